@@ -1,0 +1,21 @@
+//! Lumped physical model of the TCA-driven shape-morphing link.
+//!
+//! The core (`no_std`, f64 through `libm`) is shared by the build-time table generator, the
+//! simulated link and host tools: [`thermal`] (steady resistance matrix and transient network),
+//! [`mechanics`] (TCA force law and constant-curvature balance) and [`table`]. With the `std`
+//! feature, [`file`] reads and writes `link.toml`; with `fit`, [`calibrate`] fits the unknown
+//! mechanical constants to measured radii.
+#![cfg_attr(not(any(feature = "std", test)), no_std)]
+#![deny(missing_docs)]
+
+pub mod mechanics;
+pub mod params;
+pub mod table;
+pub mod thermal;
+
+#[cfg(feature = "fit")]
+pub mod calibrate;
+#[cfg(feature = "std")]
+pub mod file;
+
+pub use params::LinkParams;
