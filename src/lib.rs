@@ -1,8 +1,19 @@
 //! morphlink core: the hardware-free controller of a TCA-driven shape-morphing link.
 //!
 //! `no_std`, allocation-free and free of hardware access so the same code runs in the firmware,
-//! in the simulated link on the host and in the emulated image.
+//! in the simulated link on the host and in the emulated image. The firmware, `morph-sim` and
+//! the emulated build only move ADC counts into [`controller::Controller::step`] and PWM duties
+//! out of it, and protocol lines through [`controller::Controller::handle_line`].
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 
+pub mod controller;
+pub mod fixed;
+pub mod heater;
+pub mod link;
+pub mod mathf;
 pub mod protocol;
+pub mod sequencer;
+pub mod supervisor;
+pub mod table;
+pub mod thermistor;

@@ -1,0 +1,458 @@
+//! The controller: `step(now, inputs) -> outputs` once per control tick, and protocol lines in,
+//! reply lines out. It owns the supervisor and the sequencer and is all the firmware, the
+//! simulator and the emulated image need: they only move ADC counts in and duties out.
+//!
+//! Per tick: ADC counts → classified temperatures and supply volts → supervisor (a trip turns
+//! both heaters off in this same tick and latches) → sequencer → watts → PWM duties.
+
+use crate::fixed::Fixed;
+use crate::heater::HeaterConfig;
+use crate::protocol::{self, Command, ErrorCode, Mode, OutLine, ProtoError, SimCommand};
+use crate::sequencer::{Phase, Powers, SeqEvent, Sequencer};
+use crate::supervisor::{Fault, FaultCode, Frame, Subject, Supervisor, SUPPLY_MAX_V, SUPPLY_MIN_V};
+use crate::table;
+use crate::thermistor::ThermistorConfig;
+use core::fmt::Write;
+use heapless::Deque;
+
+/// Control rate, Hz. The fastest thermal part (the TCA, about 1 s) is sampled ten times per
+/// time constant; thermistors lag 2–10 s, so faster control would see nothing new.
+pub const CONTROL_HZ: u32 = 10;
+/// Control period, ms.
+pub const TICK_MS: u64 = 1000 / CONTROL_HZ as u64;
+/// ADC samples summed per reading (16 × 12-bit: 1 °C steps become about 0.03 °C, and mains
+/// noise averages out over the 16 ms burst).
+pub const OVERSAMPLE: u32 = 16;
+/// Full scale of one summed reading, counts.
+pub const FULL_SCALE_COUNTS: u32 = OVERSAMPLE * 4095;
+
+/// Heater-supply sense: a resistor divider into an ADC channel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SupplySense {
+    /// ADC reference, V.
+    pub vref_v: f32,
+    /// Supply volts per ADC-pin volt: (R_top + R_bottom) / R_bottom.
+    pub divider_ratio: f32,
+    /// Full scale of the summed reading, counts.
+    pub full_scale_counts: u32,
+}
+
+impl SupplySense {
+    /// 47 kΩ over 10 kΩ from the supply to a 3.3 V ADC: 12 V reads 2.1 V, 18.8 V is full scale.
+    pub const DEFAULT: SupplySense = SupplySense { vref_v: 3.3, divider_ratio: 5.7, full_scale_counts: FULL_SCALE_COUNTS };
+
+    /// Supply voltage for a summed reading, V.
+    pub fn volts(&self, counts: u32) -> f32 {
+        counts as f32 / self.full_scale_counts as f32 * self.vref_v * self.divider_ratio
+    }
+
+    /// Summed reading for a supply voltage (used by the simulator), counts.
+    pub fn counts(&self, volts: f32) -> u32 {
+        let c = volts / (self.vref_v * self.divider_ratio) * self.full_scale_counts as f32;
+        if c.is_nan() || c < 0.0 {
+            0
+        } else if c > self.full_scale_counts as f32 {
+            self.full_scale_counts
+        } else {
+            (c + 0.5) as u32
+        }
+    }
+}
+
+/// Board-level settings of the controller.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Config {
+    /// The three thermistor channels (same part and pull-up).
+    pub thermistor: ThermistorConfig,
+    /// Supply sense.
+    pub supply: SupplySense,
+    /// PLA heater.
+    pub pla_heater: HeaterConfig,
+    /// TCA heater.
+    pub tca_heater: HeaterConfig,
+}
+
+impl Config {
+    /// 10 kΩ B3950 NTCs with 10 kΩ pull-ups, 16× oversampled 12-bit ADC, 12 V supply sense,
+    /// 30 Ω PLA wrap and 6.5 Ω TCA.
+    pub const DEFAULT: Config = Config {
+        thermistor: ThermistorConfig::DEFAULT.with_full_scale(FULL_SCALE_COUNTS),
+        supply: SupplySense::DEFAULT,
+        pla_heater: HeaterConfig::PLA,
+        tca_heater: HeaterConfig::TCA,
+    };
+}
+
+/// One tick's raw inputs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Inputs {
+    /// Summed ADC counts of the PLA, TCA and ambient thermistors.
+    pub thermistor_counts: [u32; 3],
+    /// Summed ADC counts of the supply sense.
+    pub supply_counts: u32,
+    /// When these samples were taken, ms.
+    pub sample_ms: u64,
+}
+
+/// One tick's outputs: PWM duties in [0, 1].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Outputs {
+    /// PLA heater duty.
+    pub pla_duty: f32,
+    /// TCA heater duty.
+    pub tca_duty: f32,
+}
+
+/// Something to tell the user unprompted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Event {
+    /// Sequencer progress.
+    Seq(SeqEvent),
+    /// A safety trip.
+    Alarm(Fault),
+}
+
+/// Depth of the unsolicited-line queue; a morph produces at most six events and a trip one.
+pub const EVENT_QUEUE: usize = 16;
+
+/// The controller state.
+pub struct Controller {
+    cfg: Config,
+    seq: Sequencer,
+    sup: Supervisor,
+    fault: Option<Fault>,
+    frame: Option<Frame>,
+    powers: Powers,
+    outputs: Outputs,
+    supply_v: f32,
+    events: Deque<Event, EVENT_QUEUE>,
+}
+
+/// Firmware version reported by VERSION.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+impl Controller {
+    /// A controller at rest (heaters off) with the given board settings.
+    pub fn new(cfg: Config) -> Self {
+        Controller {
+            cfg,
+            seq: Sequencer::new(),
+            sup: Supervisor::new(),
+            fault: None,
+            frame: None,
+            powers: Powers::default(),
+            outputs: Outputs::default(),
+            supply_v: f32::NAN,
+            events: Deque::new(),
+        }
+    }
+
+    /// Current phase (Fault while a fault is latched).
+    pub fn phase(&self) -> Phase {
+        if self.fault.is_some() {
+            Phase::Fault
+        } else {
+            self.seq.phase()
+        }
+    }
+
+    /// The latched fault, if any.
+    pub fn fault(&self) -> Option<Fault> {
+        self.fault
+    }
+
+    /// Duties to apply now (also right after a command: ABORT zeroes them at once).
+    pub fn outputs(&self) -> Outputs {
+        self.outputs
+    }
+
+    /// Powers commanded in the last tick, W.
+    pub fn powers(&self) -> Powers {
+        self.powers
+    }
+
+    /// True while no morph runs and no fault is latched.
+    pub fn idle(&self) -> bool {
+        self.phase() == Phase::Idle
+    }
+
+    fn push(&mut self, e: Event) {
+        if self.events.is_full() {
+            self.events.pop_front();
+        }
+        let _ = self.events.push_back(e);
+    }
+
+    /// Next unsolicited event, oldest first.
+    pub fn pop_event(&mut self) -> Option<Event> {
+        self.events.pop_front()
+    }
+
+    fn frame_of(&self, inputs: &Inputs) -> Frame {
+        let t = &self.cfg.thermistor;
+        Frame {
+            readings: inputs.thermistor_counts.map(|c| t.classify(c)),
+            supply_v: self.cfg.supply.volts(inputs.supply_counts),
+            sample_ms: inputs.sample_ms,
+        }
+    }
+
+    fn trip(&mut self, fault: Fault) {
+        self.seq.fault();
+        self.fault = Some(fault);
+        self.powers = Powers::default();
+        self.outputs = Outputs::default();
+        self.push(Event::Alarm(fault));
+    }
+
+    /// One control tick at `now_ms` with this tick's inputs; returns the duties to apply.
+    pub fn step(&mut self, now_ms: u64, inputs: &Inputs) -> Outputs {
+        let frame = self.frame_of(inputs);
+        self.frame = Some(frame);
+        self.supply_v = frame.supply_v;
+        if self.fault.is_some() {
+            self.powers = Powers::default();
+            self.outputs = Outputs::default();
+            return self.outputs;
+        }
+        let m = match self.sup.check(now_ms, &frame, self.powers) {
+            Ok(m) => m,
+            Err(f) => {
+                self.trip(f);
+                return self.outputs;
+            }
+        };
+        let mut seq_events: heapless::Vec<SeqEvent, 4> = heapless::Vec::new();
+        let result = self.seq.step(now_ms, &m, &mut |e| {
+            let _ = seq_events.push(e);
+        });
+        for e in seq_events {
+            self.push(Event::Seq(e));
+        }
+        match result {
+            Ok(p) => {
+                self.powers = p;
+                let v = frame.supply_v;
+                self.outputs = Outputs {
+                    pla_duty: self.cfg.pla_heater.duty(p.pla_w, v),
+                    tca_duty: self.cfg.tca_heater.duty(p.tca_w, v),
+                };
+            }
+            Err(timeout) => self.trip(Fault {
+                code: FaultCode::PhaseTimeout,
+                subject: Subject::Phase(timeout.0),
+                value: f32::NAN,
+            }),
+        }
+        self.outputs
+    }
+
+    /// Handles one received line: writes zero or more `data:` lines and exactly one final reply
+    /// through `out`, except for `SIM` commands, which are returned for the caller (a simulated
+    /// build) to carry out and answer. Empty lines get no reply.
+    pub fn handle_line(&mut self, now_ms: u64, line: &str, out: &mut impl FnMut(&str)) -> Option<SimCommand> {
+        match protocol::parse_line(line) {
+            Ok(None) => None,
+            Ok(Some(Command::Sim(s))) => Some(s),
+            Ok(Some(cmd)) => {
+                self.handle(now_ms, cmd, out);
+                None
+            }
+            Err(e) => {
+                out(&protocol::format_error(&e));
+                None
+            }
+        }
+    }
+
+    /// Carries out one command (not `SIM`), writing its reply lines through `out`.
+    pub fn handle(&mut self, now_ms: u64, cmd: Command, out: &mut impl FnMut(&str)) {
+        let mut l = OutLine::new();
+        match cmd {
+            Command::Morph { radius_mm, mode } => self.morph(now_ms, radius_mm, mode, out),
+            Command::Status => {
+                self.write_status(&mut l);
+                out(&l);
+            }
+            Command::Abort => {
+                if self.fault.is_none() {
+                    self.seq.abort();
+                }
+                self.powers = Powers::default();
+                self.outputs = Outputs::default();
+                out("ok");
+            }
+            Command::Reset => self.reset(now_ms, out),
+            Command::Range => {
+                let (min, max) = table::range_mm();
+                let _ = write!(l, "ok min_mm={} max_mm={}", Fixed(min, 2), Fixed(max, 2));
+                out(&l);
+            }
+            Command::Table => {
+                for row in crate::link::TABLE.iter() {
+                    l.clear();
+                    let _ = write!(l, "data: {} {}", Fixed(row.power_w, 3), Fixed(row.radius_mm, 2));
+                    out(&l);
+                }
+                out("ok");
+            }
+            Command::Version => {
+                let _ = write!(l, "ok version={} protocol=1", VERSION);
+                out(&l);
+            }
+            Command::Help => {
+                for h in HELP {
+                    l.clear();
+                    let _ = write!(l, "data: {h}");
+                    out(&l);
+                }
+                out("ok");
+            }
+            Command::Sim(_) => out(&protocol::format_error(&ProtoError {
+                code: ErrorCode::Unsupported,
+                text: "SIM commands exist only in simulated builds (morph-sim, the emulator)",
+            })),
+        }
+    }
+
+    fn morph(&mut self, now_ms: u64, radius_mm: f32, mode: Mode, out: &mut impl FnMut(&str)) {
+        let mut l = OutLine::new();
+        if let Some(f) = self.fault {
+            let _ = write!(l, "error: fault-latched {} is latched; send RESET once it has cleared", f.code.as_str());
+            return out(&l);
+        }
+        if self.seq.busy() {
+            let _ = write!(l, "error: busy a morph is in phase {}; send ABORT first", self.seq.phase().as_str());
+            return out(&l);
+        }
+        if self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan() {
+            return out("error: busy no sensor reading yet; try again in a moment");
+        }
+        match table::power_for_radius_w(radius_mm) {
+            Err(r) => {
+                let _ = write!(l, "error: out-of-range reachable={}..{}", Fixed(r.min_mm, 2), Fixed(r.max_mm, 2));
+                out(&l);
+            }
+            Ok(power_w) => {
+                out("ok");
+                let mut first: heapless::Vec<SeqEvent, 2> = heapless::Vec::new();
+                self.seq.start(now_ms, radius_mm, power_w, mode, &mut |e| {
+                    let _ = first.push(e);
+                });
+                for e in first {
+                    self.push(Event::Seq(e));
+                }
+            }
+        }
+    }
+
+    fn reset(&mut self, now_ms: u64, out: &mut impl FnMut(&str)) {
+        let Some(latched) = self.fault else {
+            return out("ok fault=none");
+        };
+        let check = match &self.frame {
+            Some(frame) => self.sup.condition_clear(now_ms, frame),
+            None => Err(latched),
+        };
+        match check {
+            Ok(()) => {
+                self.fault = None;
+                self.seq.clear_fault();
+                self.sup.rearm();
+                let mut l = OutLine::new();
+                let _ = write!(l, "ok cleared={}", latched.code.as_str());
+                out(&l);
+            }
+            Err(still) => {
+                let mut l = OutLine::new();
+                let _ = write!(l, "error: fault-active ");
+                write_fault_text(&mut l, &still);
+                out(&l);
+            }
+        }
+    }
+
+    fn write_status(&self, l: &mut OutLine) {
+        let m = self.sup.measurements();
+        let _ = write!(l, "ok phase={} target_mm=", self.phase().as_str());
+        let target = self.seq.target_mm();
+        if target.is_nan() {
+            let _ = write!(l, "-");
+        } else {
+            let _ = write!(l, "{}", Fixed(target, 2));
+        }
+        let _ = write!(
+            l,
+            " t_pla_c={} t_tca_c={} t_amb_c={} p_pla_w={} p_tca_w={} supply_v={} fault={}",
+            Fixed(m.t_pla_c, 2),
+            Fixed(m.t_tca_c, 2),
+            Fixed(m.t_amb_c, 2),
+            Fixed(self.powers.pla_w, 3),
+            Fixed(self.powers.tca_w, 3),
+            Fixed(self.supply_v, 2),
+            self.fault.map(|f| f.code.as_str()).unwrap_or("none"),
+        );
+    }
+
+    /// Formats the next queued event as a protocol line (`event: ...` or `alarm: ...`).
+    pub fn pop_event_line(&mut self) -> Option<OutLine> {
+        let e = self.pop_event()?;
+        let mut l = OutLine::new();
+        match e {
+            Event::Seq(SeqEvent::Phase { phase, t_s, power_w }) => {
+                let _ = write!(l, "event: phase {} t={}", phase.as_str(), Fixed(t_s, 1));
+                if let Some(p) = power_w {
+                    let _ = write!(l, " power_w={}", Fixed(p, 3));
+                }
+            }
+            Event::Seq(SeqEvent::Done { t_s, radius_mm }) => {
+                let _ = write!(l, "event: done t={} radius_mm={}", Fixed(t_s, 1), Fixed(radius_mm, 2));
+            }
+            Event::Alarm(f) => {
+                let _ = write!(l, "alarm: ");
+                write_fault_text(&mut l, &f);
+                let _ = write!(l, "; heaters off, RESET when cleared");
+            }
+        }
+        Some(l)
+    }
+}
+
+fn subject_str(s: &Subject) -> &'static str {
+    match s {
+        Subject::Sensor(x) => x.as_str(),
+        Subject::Heater(h) => h.as_str(),
+        Subject::Phase(p) => p.as_str(),
+        Subject::Supply => "supply",
+        Subject::Frame => "sensors",
+    }
+}
+
+/// Writes `<code> <sentence>` for a fault.
+fn write_fault_text(l: &mut OutLine, f: &Fault) {
+    let s = subject_str(&f.subject);
+    let v = Fixed(f.value, 1);
+    let _ = match f.code {
+        FaultCode::ThermistorOpen => write!(l, "thermistor-open {s} thermistor reads open circuit; check its wiring"),
+        FaultCode::ThermistorShort => write!(l, "thermistor-short {s} thermistor reads short circuit; check its wiring"),
+        FaultCode::UnderTemperature => write!(l, "under-temperature {s} reads {v} C, below its minimum"),
+        FaultCode::OverTemperature => write!(l, "over-temperature {s} reads {v} C, above its maximum"),
+        FaultCode::HeaterNotHeating => write!(l, "heater-not-heating {s} heater rose only {v} K; check heater wiring and MOSFET"),
+        FaultCode::StaleSensor => write!(l, "stale-sensor no sensor frame for {v} s"),
+        FaultCode::SupplyOutOfRange => write!(l, "supply-out-of-range supply reads {v} V, allowed {}..{}", Fixed(SUPPLY_MIN_V, 1), Fixed(SUPPLY_MAX_V, 1)),
+        FaultCode::PhaseTimeout => write!(l, "phase-timeout phase {s} did not finish in time"),
+    };
+}
+
+/// HELP text, one `data:` line each.
+const HELP: [&str; 9] = [
+    "MORPH <radius_mm> [auto|paper]  morph to a radius (RANGE shows the reachable ones)",
+    "STATUS                          phase, temperatures, powers, supply, fault",
+    "ABORT                           both heaters off at once, phase idle",
+    "RESET                           clear a latched fault once its cause is gone",
+    "RANGE                           reachable radii in mm",
+    "TABLE                           TCA power / radius table",
+    "VERSION                         firmware and protocol version",
+    "HELP                            this list",
+    "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|CLEAR  simulated builds only",
+];

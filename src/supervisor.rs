@@ -1,0 +1,264 @@
+//! Safety supervisor, run every control tick before the sequencer and independently of it.
+//!
+//! Checks, each with a named default scaled to this link (a few grams of silicone whose heaters
+//! respond within seconds, not a 3D-printer hot end):
+//! thermistor open/short (ADC range, consecutive samples), per-sensor min/max temperature,
+//! heater-not-heating, stale sensor frames and supply voltage. A trip is returned as a
+//! [`Fault`]; the controller turns both heaters off in the same tick and latches it.
+
+use crate::link::{R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W};
+use crate::protocol::{Heater, Sensor};
+use crate::sequencer::{Measurements, Phase, Powers};
+use crate::thermistor::{RangeCheck, Reading};
+
+/// What tripped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FaultCode {
+    /// Thermistor reads open circuit (ADC near full scale).
+    ThermistorOpen,
+    /// Thermistor reads short circuit (ADC near zero).
+    ThermistorShort,
+    /// A sensor read below its minimum temperature.
+    UnderTemperature,
+    /// A sensor read above its maximum temperature.
+    OverTemperature,
+    /// A heater was commanded but its temperature did not rise.
+    HeaterNotHeating,
+    /// No fresh sensor frame arrived in time.
+    StaleSensor,
+    /// The heater supply is outside its allowed range.
+    SupplyOutOfRange,
+    /// A morph phase overran its timeout.
+    PhaseTimeout,
+}
+
+impl FaultCode {
+    /// Wire code (kebab-case).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FaultCode::ThermistorOpen => "thermistor-open",
+            FaultCode::ThermistorShort => "thermistor-short",
+            FaultCode::UnderTemperature => "under-temperature",
+            FaultCode::OverTemperature => "over-temperature",
+            FaultCode::HeaterNotHeating => "heater-not-heating",
+            FaultCode::StaleSensor => "stale-sensor",
+            FaultCode::SupplyOutOfRange => "supply-out-of-range",
+            FaultCode::PhaseTimeout => "phase-timeout",
+        }
+    }
+}
+
+/// What a fault is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Subject {
+    /// A thermistor.
+    Sensor(Sensor),
+    /// A heater.
+    Heater(Heater),
+    /// A morph phase.
+    Phase(Phase),
+    /// The heater supply.
+    Supply,
+    /// All sensors (a whole frame).
+    Frame,
+}
+
+/// A latched safety trip.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fault {
+    /// What tripped.
+    pub code: FaultCode,
+    /// Where.
+    pub subject: Subject,
+    /// The offending value (°C, V, s or ADC fraction; NaN if none).
+    pub value: f32,
+}
+
+/// Allowed temperature range of one sensor, °C.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Limits {
+    /// Below this the reading is implausible (broken wire, frozen water), °C.
+    pub min_c: f32,
+    /// Above this the link is in danger, °C.
+    pub max_c: f32,
+}
+
+/// PLA limits: the rod melts near 150 °C; 130 °C leaves 20 K margin. The paper's 4 W for 20 s
+/// reaches about 115 °C under water, so the paper's protocol still runs.
+pub const PLA_LIMITS: Limits = Limits { min_c: 2.0, max_c: 130.0 };
+/// TCA limits: annealed at 160 °C, it must stay below about 150 °C; 130 °C leaves 20 K margin.
+pub const TCA_LIMITS: Limits = Limits { min_c: 2.0, max_c: 130.0 };
+/// Ambient limits: a water bath or a room; above 50 °C the model's assumptions no longer hold.
+pub const AMB_LIMITS: Limits = Limits { min_c: 2.0, max_c: 50.0 };
+/// Lowest heater supply, V: −25 % of 12 V. Heater duty is computed from the measured voltage,
+/// so moderate sag is harmless; below this the heaters cannot reach the soften power.
+pub const SUPPLY_MIN_V: f32 = 9.0;
+/// Highest heater supply, V: +25 % of 12 V; above it one PWM step is too coarse for the TCA.
+pub const SUPPLY_MAX_V: f32 = 15.0;
+/// A sensor frame older than this counts as stale, ms. Klipper allows 7 s for hot ends with
+/// time constants of minutes; the TCA's fast thermal part is about 1 s, so 1 s (10 ticks).
+pub const STALE_AFTER_MS: u64 = 1000;
+/// Consecutive out-of-limit readings before a temperature trip (Klipper: 4 samples).
+pub const LIMIT_CONSECUTIVE: u8 = 4;
+/// Heater-not-heating: the heater must have been on this long before it is judged, s.
+/// Klipper's check_gain_time is 20 s for hot ends; the TCA reaches 70 % of its steady rise in
+/// 10 s under water, so 10 s.
+pub const HEATING_CHECK_S: f32 = 10.0;
+/// Heater-not-heating: smallest share of the model's steady self-rise that must be seen
+/// after [`HEATING_CHECK_S`]. Under water the TCA has reached about 55 % (with thermistor lag);
+/// 30 % leaves room for 30 % more convection and a slow sensor.
+pub const HEATING_MIN_FRACTION: f32 = 0.3;
+/// Heater-not-heating: a heater whose expected rise is below this is not judged, K (noise and
+/// ambient drift would make the check trip falsely). The TCA is checked from about 0.3 W.
+pub const HEATING_MIN_RISE_C: f32 = 3.0;
+
+/// One sensor frame as the supervisor sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    /// Classified readings of the PLA, TCA and ambient thermistors.
+    pub readings: [Reading; 3],
+    /// Measured heater supply, V.
+    pub supply_v: f32,
+    /// When the frame was sampled, ms.
+    pub sample_ms: u64,
+}
+
+const SENSORS: [Sensor; 3] = [Sensor::Pla, Sensor::Tca, Sensor::Amb];
+const LIMITS: [Limits; 3] = [PLA_LIMITS, TCA_LIMITS, AMB_LIMITS];
+
+#[derive(Clone, Copy, Debug, Default)]
+struct HeatWatch {
+    on_since_ms: Option<u64>,
+    min_power_w: f32,
+}
+
+/// The supervisor's state: consecutive-sample counters, last good temperatures and the
+/// heater watches.
+#[derive(Clone, Copy, Debug)]
+pub struct Supervisor {
+    range: [RangeCheck; 3],
+    limit_count: [u8; 3],
+    last_c: [f32; 3],
+    watch: [HeatWatch; 2],
+}
+
+impl Default for Supervisor {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Supervisor {
+    /// A supervisor with no history (temperatures unknown until the first frame).
+    pub fn new() -> Self {
+        Supervisor {
+            range: [RangeCheck::new(RangeCheck::DEFAULT_CONSECUTIVE); 3],
+            limit_count: [0; 3],
+            last_c: [f32::NAN; 3],
+            watch: [HeatWatch::default(); 2],
+        }
+    }
+
+    /// Last good temperatures, °C (NaN before the first good reading).
+    pub fn measurements(&self) -> Measurements {
+        Measurements { t_pla_c: self.last_c[0], t_tca_c: self.last_c[1], t_amb_c: self.last_c[2] }
+    }
+
+    /// Checks one frame with the powers commanded in the previous tick. Returns the
+    /// temperatures to control from, or the fault to latch.
+    pub fn check(&mut self, now_ms: u64, frame: &Frame, commanded: Powers) -> Result<Measurements, Fault> {
+        if now_ms.saturating_sub(frame.sample_ms) > STALE_AFTER_MS {
+            let age_s = now_ms.saturating_sub(frame.sample_ms) as f32 / 1000.0;
+            return Err(Fault { code: FaultCode::StaleSensor, subject: Subject::Frame, value: age_s });
+        }
+        for i in 0..3 {
+            let subject = Subject::Sensor(SENSORS[i]);
+            match self.range[i].update(frame.readings[i]) {
+                Some(Reading::Open) => return Err(Fault { code: FaultCode::ThermistorOpen, subject, value: f32::NAN }),
+                Some(Reading::Short) => return Err(Fault { code: FaultCode::ThermistorShort, subject, value: f32::NAN }),
+                _ => {}
+            }
+            if let Reading::Ok(t) = frame.readings[i] {
+                let lim = LIMITS[i];
+                if t < lim.min_c || t > lim.max_c {
+                    self.limit_count[i] = self.limit_count[i].saturating_add(1);
+                    if self.limit_count[i] >= LIMIT_CONSECUTIVE {
+                        let code = if t > lim.max_c { FaultCode::OverTemperature } else { FaultCode::UnderTemperature };
+                        return Err(Fault { code, subject, value: t });
+                    }
+                } else {
+                    self.limit_count[i] = 0;
+                    self.last_c[i] = t;
+                }
+            }
+        }
+        if !(frame.supply_v >= SUPPLY_MIN_V && frame.supply_v <= SUPPLY_MAX_V) {
+            return Err(Fault { code: FaultCode::SupplyOutOfRange, subject: Subject::Supply, value: frame.supply_v });
+        }
+        self.check_heating(now_ms, commanded)?;
+        Ok(self.measurements())
+    }
+
+    fn check_heating(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
+        let m = self.measurements();
+        // (heater, own power, other power, own sensor, own resistance)
+        let heaters = [
+            (Heater::Pla, cmd.pla_w, cmd.tca_w, m.t_pla_c, R_PP_K_PER_W),
+            (Heater::Tca, cmd.tca_w, cmd.pla_w, m.t_tca_c, R_TT_K_PER_W),
+        ];
+        for (i, (heater, own_w, other_w, temp_c, r_self)) in heaters.into_iter().enumerate() {
+            let w = &mut self.watch[i];
+            if own_w * r_self * HEATING_MIN_FRACTION < HEATING_MIN_RISE_C {
+                *w = HeatWatch::default();
+                continue;
+            }
+            let since = *w.on_since_ms.get_or_insert(now_ms);
+            if w.min_power_w == 0.0 || own_w < w.min_power_w {
+                w.min_power_w = own_w;
+            }
+            if now_ms.saturating_sub(since) as f32 / 1000.0 < HEATING_CHECK_S {
+                continue;
+            }
+            let own_rise = temp_c - m.t_amb_c - R_TP_K_PER_W * other_w;
+            let expected = HEATING_MIN_FRACTION * r_self * w.min_power_w;
+            if !(own_rise >= expected) {
+                return Err(Fault { code: FaultCode::HeaterNotHeating, subject: Subject::Heater(heater), value: own_rise });
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether a latched fault's condition has cleared on this frame (RESET is allowed), or
+    /// the fault that is still present. Sensor checks need a good reading now, not four.
+    pub fn condition_clear(&self, now_ms: u64, frame: &Frame) -> Result<(), Fault> {
+        if now_ms.saturating_sub(frame.sample_ms) > STALE_AFTER_MS {
+            let age_s = now_ms.saturating_sub(frame.sample_ms) as f32 / 1000.0;
+            return Err(Fault { code: FaultCode::StaleSensor, subject: Subject::Frame, value: age_s });
+        }
+        for i in 0..3 {
+            let subject = Subject::Sensor(SENSORS[i]);
+            match frame.readings[i] {
+                Reading::Open => return Err(Fault { code: FaultCode::ThermistorOpen, subject, value: f32::NAN }),
+                Reading::Short => return Err(Fault { code: FaultCode::ThermistorShort, subject, value: f32::NAN }),
+                Reading::Ok(t) if t > LIMITS[i].max_c => {
+                    return Err(Fault { code: FaultCode::OverTemperature, subject, value: t })
+                }
+                Reading::Ok(t) if t < LIMITS[i].min_c => {
+                    return Err(Fault { code: FaultCode::UnderTemperature, subject, value: t })
+                }
+                Reading::Ok(_) => {}
+            }
+        }
+        if !(frame.supply_v >= SUPPLY_MIN_V && frame.supply_v <= SUPPLY_MAX_V) {
+            return Err(Fault { code: FaultCode::SupplyOutOfRange, subject: Subject::Supply, value: frame.supply_v });
+        }
+        Ok(())
+    }
+
+    /// Forgets counters and heater watches (after RESET), keeping last temperatures.
+    pub fn rearm(&mut self) {
+        self.range = [RangeCheck::new(RangeCheck::DEFAULT_CONSECUTIVE); 3];
+        self.limit_count = [0; 3];
+        self.watch = [HeatWatch::default(); 2];
+    }
+}
