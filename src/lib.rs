@@ -5,5 +5,6 @@
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 
+pub mod fixed;
 pub mod mathf;
 pub mod protocol;

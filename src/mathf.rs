@@ -176,7 +176,7 @@ mod tests {
     fn micromath_ln_is_worse() {
         use micromath::F32Ext;
         let ours = max_ln_err(ln);
-        let theirs = max_ln_err(|x| F32Ext::ln(x));
+        let theirs = max_ln_err(F32Ext::ln);
         // Absolute error matters for the thermistor: dT = T² · d(ln R) / β.
         let mut abs_ours = 0.0f64;
         let mut abs_theirs = 0.0f64;
