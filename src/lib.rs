@@ -8,3 +8,4 @@
 pub mod fixed;
 pub mod mathf;
 pub mod protocol;
+pub mod thermistor;
