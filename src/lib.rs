@@ -6,6 +6,7 @@
 #![deny(missing_docs)]
 
 pub mod fixed;
+pub mod heater;
 pub mod mathf;
 pub mod protocol;
 pub mod thermistor;
