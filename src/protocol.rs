@@ -133,3 +133,688 @@ pub struct ProtoError {
     /// Human-readable explanation (no line breaks).
     pub text: &'static str,
 }
+
+impl ErrorCode {
+    /// The kebab-case wire word of this code, as in `error: <code> <text>`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ErrorCode::UnknownCommand => "unknown-command",
+            ErrorCode::BadArgument => "bad-argument",
+            ErrorCode::OutOfRange => "out-of-range",
+            ErrorCode::Busy => "busy",
+            ErrorCode::FaultLatched => "fault-latched",
+            ErrorCode::FaultActive => "fault-active",
+            ErrorCode::LineTooLong => "line-too-long",
+            ErrorCode::Unsupported => "unsupported",
+        }
+    }
+}
+
+impl Mode {
+    /// The lowercase wire word (`auto`, `paper`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Mode::Auto => "auto",
+            Mode::Paper => "paper",
+        }
+    }
+}
+
+impl Sensor {
+    /// The lowercase wire word (`pla`, `tca`, `amb`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Sensor::Pla => "pla",
+            Sensor::Tca => "tca",
+            Sensor::Amb => "amb",
+        }
+    }
+}
+
+impl Heater {
+    /// The lowercase wire word (`pla`, `tca`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Heater::Pla => "pla",
+            Heater::Tca => "tca",
+        }
+    }
+}
+
+impl Medium {
+    /// The lowercase wire word (`water`, `air`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Medium::Water => "water",
+            Medium::Air => "air",
+        }
+    }
+}
+
+impl SimFault {
+    /// The lowercase wire word (`thermistor-open`, `thermistor-short`, `heater-open`,
+    /// `heater-stuck`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SimFault::ThermistorOpen => "thermistor-open",
+            SimFault::ThermistorShort => "thermistor-short",
+            SimFault::HeaterOpen => "heater-open",
+            SimFault::HeaterStuck => "heater-stuck",
+        }
+    }
+}
+
+/// Every [`Mode`], for matching wire words.
+const MODES: [Mode; 2] = [Mode::Auto, Mode::Paper];
+/// Every [`Sensor`], for matching wire words.
+const SENSORS: [Sensor; 3] = [Sensor::Pla, Sensor::Tca, Sensor::Amb];
+/// Every [`Medium`], for matching wire words.
+const MEDIA: [Medium; 2] = [Medium::Water, Medium::Air];
+/// Every [`SimFault`], for matching wire words.
+const SIM_FAULTS: [SimFault; 4] = [
+    SimFault::ThermistorOpen,
+    SimFault::ThermistorShort,
+    SimFault::HeaterOpen,
+    SimFault::HeaterStuck,
+];
+
+/// Finds the item whose wire word equals `word`, ignoring ASCII case.
+fn lookup<T: Copy>(items: &[T], word: &str, name: fn(T) -> &'static str) -> Option<T> {
+    items
+        .iter()
+        .copied()
+        .find(|&item| name(item).eq_ignore_ascii_case(word))
+}
+
+/// Shorthand for a `bad-argument` error.
+const fn bad(text: &'static str) -> ProtoError {
+    ProtoError {
+        code: ErrorCode::BadArgument,
+        text,
+    }
+}
+
+/// Reply to a first word that is no command.
+const UNKNOWN: ProtoError = ProtoError {
+    code: ErrorCode::UnknownCommand,
+    text: "Unknown command; send HELP for the list of commands.",
+};
+
+/// Splits on runs of spaces and tabs.
+fn words(line: &str) -> impl Iterator<Item = &str> {
+    line.split([' ', '\t']).filter(|w| !w.is_empty())
+}
+
+/// Parses one command line (without its line ending).
+///
+/// Leading/trailing ASCII whitespace is ignored and a blank line gives `Ok(None)`. Command and
+/// keyword words match case-insensitively; numbers use [`crate::fixed::parse_decimal`]. Only the
+/// syntax is checked here: a MORPH radius must be a positive number, but whether it is
+/// reachable (and whether SIM values are within limits) is decided by the caller.
+pub fn parse_line(line: &str) -> Result<Option<Command>, ProtoError> {
+    let line = line.trim_matches(|c: char| c.is_ascii_whitespace());
+    let mut args = words(line);
+    let Some(first) = args.next() else {
+        return Ok(None);
+    };
+    let simple = [
+        ("STATUS", Command::Status, "STATUS takes no arguments."),
+        ("ABORT", Command::Abort, "ABORT takes no arguments."),
+        ("RESET", Command::Reset, "RESET takes no arguments."),
+        ("RANGE", Command::Range, "RANGE takes no arguments."),
+        ("TABLE", Command::Table, "TABLE takes no arguments."),
+        ("VERSION", Command::Version, "VERSION takes no arguments."),
+        ("HELP", Command::Help, "HELP takes no arguments."),
+    ];
+    for (word, command, extra) in simple {
+        if first.eq_ignore_ascii_case(word) {
+            return no_more(args, extra).map(|()| Some(command));
+        }
+    }
+    if first.eq_ignore_ascii_case("MORPH") {
+        parse_morph(args).map(Some)
+    } else if first.eq_ignore_ascii_case("SIM") {
+        parse_sim(args).map(|sim| Some(Command::Sim(sim)))
+    } else {
+        Err(UNKNOWN)
+    }
+}
+
+/// `Ok` if `args` is exhausted, else `bad-argument` with `text`.
+fn no_more<'a>(
+    mut args: impl Iterator<Item = &'a str>,
+    text: &'static str,
+) -> Result<(), ProtoError> {
+    match args.next() {
+        None => Ok(()),
+        Some(_) => Err(bad(text)),
+    }
+}
+
+/// `MORPH <radius_mm> [auto|paper]` after the command word.
+fn parse_morph<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<Command, ProtoError> {
+    let radius = args
+        .next()
+        .ok_or(bad("MORPH needs a radius in mm, e.g. MORPH 38."))?;
+    let radius_mm = crate::fixed::parse_decimal(radius).ok_or(bad(
+        "MORPH radius must be a plain number of mm, e.g. MORPH 38.5.",
+    ))?;
+    if !radius_mm.is_finite() || radius_mm <= 0.0 {
+        return Err(bad("MORPH radius must be greater than 0 mm."));
+    }
+    let mode = match args.next() {
+        None => Mode::Auto,
+        Some(word) => {
+            lookup(&MODES, word, Mode::as_str).ok_or(bad("MORPH mode must be auto or paper."))?
+        }
+    };
+    no_more(
+        args,
+        "MORPH takes a radius and an optional mode (auto or paper).",
+    )?;
+    Ok(Command::Morph { radius_mm, mode })
+}
+
+/// `SIM <subcommand> ...` after the command word.
+fn parse_sim<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<SimCommand, ProtoError> {
+    const NEEDS_SUB: &str = "SIM needs STATE, FAULT, SUPPLY, AMBIENT, MEDIUM or CLEAR.";
+    let sub = args.next().ok_or(bad(NEEDS_SUB))?;
+    let is = |word: &str| sub.eq_ignore_ascii_case(word);
+    let sim = if is("STATE") {
+        SimCommand::State
+    } else if is("CLEAR") {
+        SimCommand::Clear
+    } else if is("FAULT") {
+        parse_sim_fault(&mut args)?
+    } else if is("SUPPLY") {
+        let volts = number(
+            args.next(),
+            "SIM SUPPLY needs a voltage in V, e.g. SIM SUPPLY 5.",
+        )?;
+        SimCommand::Supply(volts)
+    } else if is("AMBIENT") {
+        let temp_c = number(
+            args.next(),
+            "SIM AMBIENT needs a temperature in degrees C, e.g. SIM AMBIENT 25.",
+        )?;
+        SimCommand::Ambient(temp_c)
+    } else if is("MEDIUM") {
+        let medium = args
+            .next()
+            .and_then(|word| lookup(&MEDIA, word, Medium::as_str))
+            .ok_or(bad("SIM MEDIUM needs water or air."))?;
+        SimCommand::Medium(medium)
+    } else {
+        return Err(bad(NEEDS_SUB));
+    };
+    let extra = match sim {
+        SimCommand::State => "SIM STATE takes no arguments.",
+        SimCommand::Clear => "SIM CLEAR takes no arguments.",
+        SimCommand::Fault(..) => "SIM FAULT takes a kind and an optional target (pla, tca or amb).",
+        SimCommand::Supply(_) => "SIM SUPPLY takes one voltage.",
+        SimCommand::Ambient(_) => "SIM AMBIENT takes one temperature.",
+        SimCommand::Medium(_) => "SIM MEDIUM takes one medium.",
+    };
+    no_more(args, extra)?;
+    Ok(sim)
+}
+
+/// `SIM FAULT <kind> [pla|tca|amb]` after `FAULT`; the target defaults to `pla`.
+fn parse_sim_fault<'a>(args: &mut impl Iterator<Item = &'a str>) -> Result<SimCommand, ProtoError> {
+    let kind = args
+        .next()
+        .and_then(|word| lookup(&SIM_FAULTS, word, SimFault::as_str))
+        .ok_or(bad(
+            "SIM FAULT needs thermistor-open, thermistor-short, heater-open or heater-stuck.",
+        ))?;
+    let target = match args.next() {
+        None => Sensor::Pla,
+        Some(word) => lookup(&SENSORS, word, Sensor::as_str)
+            .ok_or(bad("SIM FAULT target must be pla, tca or amb."))?,
+    };
+    let heater_fault = matches!(kind, SimFault::HeaterOpen | SimFault::HeaterStuck);
+    if heater_fault && target == Sensor::Amb {
+        return Err(bad("Heater faults target pla or tca; amb has no heater."));
+    }
+    Ok(SimCommand::Fault(kind, target))
+}
+
+/// A required decimal argument, `bad-argument` with `text` if missing or malformed.
+fn number(word: Option<&str>, text: &'static str) -> Result<f32, ProtoError> {
+    word.and_then(crate::fixed::parse_decimal)
+        .filter(|v| v.is_finite())
+        .ok_or(bad(text))
+}
+
+/// What [`LineAssembler::push`] reports when a line ends.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Assembled<'a> {
+    /// A complete line without its ending (may be empty; callers ignore blank lines).
+    Line(&'a str),
+    /// The line exceeded [`MAX_LINE`] bytes; its content was dropped.
+    TooLong,
+    /// The line is not valid UTF-8; its content was dropped.
+    Invalid,
+}
+
+/// Collects bytes into lines in a fixed [`MAX_LINE`]-byte buffer, without allocation.
+///
+/// `\n` ends a line, `\r` is ignored anywhere. Bytes past [`MAX_LINE`] are discarded and the
+/// line reports [`Assembled::TooLong`] once, at its `\n`, so a flood of garbage costs one error
+/// reply, not one per byte.
+#[derive(Clone, Debug)]
+pub struct LineAssembler {
+    buf: [u8; MAX_LINE],
+    len: usize,
+    overflow: bool,
+}
+
+impl Default for LineAssembler {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl LineAssembler {
+    /// An empty assembler.
+    pub const fn new() -> Self {
+        Self {
+            buf: [0; MAX_LINE],
+            len: 0,
+            overflow: false,
+        }
+    }
+
+    /// Feeds one received byte; returns the finished line when `byte` is `\n`.
+    pub fn push(&mut self, byte: u8) -> Option<Assembled<'_>> {
+        match byte {
+            b'\r' => None,
+            b'\n' => {
+                let len = self.len;
+                let overflow = self.overflow;
+                self.len = 0;
+                self.overflow = false;
+                if overflow {
+                    return Some(Assembled::TooLong);
+                }
+                Some(match core::str::from_utf8(&self.buf[..len]) {
+                    Ok(line) => Assembled::Line(line),
+                    Err(_) => Assembled::Invalid,
+                })
+            }
+            _ => {
+                if self.len < MAX_LINE {
+                    self.buf[self.len] = byte;
+                    self.len += 1;
+                } else {
+                    self.overflow = true;
+                }
+                None
+            }
+        }
+    }
+}
+
+/// Reply to an [`Assembled::TooLong`] line; the text names [`MAX_LINE`].
+pub const ERR_LINE_TOO_LONG: ProtoError = ProtoError {
+    code: ErrorCode::LineTooLong,
+    text: "Lines are limited to 64 characters.",
+};
+
+/// Reply to an [`Assembled::Invalid`] line.
+pub const ERR_INVALID_LINE: ProtoError = ProtoError {
+    code: ErrorCode::BadArgument,
+    text: "The line is not valid text; commands are plain ASCII.",
+};
+
+/// One reply or event line, without its line ending. 192 bytes hold the longest `data:` line.
+pub type OutLine = heapless::String<192>;
+
+/// Formats `error: <code> <text>` (truncated at [`OutLine`]'s capacity, which no built-in text
+/// reaches).
+pub fn format_error(err: &ProtoError) -> OutLine {
+    let mut out = OutLine::new();
+    for part in ["error: ", err.code.as_str(), " ", err.text] {
+        for c in part.chars() {
+            if out.push(c).is_err() {
+                return out;
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixed::Fixed;
+    use proptest::prelude::*;
+    use std::{format, string::String, vec::Vec};
+
+    fn code(line: &str) -> Option<ErrorCode> {
+        parse_line(line).err().map(|e| e.code)
+    }
+
+    fn sim(line: &str) -> SimCommand {
+        match parse_line(line) {
+            Ok(Some(Command::Sim(s))) => s,
+            other => panic!("{line:?} gave {other:?}"),
+        }
+    }
+
+    #[test]
+    fn wire_words() {
+        assert_eq!(ErrorCode::UnknownCommand.as_str(), "unknown-command");
+        assert_eq!(ErrorCode::BadArgument.as_str(), "bad-argument");
+        assert_eq!(ErrorCode::OutOfRange.as_str(), "out-of-range");
+        assert_eq!(ErrorCode::Busy.as_str(), "busy");
+        assert_eq!(ErrorCode::FaultLatched.as_str(), "fault-latched");
+        assert_eq!(ErrorCode::FaultActive.as_str(), "fault-active");
+        assert_eq!(ErrorCode::LineTooLong.as_str(), "line-too-long");
+        assert_eq!(ErrorCode::Unsupported.as_str(), "unsupported");
+        assert_eq!(Mode::Paper.as_str(), "paper");
+        assert_eq!(Sensor::Amb.as_str(), "amb");
+        assert_eq!(Heater::Tca.as_str(), "tca");
+        assert_eq!(Heater::Pla.as_str(), "pla");
+        assert_eq!(Medium::Water.as_str(), "water");
+        assert_eq!(SimFault::ThermistorShort.as_str(), "thermistor-short");
+        assert_eq!(SimFault::HeaterStuck.as_str(), "heater-stuck");
+    }
+
+    #[test]
+    fn blank_lines_are_nothing() {
+        for line in ["", " ", "\t \t", "\r", " \x0c "] {
+            assert_eq!(parse_line(line), Ok(None), "{line:?}");
+        }
+    }
+
+    #[test]
+    fn simple_commands_any_case_and_spacing() {
+        assert_eq!(parse_line("STATUS"), Ok(Some(Command::Status)));
+        assert_eq!(parse_line("  status \r"), Ok(Some(Command::Status)));
+        assert_eq!(parse_line("Abort"), Ok(Some(Command::Abort)));
+        assert_eq!(parse_line("reset"), Ok(Some(Command::Reset)));
+        assert_eq!(parse_line("RANGE"), Ok(Some(Command::Range)));
+        assert_eq!(parse_line("table"), Ok(Some(Command::Table)));
+        assert_eq!(parse_line("VeRsIoN"), Ok(Some(Command::Version)));
+        assert_eq!(parse_line("\thelp"), Ok(Some(Command::Help)));
+        assert_eq!(code("STATUS now"), Some(ErrorCode::BadArgument));
+        assert_eq!(code("HELP me"), Some(ErrorCode::BadArgument));
+    }
+
+    #[test]
+    fn morph() {
+        let morph = |radius_mm, mode| Ok(Some(Command::Morph { radius_mm, mode }));
+        assert_eq!(parse_line("MORPH 38"), morph(38.0, Mode::Auto));
+        assert_eq!(
+            parse_line("morph \t 38.5   paper"),
+            morph(38.5, Mode::Paper)
+        );
+        assert_eq!(parse_line("MORPH 12 AUTO"), morph(12.0, Mode::Auto));
+        // Range checking against the table happens elsewhere.
+        assert_eq!(parse_line("MORPH 100000"), morph(100_000.0, Mode::Auto));
+        let err = parse_line("MORPH").unwrap_err();
+        assert_eq!(err.code, ErrorCode::BadArgument);
+        assert!(err.text.contains("radius in mm"));
+        for bad in [
+            "MORPH 0",
+            "MORPH -3",
+            "MORPH -0",
+            "MORPH abc",
+            "MORPH 1e2",
+            "MORPH inf",
+            "MORPH nan",
+            "MORPH 38 fast",
+            "MORPH 38 auto extra",
+            "MORPH 3８",
+        ] {
+            assert_eq!(code(bad), Some(ErrorCode::BadArgument), "{bad}");
+        }
+    }
+
+    #[test]
+    fn sim_commands() {
+        assert_eq!(sim("SIM STATE"), SimCommand::State);
+        assert_eq!(sim("sim clear"), SimCommand::Clear);
+        assert_eq!(
+            sim("SIM FAULT thermistor-open"),
+            SimCommand::Fault(SimFault::ThermistorOpen, Sensor::Pla)
+        );
+        assert_eq!(
+            sim("SIM FAULT Thermistor-Short amb"),
+            SimCommand::Fault(SimFault::ThermistorShort, Sensor::Amb)
+        );
+        assert_eq!(
+            sim("SIM FAULT heater-stuck TCA"),
+            SimCommand::Fault(SimFault::HeaterStuck, Sensor::Tca)
+        );
+        assert_eq!(sim("SIM SUPPLY 4.5"), SimCommand::Supply(4.5));
+        assert_eq!(sim("SIM AMBIENT -5"), SimCommand::Ambient(-5.0));
+        assert_eq!(sim("SIM MEDIUM air"), SimCommand::Medium(Medium::Air));
+        assert_eq!(sim("SIM MEDIUM WATER"), SimCommand::Medium(Medium::Water));
+        for bad in [
+            "SIM",
+            "SIM NOTHING",
+            "SIM STATE now",
+            "SIM CLEAR all",
+            "SIM FAULT",
+            "SIM FAULT melted",
+            "SIM FAULT heater-open amb",
+            "SIM FAULT heater-open pla extra",
+            "SIM FAULT thermistor-open xyz",
+            "SIM SUPPLY",
+            "SIM SUPPLY five",
+            "SIM SUPPLY 5 V",
+            "SIM AMBIENT",
+            "SIM AMBIENT 1e3",
+            "SIM MEDIUM",
+            "SIM MEDIUM oil",
+            "SIM MEDIUM air water",
+        ] {
+            assert_eq!(code(bad), Some(ErrorCode::BadArgument), "{bad}");
+        }
+    }
+
+    #[test]
+    fn unknown_and_non_ascii() {
+        assert_eq!(code("FLY"), Some(ErrorCode::UnknownCommand));
+        assert_eq!(code("MORPHX 38"), Some(ErrorCode::UnknownCommand));
+        assert_eq!(code("ＳＴＡＴＵＳ"), Some(ErrorCode::UnknownCommand));
+        assert_eq!(code("STATUS ü"), Some(ErrorCode::BadArgument));
+        assert_eq!(code("\u{FFFD}"), Some(ErrorCode::UnknownCommand));
+    }
+
+    #[test]
+    fn error_texts_are_sentences_that_fit() {
+        let lines = [
+            "FLY",
+            "STATUS x",
+            "ABORT x",
+            "RESET x",
+            "RANGE x",
+            "TABLE x",
+            "VERSION x",
+            "HELP x",
+            "MORPH",
+            "MORPH x",
+            "MORPH 0",
+            "MORPH 1 x",
+            "MORPH 1 auto x",
+            "SIM",
+            "SIM x",
+            "SIM STATE x",
+            "SIM CLEAR x",
+            "SIM FAULT",
+            "SIM FAULT heater-open x",
+            "SIM FAULT heater-open amb",
+            "SIM FAULT heater-open pla x",
+            "SIM SUPPLY",
+            "SIM SUPPLY 1 x",
+            "SIM AMBIENT",
+            "SIM AMBIENT 1 x",
+            "SIM MEDIUM",
+            "SIM MEDIUM air x",
+        ];
+        let errors = lines
+            .iter()
+            .map(|l| parse_line(l).unwrap_err())
+            .chain([ERR_LINE_TOO_LONG, ERR_INVALID_LINE]);
+        for err in errors {
+            let text = err.text;
+            assert!(
+                text.ends_with('.') && text.is_ascii() && !text.contains('\n'),
+                "{text}"
+            );
+            assert!(text.as_bytes()[0].is_ascii_uppercase(), "{text}");
+            let out = format_error(&err);
+            assert_eq!(
+                out.as_str(),
+                format!("error: {} {}", err.code.as_str(), text)
+            );
+            assert!(out.len() < out.capacity());
+        }
+        assert!(ERR_LINE_TOO_LONG.text.contains(&format!("{MAX_LINE}")));
+    }
+
+    #[test]
+    fn format_error_layout() {
+        let out = format_error(&parse_line("MORPH").unwrap_err());
+        assert_eq!(
+            out.as_str(),
+            "error: bad-argument MORPH needs a radius in mm, e.g. MORPH 38."
+        );
+    }
+
+    /// Feeds `bytes`, collecting owned copies of each result.
+    fn assemble(bytes: &[u8]) -> Vec<Result<String, Assembled<'static>>> {
+        let mut asm = LineAssembler::new();
+        let mut out = Vec::new();
+        for &b in bytes {
+            match asm.push(b) {
+                None => {}
+                Some(Assembled::Line(l)) => out.push(Ok(String::from(l))),
+                Some(Assembled::TooLong) => out.push(Err(Assembled::TooLong)),
+                Some(Assembled::Invalid) => out.push(Err(Assembled::Invalid)),
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn assembler_lines() {
+        let got = assemble(b"STATUS\r\n\nabc\rdef\nno end");
+        assert_eq!(
+            got,
+            [Ok("STATUS".into()), Ok("".into()), Ok("abcdef".into())]
+        );
+    }
+
+    #[test]
+    fn assembler_limits() {
+        let exact = [b'a'; MAX_LINE];
+        let mut stream = Vec::from(exact);
+        stream.push(b'\n');
+        stream.extend_from_slice(&[b'b'; MAX_LINE + 1]);
+        stream.extend_from_slice(&[b'c'; 500]);
+        stream.extend_from_slice(b"\nSTATUS\n");
+        let got = assemble(&stream);
+        assert_eq!(got.len(), 3);
+        assert_eq!(got[0], Ok(String::from_utf8(exact.to_vec()).unwrap()));
+        assert_eq!(got[1], Err(Assembled::TooLong));
+        assert_eq!(got[2], Ok("STATUS".into()));
+    }
+
+    #[test]
+    fn assembler_invalid_utf8() {
+        let got = assemble(b"ST\xffATUS\n\xc3\xbc\nok\n");
+        assert_eq!(
+            got,
+            [Err(Assembled::Invalid), Ok("ü".into()), Ok("ok".into())]
+        );
+    }
+
+    /// What the assembler should report for each `\n`-terminated segment of `bytes`.
+    fn model(bytes: &[u8]) -> Vec<Result<String, Assembled<'static>>> {
+        let mut segments: Vec<&[u8]> = bytes.split(|&b| b == b'\n').collect();
+        segments.pop(); // the unterminated tail
+        segments
+            .into_iter()
+            .map(|seg| {
+                let kept: Vec<u8> = seg.iter().copied().filter(|&b| b != b'\r').collect();
+                if kept.len() > MAX_LINE {
+                    Err(Assembled::TooLong)
+                } else {
+                    String::from_utf8(kept).map_err(|_| Assembled::Invalid)
+                }
+            })
+            .collect()
+    }
+
+    /// Bytes weighted towards line structure: newlines, CRs, spaces, command letters, junk.
+    fn stream() -> impl Strategy<Value = Vec<u8>> {
+        let byte = prop_oneof![
+            3 => Just(b'\n'),
+            2 => Just(b'\r'),
+            3 => Just(b' '),
+            10 => prop::sample::select(b"MORPHSIMFAULTSTATUS0123456789.-abcdeptw".to_vec()),
+            2 => any::<u8>(),
+        ];
+        let long = prop::collection::vec(b'a'..=b'z', 60..200);
+        prop::collection::vec(
+            prop_oneof![4 => prop::collection::vec(byte, 0..20), 1 => long],
+            0..20,
+        )
+        .prop_map(|parts| parts.concat())
+    }
+
+    proptest! {
+        #[test]
+        fn assembler_matches_model_and_parse_answers_once(bytes in stream()) {
+            let got = assemble(&bytes);
+            prop_assert_eq!(&got, &model(&bytes));
+            for line in got.iter().filter_map(|r| r.as_ref().ok()) {
+                let result = parse_line(line);
+                let blank = line.trim_matches(|c: char| c.is_ascii_whitespace()).is_empty();
+                // A non-blank line gets exactly one answer: a command or an error.
+                prop_assert_eq!(matches!(result, Ok(None)), blank, "{:?}", line);
+            }
+        }
+
+        #[test]
+        fn parse_line_never_panics(line in "\\PC{0,80}") {
+            let _ = parse_line(&line);
+        }
+
+        #[test]
+        fn parse_line_never_panics_on_near_commands(
+            line in "(?i)(morph|sim|status|fault)( {1,2}[a-z0-9.\\-+ü]{0,8}){0,4}"
+        ) {
+            let result = parse_line(&line);
+            prop_assert!(!matches!(result, Ok(None)));
+        }
+
+        #[test]
+        fn morph_round_trip(
+            radius_mm in 1e-3f32..1e5,
+            decimals in 0u8..=3,
+            mode in prop::option::of(prop::sample::select(MODES.to_vec())),
+            upper in any::<bool>(),
+            sep in "[ \t]{1,3}",
+        ) {
+            let number = format!("{}", Fixed(radius_mm, decimals));
+            let expected = crate::fixed::parse_decimal(&number).unwrap_or(f32::NAN);
+            prop_assume!(expected > 0.0);
+            let mut line = format!("MORPH{sep}{number}");
+            if let Some(mode) = mode {
+                line = format!("{line}{sep}{}", mode.as_str());
+            }
+            if !upper {
+                line = line.to_lowercase();
+            }
+            let want = Command::Morph { radius_mm: expected, mode: mode.unwrap_or(Mode::Auto) };
+            prop_assert_eq!(parse_line(&line), Ok(Some(want)));
+            let tol = 0.5 * 10f32.powi(-(decimals as i32)) + radius_mm * 2.0 * f32::EPSILON;
+            prop_assert!((expected - radius_mm).abs() <= tol);
+        }
+    }
+}
