@@ -176,6 +176,11 @@ impl Controller {
         self.phase() == Phase::Idle
     }
 
+    /// True while a morph is under way (not idle, not faulted).
+    pub fn busy(&self) -> bool {
+        self.fault.is_none() && self.seq.busy()
+    }
+
     fn push(&mut self, e: Event) {
         if self.events.is_full() {
             self.events.pop_front();
