@@ -6,7 +6,7 @@
 //! heater-not-heating, stale sensor frames and supply voltage. A trip is returned as a
 //! [`Fault`]; the controller turns both heaters off in the same tick and latches it.
 
-use crate::link::{R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W};
+use crate::link::{R_PP_K_PER_W, R_TT_K_PER_W};
 use crate::protocol::{Heater, Sensor};
 use crate::sequencer::{Measurements, Phase, Powers};
 use crate::thermistor::{RangeCheck, Reading};
@@ -108,9 +108,10 @@ pub const HEATING_CHECK_S: f32 = 10.0;
 /// after [`HEATING_CHECK_S`]. Under water the TCA has reached about 55 % (with thermistor lag);
 /// 30 % leaves room for 30 % more convection and a slow sensor.
 pub const HEATING_MIN_FRACTION: f32 = 0.3;
-/// Heater-not-heating: a heater whose expected rise is below this is not judged, K (noise and
-/// ambient drift would make the check trip falsely). The TCA is checked from about 0.3 W.
-pub const HEATING_MIN_RISE_C: f32 = 3.0;
+/// Heater-not-heating: a heater whose expected rise is below this is not judged, K: the other
+/// heater can warm its sensor by a few kelvin within one check window, which would hide a dead
+/// heater; below this the check could not tell. The TCA is judged from about 0.4 W.
+pub const HEATING_MIN_RISE_C: f32 = 4.0;
 
 /// One sensor frame as the supervisor sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -130,6 +131,7 @@ const LIMITS: [Limits; 3] = [PLA_LIMITS, TCA_LIMITS, AMB_LIMITS];
 struct HeatWatch {
     on_since_ms: Option<u64>,
     min_power_w: f32,
+    start_c: f32,
 }
 
 /// The supervisor's state: consecutive-sample counters, last good temperatures and the
@@ -201,28 +203,32 @@ impl Supervisor {
 
     fn check_heating(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
         let m = self.measurements();
-        // (heater, own power, other power, own sensor, own resistance)
-        let heaters = [
-            (Heater::Pla, cmd.pla_w, cmd.tca_w, m.t_pla_c, R_PP_K_PER_W),
-            (Heater::Tca, cmd.tca_w, cmd.pla_w, m.t_tca_c, R_TT_K_PER_W),
-        ];
-        for (i, (heater, own_w, other_w, temp_c, r_self)) in heaters.into_iter().enumerate() {
+        // (heater, own power, own sensor, own resistance)
+        let heaters = [(Heater::Pla, cmd.pla_w, m.t_pla_c, R_PP_K_PER_W), (Heater::Tca, cmd.tca_w, m.t_tca_c, R_TT_K_PER_W)];
+        for (i, (heater, own_w, temp_c, r_self)) in heaters.into_iter().enumerate() {
             let w = &mut self.watch[i];
-            if own_w * r_self * HEATING_MIN_FRACTION < HEATING_MIN_RISE_C {
+            // One watch per on-period: it starts when the heater is switched on and judges the
+            // rise since then against the lowest power of the period.
+            if !(own_w > 0.0) {
                 *w = HeatWatch::default();
                 continue;
             }
-            let since = *w.on_since_ms.get_or_insert(now_ms);
-            if w.min_power_w == 0.0 || own_w < w.min_power_w {
-                w.min_power_w = own_w;
+            if w.on_since_ms.is_none() {
+                *w = HeatWatch { on_since_ms: Some(now_ms), min_power_w: own_w, start_c: temp_c };
             }
-            if now_ms.saturating_sub(since) as f32 / 1000.0 < HEATING_CHECK_S {
+            w.min_power_w = w.min_power_w.min(own_w);
+            let since = w.on_since_ms.unwrap_or(now_ms);
+            let judged = w.min_power_w * r_self * HEATING_MIN_FRACTION >= HEATING_MIN_RISE_C;
+            if !judged || (now_ms.saturating_sub(since) as f32) / 1000.0 < HEATING_CHECK_S {
                 continue;
             }
-            let own_rise = temp_c - m.t_amb_c - R_TP_K_PER_W * other_w;
+            // Two rises must each reach the expected share of the model's steady rise: since the
+            // heater came on (catches a heater dead from the start even while the other heater
+            // warms its sensor) and above ambient (catches one that dies later: it cools away).
             let expected = HEATING_MIN_FRACTION * r_self * w.min_power_w;
-            if !(own_rise >= expected) {
-                return Err(Fault { code: FaultCode::HeaterNotHeating, subject: Subject::Heater(heater), value: own_rise });
+            let rise = (temp_c - w.start_c).min(temp_c - m.t_amb_c);
+            if !(rise >= expected) {
+                return Err(Fault { code: FaultCode::HeaterNotHeating, subject: Subject::Heater(heater), value: rise });
             }
         }
         Ok(())

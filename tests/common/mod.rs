@@ -1,0 +1,85 @@
+//! Shared helpers of the integration tests: a rig that records every line it sends.
+#![allow(dead_code)]
+
+use morphlink::controller::Outputs;
+use morphlink::sequencer::Phase;
+use morphlink_sim::{Plant, Rig};
+
+/// A rig plus the lines it has written.
+pub struct Bench {
+    pub rig: Rig,
+    pub lines: Vec<String>,
+}
+
+impl Bench {
+    pub fn new() -> Self {
+        Self::with_plant(Plant::NOMINAL)
+    }
+
+    pub fn with_plant(plant: Plant) -> Self {
+        Bench { rig: Rig::new(plant), lines: Vec::new() }
+    }
+
+    /// Sends one line; returns the lines written in reply.
+    pub fn send(&mut self, line: &str) -> Vec<String> {
+        let mut reply = Vec::new();
+        self.rig.handle_line(line, &mut |l| reply.push(l.to_string()));
+        self.lines.extend(reply.iter().cloned());
+        reply
+    }
+
+    /// One tick; returns the outputs and the event/alarm lines it produced.
+    pub fn tick(&mut self) -> (Outputs, Vec<String>) {
+        let out = self.rig.tick();
+        let mut ev = Vec::new();
+        self.rig.drain_events(&mut |l| ev.push(l.to_string()));
+        self.lines.extend(ev.iter().cloned());
+        (out, ev)
+    }
+
+    /// Ticks until `pred` holds or `max_s` of simulated time passes; true if it held.
+    pub fn run_until(&mut self, max_s: f64, mut pred: impl FnMut(&Bench) -> bool) -> bool {
+        let end = self.rig.now_ms() + (max_s * 1000.0) as u64;
+        while self.rig.now_ms() < end {
+            if pred(self) {
+                return true;
+            }
+            self.tick();
+        }
+        pred(self)
+    }
+
+    /// Ticks for `s` seconds of simulated time.
+    pub fn run_for(&mut self, s: f64) {
+        let end = self.rig.now_ms() + (s * 1000.0) as u64;
+        while self.rig.now_ms() < end {
+            self.tick();
+        }
+    }
+
+    pub fn phase(&self) -> Phase {
+        self.rig.ctrl.phase()
+    }
+
+    /// Starts a morph (asserting `ok`) and runs until the controller is idle again.
+    pub fn morph(&mut self, radius_mm: f32, mode: &str) -> f64 {
+        let r = self.send(&format!("MORPH {radius_mm} {mode}"));
+        assert_eq!(r, ["ok"], "MORPH {radius_mm} {mode}");
+        let t0 = self.rig.now_ms();
+        assert!(self.run_until(400.0, |b| !b.rig.ctrl.busy()), "morph did not finish: {:?}", self.lines);
+        (self.rig.now_ms() - t0) as f64 / 1000.0
+    }
+
+    /// Phase names announced by `event: phase` lines so far.
+    pub fn phases(&self) -> Vec<String> {
+        self.lines
+            .iter()
+            .filter_map(|l| l.strip_prefix("event: phase ").map(|r| r.split(' ').next().unwrap().to_string()))
+            .collect()
+    }
+
+    /// Value of `key=` in a reply line.
+    pub fn field(line: &str, key: &str) -> Option<String> {
+        line.split(' ').find_map(|w| w.strip_prefix(&format!("{key}=")).map(str::to_string))
+    }
+}
