@@ -39,7 +39,11 @@ pub struct SupplySense {
 
 impl SupplySense {
     /// 47 kΩ over 10 kΩ from the supply to a 3.3 V ADC: 12 V reads 2.1 V, 18.8 V is full scale.
-    pub const DEFAULT: SupplySense = SupplySense { vref_v: 3.3, divider_ratio: 5.7, full_scale_counts: FULL_SCALE_COUNTS };
+    pub const DEFAULT: SupplySense = SupplySense {
+        vref_v: 3.3,
+        divider_ratio: 5.7,
+        full_scale_counts: FULL_SCALE_COUNTS,
+    };
 
     /// Supply voltage for a summed reading, V.
     pub fn volts(&self, counts: u32) -> f32 {
@@ -255,7 +259,12 @@ impl Controller {
     /// Handles one received line: writes zero or more `data:` lines and exactly one final reply
     /// through `out`, except for `SIM` commands, which are returned for the caller (a simulated
     /// build) to carry out and answer. Empty lines get no reply.
-    pub fn handle_line(&mut self, now_ms: u64, line: &str, out: &mut impl FnMut(&str)) -> Option<SimCommand> {
+    pub fn handle_line(
+        &mut self,
+        now_ms: u64,
+        line: &str,
+        out: &mut impl FnMut(&str),
+    ) -> Option<SimCommand> {
         match protocol::parse_line(line) {
             Ok(None) => None,
             Ok(Some(Command::Sim(s))) => Some(s),
@@ -296,7 +305,12 @@ impl Controller {
             Command::Table => {
                 for row in crate::link::TABLE.iter() {
                     l.clear();
-                    let _ = write!(l, "data: {} {}", Fixed(row.power_w, 3), Fixed(row.radius_mm, 2));
+                    let _ = write!(
+                        l,
+                        "data: {} {}",
+                        Fixed(row.power_w, 3),
+                        Fixed(row.radius_mm, 2)
+                    );
                     out(&l);
                 }
                 out("ok");
@@ -323,11 +337,19 @@ impl Controller {
     fn morph(&mut self, now_ms: u64, radius_mm: f32, mode: Mode, out: &mut impl FnMut(&str)) {
         let mut l = OutLine::new();
         if let Some(f) = self.fault {
-            let _ = write!(l, "error: fault-latched {} is latched; send RESET once it has cleared", f.code.as_str());
+            let _ = write!(
+                l,
+                "error: fault-latched {} is latched; send RESET once it has cleared",
+                f.code.as_str()
+            );
             return out(&l);
         }
         if self.seq.busy() {
-            let _ = write!(l, "error: busy a morph is in phase {}; send ABORT first", self.seq.phase().as_str());
+            let _ = write!(
+                l,
+                "error: busy a morph is in phase {}; send ABORT first",
+                self.seq.phase().as_str()
+            );
             return out(&l);
         }
         if self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan() {
@@ -335,7 +357,12 @@ impl Controller {
         }
         match table::power_for_radius_w(radius_mm) {
             Err(r) => {
-                let _ = write!(l, "error: out-of-range reachable={}..{}", Fixed(r.min_mm, 2), Fixed(r.max_mm, 2));
+                let _ = write!(
+                    l,
+                    "error: out-of-range reachable={}..{}",
+                    Fixed(r.min_mm, 2),
+                    Fixed(r.max_mm, 2)
+                );
                 out(&l);
             }
             Ok(power_w) => {
@@ -404,14 +431,23 @@ impl Controller {
         let e = self.pop_event()?;
         let mut l = OutLine::new();
         match e {
-            Event::Seq(SeqEvent::Phase { phase, t_s, power_w }) => {
+            Event::Seq(SeqEvent::Phase {
+                phase,
+                t_s,
+                power_w,
+            }) => {
                 let _ = write!(l, "event: phase {} t={}", phase.as_str(), Fixed(t_s, 1));
                 if let Some(p) = power_w {
                     let _ = write!(l, " power_w={}", Fixed(p, 3));
                 }
             }
             Event::Seq(SeqEvent::Done { t_s, radius_mm }) => {
-                let _ = write!(l, "event: done t={} radius_mm={}", Fixed(t_s, 1), Fixed(radius_mm, 2));
+                let _ = write!(
+                    l,
+                    "event: done t={} radius_mm={}",
+                    Fixed(t_s, 1),
+                    Fixed(radius_mm, 2)
+                );
             }
             Event::Alarm(f) => {
                 let _ = write!(l, "alarm: ");
@@ -438,13 +474,31 @@ fn write_fault_text(l: &mut OutLine, f: &Fault) {
     let s = subject_str(&f.subject);
     let v = Fixed(f.value, 1);
     let _ = match f.code {
-        FaultCode::ThermistorOpen => write!(l, "thermistor-open {s} thermistor reads open circuit; check its wiring"),
-        FaultCode::ThermistorShort => write!(l, "thermistor-short {s} thermistor reads short circuit; check its wiring"),
-        FaultCode::UnderTemperature => write!(l, "under-temperature {s} reads {v} C, below its minimum"),
-        FaultCode::OverTemperature => write!(l, "over-temperature {s} reads {v} C, above its maximum"),
-        FaultCode::HeaterNotHeating => write!(l, "heater-not-heating {s} heater rose only {v} K; check heater wiring and MOSFET"),
+        FaultCode::ThermistorOpen => write!(
+            l,
+            "thermistor-open {s} thermistor reads open circuit; check its wiring"
+        ),
+        FaultCode::ThermistorShort => write!(
+            l,
+            "thermistor-short {s} thermistor reads short circuit; check its wiring"
+        ),
+        FaultCode::UnderTemperature => {
+            write!(l, "under-temperature {s} reads {v} C, below its minimum")
+        }
+        FaultCode::OverTemperature => {
+            write!(l, "over-temperature {s} reads {v} C, above its maximum")
+        }
+        FaultCode::HeaterNotHeating => write!(
+            l,
+            "heater-not-heating {s} heater rose only {v} K; check heater wiring and MOSFET"
+        ),
         FaultCode::StaleSensor => write!(l, "stale-sensor no sensor frame for {v} s"),
-        FaultCode::SupplyOutOfRange => write!(l, "supply-out-of-range supply reads {v} V, allowed {}..{}", Fixed(SUPPLY_MIN_V, 1), Fixed(SUPPLY_MAX_V, 1)),
+        FaultCode::SupplyOutOfRange => write!(
+            l,
+            "supply-out-of-range supply reads {v} V, allowed {}..{}",
+            Fixed(SUPPLY_MIN_V, 1),
+            Fixed(SUPPLY_MAX_V, 1)
+        ),
         FaultCode::PhaseTimeout => write!(l, "phase-timeout phase {s} did not finish in time"),
     };
 }

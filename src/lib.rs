@@ -6,6 +6,9 @@
 //! out of it, and protocol lines through [`controller::Controller::handle_line`].
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
+// `!(x >= limit)` is deliberate: a NaN reading must fail a check, not pass it.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+#![allow(clippy::needless_range_loop)]
 
 pub mod controller;
 pub mod fixed;

@@ -167,11 +167,21 @@ impl Sequencer {
 
     /// True while a morph is under way.
     pub fn busy(&self) -> bool {
-        matches!(self.phase, Phase::Soften | Phase::Bend | Phase::Lock | Phase::Release)
+        matches!(
+            self.phase,
+            Phase::Soften | Phase::Bend | Phase::Lock | Phase::Release
+        )
     }
 
     /// Starts a morph to `radius_mm` with TCA power `tca_power_w` (from the table).
-    pub fn start(&mut self, now_ms: u64, radius_mm: f32, tca_power_w: f32, mode: Mode, emit: &mut impl FnMut(SeqEvent)) {
+    pub fn start(
+        &mut self,
+        now_ms: u64,
+        radius_mm: f32,
+        tca_power_w: f32,
+        mode: Mode,
+        emit: &mut impl FnMut(SeqEvent),
+    ) {
         self.mode = mode;
         self.target_mm = radius_mm;
         self.tca_power_w = tca_power_w;
@@ -208,7 +218,11 @@ impl Sequencer {
         self.window_temp_c = f32::NAN;
         let t_s = self.since_s(now_ms, self.start_ms);
         let power_w = (phase == Phase::Bend).then_some(self.tca_power_w);
-        emit(SeqEvent::Phase { phase, t_s, power_w });
+        emit(SeqEvent::Phase {
+            phase,
+            t_s,
+            power_w,
+        });
     }
 
     /// TCA power during lock, W: the bend power plus what replaces the heat the PLA heater
@@ -219,7 +233,12 @@ impl Sequencer {
     }
 
     /// One control tick: advances the phase from the measurements and returns the powers.
-    pub fn step(&mut self, now_ms: u64, m: &Measurements, emit: &mut impl FnMut(SeqEvent)) -> Result<Powers, PhaseTimeout> {
+    pub fn step(
+        &mut self,
+        now_ms: u64,
+        m: &Measurements,
+        emit: &mut impl FnMut(SeqEvent),
+    ) -> Result<Powers, PhaseTimeout> {
         match self.mode {
             Mode::Auto => self.step_gated(now_ms, m, emit),
             Mode::Paper => self.step_paper(now_ms, m, emit),
@@ -266,10 +285,18 @@ impl Sequencer {
     fn finish(&mut self, now_ms: u64, emit: &mut impl FnMut(SeqEvent)) {
         self.phase = Phase::Idle;
         let t_s = self.since_s(now_ms, self.start_ms);
-        emit(SeqEvent::Done { t_s, radius_mm: self.estimate_mm });
+        emit(SeqEvent::Done {
+            t_s,
+            radius_mm: self.estimate_mm,
+        });
     }
 
-    fn step_gated(&mut self, now_ms: u64, m: &Measurements, emit: &mut impl FnMut(SeqEvent)) -> Result<Powers, PhaseTimeout> {
+    fn step_gated(
+        &mut self,
+        now_ms: u64,
+        m: &Measurements,
+        emit: &mut impl FnMut(SeqEvent),
+    ) -> Result<Powers, PhaseTimeout> {
         self.check_timeout(now_ms)?;
         let in_phase_s = self.since_s(now_ms, self.phase_ms);
         match self.phase {
@@ -299,7 +326,12 @@ impl Sequencer {
         Ok(self.powers())
     }
 
-    fn step_paper(&mut self, now_ms: u64, m: &Measurements, emit: &mut impl FnMut(SeqEvent)) -> Result<Powers, PhaseTimeout> {
+    fn step_paper(
+        &mut self,
+        now_ms: u64,
+        m: &Measurements,
+        emit: &mut impl FnMut(SeqEvent),
+    ) -> Result<Powers, PhaseTimeout> {
         self.check_timeout(now_ms)?;
         let t_s = self.since_s(now_ms, self.start_ms);
         let next = match self.phase {
@@ -325,10 +357,22 @@ impl Sequencer {
     fn powers(&self) -> Powers {
         let paper = self.mode == Mode::Paper;
         match self.phase {
-            Phase::Soften => Powers { pla_w: SOFTEN_POWER_W, tca_w: 0.0 },
-            Phase::Bend => Powers { pla_w: HOLD_POWER_W, tca_w: self.tca_power_w },
-            Phase::Lock if paper => Powers { pla_w: 0.0, tca_w: self.tca_power_w },
-            Phase::Lock => Powers { pla_w: 0.0, tca_w: self.lock_tca_power_w() },
+            Phase::Soften => Powers {
+                pla_w: SOFTEN_POWER_W,
+                tca_w: 0.0,
+            },
+            Phase::Bend => Powers {
+                pla_w: HOLD_POWER_W,
+                tca_w: self.tca_power_w,
+            },
+            Phase::Lock if paper => Powers {
+                pla_w: 0.0,
+                tca_w: self.tca_power_w,
+            },
+            Phase::Lock => Powers {
+                pla_w: 0.0,
+                tca_w: self.lock_tca_power_w(),
+            },
             _ => Powers::default(),
         }
     }
@@ -341,7 +385,11 @@ mod tests {
     use std::vec::Vec;
 
     fn meas(pla: f32, tca: f32) -> Measurements {
-        Measurements { t_pla_c: pla, t_tca_c: tca, t_amb_c: 22.0 }
+        Measurements {
+            t_pla_c: pla,
+            t_tca_c: tca,
+            t_amb_c: 22.0,
+        }
     }
 
     fn run(seq: &mut Sequencer, now: u64, m: Measurements, ev: &mut Vec<SeqEvent>) -> Powers {
@@ -353,7 +401,13 @@ mod tests {
         let mut s = Sequencer::new();
         let mut ev = Vec::new();
         s.start(0, 38.0, 0.6, Mode::Auto, &mut |e| ev.push(e));
-        assert_eq!(run(&mut s, 100, meas(30.0, 22.0), &mut ev), Powers { pla_w: SOFTEN_POWER_W, tca_w: 0.0 });
+        assert_eq!(
+            run(&mut s, 100, meas(30.0, 22.0), &mut ev),
+            Powers {
+                pla_w: SOFTEN_POWER_W,
+                tca_w: 0.0
+            }
+        );
         run(&mut s, 5000, meas(71.0, 30.0), &mut ev);
         assert_eq!(s.phase(), Phase::Bend);
         // Rising TCA: not settled.
@@ -361,7 +415,13 @@ mod tests {
         for i in 0..20 {
             t += 1000;
             let p = run(&mut s, t, meas(70.0, 30.0 + i as f32), &mut ev);
-            assert_eq!(p, Powers { pla_w: HOLD_POWER_W, tca_w: 0.6 });
+            assert_eq!(
+                p,
+                Powers {
+                    pla_w: HOLD_POWER_W,
+                    tca_w: 0.6
+                }
+            );
         }
         assert_eq!(s.phase(), Phase::Bend);
         for _ in 0..10 {
@@ -374,20 +434,38 @@ mod tests {
         assert!(p.tca_w > 0.6, "lock compensates the lost PLA heat: {p:?}");
         run(&mut s, t + 200, meas(44.0, 52.0), &mut ev);
         assert_eq!(s.phase(), Phase::Release);
-        assert_eq!(run(&mut s, t + 300, meas(44.0, 52.0), &mut ev), Powers::default());
+        assert_eq!(
+            run(&mut s, t + 300, meas(44.0, 52.0), &mut ev),
+            Powers::default()
+        );
         run(&mut s, t + 2300, meas(40.0, 40.0), &mut ev);
         assert_eq!(s.phase(), Phase::Idle);
         let phases: Vec<Phase> = ev
             .iter()
-            .filter_map(|e| if let SeqEvent::Phase { phase, .. } = e { Some(*phase) } else { None })
+            .filter_map(|e| {
+                if let SeqEvent::Phase { phase, .. } = e {
+                    Some(*phase)
+                } else {
+                    None
+                }
+            })
             .collect();
-        assert_eq!(phases, [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release]);
-        assert!(matches!(ev.last(), Some(SeqEvent::Done { radius_mm, .. }) if radius_mm.is_finite()));
+        assert_eq!(
+            phases,
+            [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release]
+        );
+        assert!(
+            matches!(ev.last(), Some(SeqEvent::Done { radius_mm, .. }) if radius_mm.is_finite())
+        );
     }
 
     #[test]
     fn every_gated_phase_times_out_into_fault() {
-        for (phase_at, timeout) in [(0u64, SOFTEN_TIMEOUT_S), (1, BEND_TIMEOUT_S), (2, LOCK_TIMEOUT_S)] {
+        for (phase_at, timeout) in [
+            (0u64, SOFTEN_TIMEOUT_S),
+            (1, BEND_TIMEOUT_S),
+            (2, LOCK_TIMEOUT_S),
+        ] {
             let mut s = Sequencer::new();
             let mut ev = Vec::new();
             s.start(0, 38.0, 0.6, Mode::Auto, &mut |e| ev.push(e));
@@ -416,7 +494,11 @@ mod tests {
             while t <= entered + (timeout as u64 + 2) * 1000 {
                 t += 500;
                 i += 1.0;
-                let m = if p == Phase::Bend { meas(75.0, i) } else { stuck };
+                let m = if p == Phase::Bend {
+                    meas(75.0, i)
+                } else {
+                    stuck
+                };
                 result = s.step(t, &m, &mut |e| ev.push(e));
                 if result.is_err() {
                     break;
@@ -424,7 +506,10 @@ mod tests {
             }
             assert_eq!(result, Err(PhaseTimeout(p)), "phase {p:?}");
             assert_eq!(s.phase(), Phase::Fault);
-            assert_eq!(s.step(t + 100, &stuck, &mut |e| ev.push(e)), Ok(Powers::default()));
+            assert_eq!(
+                s.step(t + 100, &stuck, &mut |e| ev.push(e)),
+                Ok(Powers::default())
+            );
         }
     }
 
@@ -434,16 +519,50 @@ mod tests {
         let mut ev = Vec::new();
         s.start(0, 38.0, 0.6, Mode::Paper, &mut |e| ev.push(e));
         let m = meas(80.0, 40.0);
-        let at = |s: &mut Sequencer, ev: &mut Vec<SeqEvent>, t_s: f32| run(s, (t_s * 1000.0) as u64, m, ev);
-        assert_eq!(at(&mut s, &mut ev, 10.0), Powers { pla_w: 4.0, tca_w: 0.0 });
-        assert_eq!(at(&mut s, &mut ev, 20.0), Powers { pla_w: HOLD_POWER_W, tca_w: 0.6 });
-        assert_eq!(at(&mut s, &mut ev, 69.9), Powers { pla_w: HOLD_POWER_W, tca_w: 0.6 });
-        assert_eq!(at(&mut s, &mut ev, 70.0), Powers { pla_w: 0.0, tca_w: 0.6 });
-        assert_eq!(at(&mut s, &mut ev, 119.9), Powers { pla_w: 0.0, tca_w: 0.6 });
+        let at = |s: &mut Sequencer, ev: &mut Vec<SeqEvent>, t_s: f32| {
+            run(s, (t_s * 1000.0) as u64, m, ev)
+        };
+        assert_eq!(
+            at(&mut s, &mut ev, 10.0),
+            Powers {
+                pla_w: 4.0,
+                tca_w: 0.0
+            }
+        );
+        assert_eq!(
+            at(&mut s, &mut ev, 20.0),
+            Powers {
+                pla_w: HOLD_POWER_W,
+                tca_w: 0.6
+            }
+        );
+        assert_eq!(
+            at(&mut s, &mut ev, 69.9),
+            Powers {
+                pla_w: HOLD_POWER_W,
+                tca_w: 0.6
+            }
+        );
+        assert_eq!(
+            at(&mut s, &mut ev, 70.0),
+            Powers {
+                pla_w: 0.0,
+                tca_w: 0.6
+            }
+        );
+        assert_eq!(
+            at(&mut s, &mut ev, 119.9),
+            Powers {
+                pla_w: 0.0,
+                tca_w: 0.6
+            }
+        );
         assert_eq!(at(&mut s, &mut ev, 120.0), Powers::default());
         at(&mut s, &mut ev, 122.0);
         assert_eq!(s.phase(), Phase::Idle);
-        assert!(matches!(ev.last(), Some(SeqEvent::Done { t_s, .. }) if (*t_s - 122.0).abs() < 0.01));
+        assert!(
+            matches!(ev.last(), Some(SeqEvent::Done { t_s, .. }) if (*t_s - 122.0).abs() < 0.01)
+        );
     }
 
     #[test]
@@ -462,7 +581,10 @@ mod tests {
             }
             s.abort();
             assert_eq!(s.phase(), Phase::Idle);
-            assert_eq!(run(&mut s, t + 100, meas(75.0, 50.0), &mut ev), Powers::default());
+            assert_eq!(
+                run(&mut s, t + 100, meas(75.0, 50.0), &mut ev),
+                Powers::default()
+            );
         }
     }
 }

@@ -85,11 +85,20 @@ pub struct Limits {
 
 /// PLA limits: the rod melts near 150 °C; 130 °C leaves 20 K margin. The paper's 4 W for 20 s
 /// reaches about 115 °C under water, so the paper's protocol still runs.
-pub const PLA_LIMITS: Limits = Limits { min_c: 2.0, max_c: 130.0 };
+pub const PLA_LIMITS: Limits = Limits {
+    min_c: 2.0,
+    max_c: 130.0,
+};
 /// TCA limits: annealed at 160 °C, it must stay below about 150 °C; 130 °C leaves 20 K margin.
-pub const TCA_LIMITS: Limits = Limits { min_c: 2.0, max_c: 130.0 };
+pub const TCA_LIMITS: Limits = Limits {
+    min_c: 2.0,
+    max_c: 130.0,
+};
 /// Ambient limits: a water bath or a room; above 50 °C the model's assumptions no longer hold.
-pub const AMB_LIMITS: Limits = Limits { min_c: 2.0, max_c: 50.0 };
+pub const AMB_LIMITS: Limits = Limits {
+    min_c: 2.0,
+    max_c: 50.0,
+};
 /// Lowest heater supply, V: −25 % of 12 V. Heater duty is computed from the measured voltage,
 /// so moderate sag is harmless; below this the heaters cannot reach the soften power.
 pub const SUPPLY_MIN_V: f32 = 9.0;
@@ -163,21 +172,46 @@ impl Supervisor {
 
     /// Last good temperatures, °C (NaN before the first good reading).
     pub fn measurements(&self) -> Measurements {
-        Measurements { t_pla_c: self.last_c[0], t_tca_c: self.last_c[1], t_amb_c: self.last_c[2] }
+        Measurements {
+            t_pla_c: self.last_c[0],
+            t_tca_c: self.last_c[1],
+            t_amb_c: self.last_c[2],
+        }
     }
 
     /// Checks one frame with the powers commanded in the previous tick. Returns the
     /// temperatures to control from, or the fault to latch.
-    pub fn check(&mut self, now_ms: u64, frame: &Frame, commanded: Powers) -> Result<Measurements, Fault> {
+    pub fn check(
+        &mut self,
+        now_ms: u64,
+        frame: &Frame,
+        commanded: Powers,
+    ) -> Result<Measurements, Fault> {
         if now_ms.saturating_sub(frame.sample_ms) > STALE_AFTER_MS {
             let age_s = now_ms.saturating_sub(frame.sample_ms) as f32 / 1000.0;
-            return Err(Fault { code: FaultCode::StaleSensor, subject: Subject::Frame, value: age_s });
+            return Err(Fault {
+                code: FaultCode::StaleSensor,
+                subject: Subject::Frame,
+                value: age_s,
+            });
         }
         for i in 0..3 {
             let subject = Subject::Sensor(SENSORS[i]);
             match self.range[i].update(frame.readings[i]) {
-                Some(Reading::Open) => return Err(Fault { code: FaultCode::ThermistorOpen, subject, value: f32::NAN }),
-                Some(Reading::Short) => return Err(Fault { code: FaultCode::ThermistorShort, subject, value: f32::NAN }),
+                Some(Reading::Open) => {
+                    return Err(Fault {
+                        code: FaultCode::ThermistorOpen,
+                        subject,
+                        value: f32::NAN,
+                    })
+                }
+                Some(Reading::Short) => {
+                    return Err(Fault {
+                        code: FaultCode::ThermistorShort,
+                        subject,
+                        value: f32::NAN,
+                    })
+                }
                 _ => {}
             }
             if let Reading::Ok(t) = frame.readings[i] {
@@ -185,8 +219,16 @@ impl Supervisor {
                 if t < lim.min_c || t > lim.max_c {
                     self.limit_count[i] = self.limit_count[i].saturating_add(1);
                     if self.limit_count[i] >= LIMIT_CONSECUTIVE {
-                        let code = if t > lim.max_c { FaultCode::OverTemperature } else { FaultCode::UnderTemperature };
-                        return Err(Fault { code, subject, value: t });
+                        let code = if t > lim.max_c {
+                            FaultCode::OverTemperature
+                        } else {
+                            FaultCode::UnderTemperature
+                        };
+                        return Err(Fault {
+                            code,
+                            subject,
+                            value: t,
+                        });
                     }
                 } else {
                     self.limit_count[i] = 0;
@@ -195,7 +237,11 @@ impl Supervisor {
             }
         }
         if !(frame.supply_v >= SUPPLY_MIN_V && frame.supply_v <= SUPPLY_MAX_V) {
-            return Err(Fault { code: FaultCode::SupplyOutOfRange, subject: Subject::Supply, value: frame.supply_v });
+            return Err(Fault {
+                code: FaultCode::SupplyOutOfRange,
+                subject: Subject::Supply,
+                value: frame.supply_v,
+            });
         }
         self.check_heating(now_ms, commanded)?;
         Ok(self.measurements())
@@ -204,7 +250,10 @@ impl Supervisor {
     fn check_heating(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
         let m = self.measurements();
         // (heater, own power, own sensor, own resistance)
-        let heaters = [(Heater::Pla, cmd.pla_w, m.t_pla_c, R_PP_K_PER_W), (Heater::Tca, cmd.tca_w, m.t_tca_c, R_TT_K_PER_W)];
+        let heaters = [
+            (Heater::Pla, cmd.pla_w, m.t_pla_c, R_PP_K_PER_W),
+            (Heater::Tca, cmd.tca_w, m.t_tca_c, R_TT_K_PER_W),
+        ];
         for (i, (heater, own_w, temp_c, r_self)) in heaters.into_iter().enumerate() {
             let w = &mut self.watch[i];
             // One watch per on-period: it starts when the heater is switched on and judges the
@@ -214,7 +263,11 @@ impl Supervisor {
                 continue;
             }
             if w.on_since_ms.is_none() {
-                *w = HeatWatch { on_since_ms: Some(now_ms), min_power_w: own_w, start_c: temp_c };
+                *w = HeatWatch {
+                    on_since_ms: Some(now_ms),
+                    min_power_w: own_w,
+                    start_c: temp_c,
+                };
             }
             w.min_power_w = w.min_power_w.min(own_w);
             let since = w.on_since_ms.unwrap_or(now_ms);
@@ -228,7 +281,11 @@ impl Supervisor {
             let expected = HEATING_MIN_FRACTION * r_self * w.min_power_w;
             let rise = (temp_c - w.start_c).min(temp_c - m.t_amb_c);
             if !(rise >= expected) {
-                return Err(Fault { code: FaultCode::HeaterNotHeating, subject: Subject::Heater(heater), value: rise });
+                return Err(Fault {
+                    code: FaultCode::HeaterNotHeating,
+                    subject: Subject::Heater(heater),
+                    value: rise,
+                });
             }
         }
         Ok(())
@@ -239,24 +296,52 @@ impl Supervisor {
     pub fn condition_clear(&self, now_ms: u64, frame: &Frame) -> Result<(), Fault> {
         if now_ms.saturating_sub(frame.sample_ms) > STALE_AFTER_MS {
             let age_s = now_ms.saturating_sub(frame.sample_ms) as f32 / 1000.0;
-            return Err(Fault { code: FaultCode::StaleSensor, subject: Subject::Frame, value: age_s });
+            return Err(Fault {
+                code: FaultCode::StaleSensor,
+                subject: Subject::Frame,
+                value: age_s,
+            });
         }
         for i in 0..3 {
             let subject = Subject::Sensor(SENSORS[i]);
             match frame.readings[i] {
-                Reading::Open => return Err(Fault { code: FaultCode::ThermistorOpen, subject, value: f32::NAN }),
-                Reading::Short => return Err(Fault { code: FaultCode::ThermistorShort, subject, value: f32::NAN }),
+                Reading::Open => {
+                    return Err(Fault {
+                        code: FaultCode::ThermistorOpen,
+                        subject,
+                        value: f32::NAN,
+                    })
+                }
+                Reading::Short => {
+                    return Err(Fault {
+                        code: FaultCode::ThermistorShort,
+                        subject,
+                        value: f32::NAN,
+                    })
+                }
                 Reading::Ok(t) if t > LIMITS[i].max_c => {
-                    return Err(Fault { code: FaultCode::OverTemperature, subject, value: t })
+                    return Err(Fault {
+                        code: FaultCode::OverTemperature,
+                        subject,
+                        value: t,
+                    })
                 }
                 Reading::Ok(t) if t < LIMITS[i].min_c => {
-                    return Err(Fault { code: FaultCode::UnderTemperature, subject, value: t })
+                    return Err(Fault {
+                        code: FaultCode::UnderTemperature,
+                        subject,
+                        value: t,
+                    })
                 }
                 Reading::Ok(_) => {}
             }
         }
         if !(frame.supply_v >= SUPPLY_MIN_V && frame.supply_v <= SUPPLY_MAX_V) {
-            return Err(Fault { code: FaultCode::SupplyOutOfRange, subject: Subject::Supply, value: frame.supply_v });
+            return Err(Fault {
+                code: FaultCode::SupplyOutOfRange,
+                subject: Subject::Supply,
+                value: frame.supply_v,
+            });
         }
         Ok(())
     }

@@ -21,7 +21,12 @@ pub struct OutOfRange {
 }
 
 /// Interpolates `y` at `x` along rows whose key `key(row)` ascends.
-fn interpolate(rows: &[Row], x: f32, key: impl Fn(&Row) -> f32, value: impl Fn(&Row) -> f32) -> f32 {
+fn interpolate(
+    rows: &[Row],
+    x: f32,
+    key: impl Fn(&Row) -> f32,
+    value: impl Fn(&Row) -> f32,
+) -> f32 {
     for pair in rows.windows(2) {
         let (a, b) = (&pair[0], &pair[1]);
         if x <= key(b) {
@@ -39,7 +44,12 @@ pub fn power_for_radius_w(radius_mm: f32) -> Result<f32, OutOfRange> {
         return Err(OutOfRange { min_mm, max_mm });
     }
     // Curvature ascends with power.
-    Ok(interpolate(&TABLE, 1.0 / radius_mm, |r| 1.0 / r.radius_mm, |r| r.power_w))
+    Ok(interpolate(
+        &TABLE,
+        1.0 / radius_mm,
+        |r| 1.0 / r.radius_mm,
+        |r| r.power_w,
+    ))
 }
 
 /// Radius the table predicts for a TCA power, mm (clamped to the table's ends).
@@ -53,7 +63,11 @@ pub fn radius_for_power_mm(power_w: f32) -> f32 {
 pub fn radius_for_tca_rise_mm(rise_k: f32) -> f32 {
     let lo = TABLE[0].tca_rise_k;
     let hi = TABLE[TABLE.len() - 1].tca_rise_k;
-    let x = if rise_k.is_finite() { rise_k.clamp(lo, hi) } else { lo };
+    let x = if rise_k.is_finite() {
+        rise_k.clamp(lo, hi)
+    } else {
+        lo
+    };
     1.0 / interpolate(&TABLE, x, |r| r.tca_rise_k, |r| 1.0 / r.radius_mm)
 }
 

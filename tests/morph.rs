@@ -6,7 +6,9 @@ use morphlink::table;
 /// Targets spread over the reachable range, ends included (0.2 mm inside).
 fn targets() -> Vec<f32> {
     let (min, max) = table::range_mm();
-    (0..7).map(|i| (min + 0.2) + (max - min - 0.4) * i as f32 / 6.0).collect()
+    (0..7)
+        .map(|i| (min + 0.2) + (max - min - 0.4) * i as f32 / 6.0)
+        .collect()
 }
 
 #[test]
@@ -14,16 +16,30 @@ fn auto_morphs_reach_every_target_within_two_percent_with_phases_in_order() {
     for target in targets() {
         let mut b = Bench::new();
         let t = b.morph(target, "auto");
-        assert_eq!(b.phases(), ["soften", "bend", "lock", "release"], "target {target}");
-        let done = b.lines.iter().find(|l| l.starts_with("event: done")).expect("done event");
+        assert_eq!(
+            b.phases(),
+            ["soften", "bend", "lock", "release"],
+            "target {target}"
+        );
+        let done = b
+            .lines
+            .iter()
+            .find(|l| l.starts_with("event: done"))
+            .expect("done event");
         let estimate: f32 = Bench::field(done, "radius_mm").unwrap().parse().unwrap();
         // Let the TCA cool fully: spring-back included.
         b.run_for(60.0);
         let r = b.rig.link.radius_mm() as f32;
         let err = (r - target) / target * 100.0;
         println!("target {target:.2} mm: final {r:.2} mm ({err:+.2} %), estimate {estimate:.2} mm, {t:.1} s");
-        assert!(err.abs() < 2.0, "target {target} mm ended at {r} mm ({err:+.2} %)");
-        assert!((estimate - r).abs() / r < 0.03, "estimate {estimate} vs {r}");
+        assert!(
+            err.abs() < 2.0,
+            "target {target} mm ended at {r} mm ({err:+.2} %)"
+        );
+        assert!(
+            (estimate - r).abs() / r < 0.03,
+            "estimate {estimate} vs {r}"
+        );
     }
 }
 
@@ -38,7 +54,10 @@ fn paper_mode_takes_the_papers_time_and_reaches_the_target() {
     let r = b.rig.link.radius_mm() as f32;
     println!("paper mode: {r:.2} mm for {target} mm");
     // The paper's protocol drops the PLA heat without compensating the TCA: it lands farther.
-    assert!((r - target).abs() / target < 0.05, "paper mode ended at {r} mm");
+    assert!(
+        (r - target).abs() / target < 0.05,
+        "paper mode ended at {r} mm"
+    );
 }
 
 #[test]
@@ -67,5 +86,8 @@ fn morph_while_busy_or_out_of_range_is_refused_and_changes_nothing() {
     let r = b.send("MORPH 40");
     assert!(r[0].starts_with("error: busy"), "{r:?}");
     let status = b.send("STATUS");
-    assert_eq!(Bench::field(&status[0], "target_mm").as_deref(), Some("38.00"));
+    assert_eq!(
+        Bench::field(&status[0], "target_mm").as_deref(),
+        Some("38.00")
+    );
 }

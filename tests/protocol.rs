@@ -1,7 +1,9 @@
 //! Protocol v1 as a contract, driven through the rig exactly as a serial client would.
 mod common;
 use common::Bench;
-use morphlink::protocol::{format_error, Assembled, LineAssembler, ERR_INVALID_LINE, ERR_LINE_TOO_LONG};
+use morphlink::protocol::{
+    format_error, Assembled, LineAssembler, ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
+};
 use proptest::prelude::*;
 
 /// Feeds raw bytes through the bounded line assembler into the bench; returns reply lines.
@@ -29,11 +31,26 @@ fn is_final(l: &str) -> bool {
 #[test]
 fn every_command_gets_exactly_one_final_reply() {
     let mut b = Bench::new();
-    for cmd in ["STATUS", "RANGE", "TABLE", "VERSION", "HELP", "RESET", "ABORT", "SIM STATE", "bogus", "MORPH", "MORPH x"] {
+    for cmd in [
+        "STATUS",
+        "RANGE",
+        "TABLE",
+        "VERSION",
+        "HELP",
+        "RESET",
+        "ABORT",
+        "SIM STATE",
+        "bogus",
+        "MORPH",
+        "MORPH x",
+    ] {
         let r = b.send(cmd);
         assert_eq!(r.iter().filter(|l| is_final(l)).count(), 1, "{cmd}: {r:?}");
         assert!(is_final(r.last().unwrap()), "{cmd}: {r:?}");
-        assert!(r[..r.len() - 1].iter().all(|l| l.starts_with("data: ")), "{cmd}: {r:?}");
+        assert!(
+            r[..r.len() - 1].iter().all(|l| l.starts_with("data: ")),
+            "{cmd}: {r:?}"
+        );
     }
 }
 
@@ -50,12 +67,25 @@ fn commands_are_case_insensitive_and_crlf_is_accepted() {
 fn status_has_every_field_of_the_contract() {
     let mut b = Bench::new();
     let s = &b.send("STATUS")[0];
-    for key in ["phase", "target_mm", "t_pla_c", "t_tca_c", "t_amb_c", "p_pla_w", "p_tca_w", "supply_v", "fault"] {
+    for key in [
+        "phase",
+        "target_mm",
+        "t_pla_c",
+        "t_tca_c",
+        "t_amb_c",
+        "p_pla_w",
+        "p_tca_w",
+        "supply_v",
+        "fault",
+    ] {
         assert!(Bench::field(s, key).is_some(), "{key} missing in {s}");
     }
     let state = &b.send("SIM STATE")[0];
     for key in ["time_s", "radius_mm", "t_pla_c", "t_tca_c"] {
-        assert!(Bench::field(state, key).is_some(), "{key} missing in {state}");
+        assert!(
+            Bench::field(state, key).is_some(),
+            "{key} missing in {state}"
+        );
     }
 }
 

@@ -5,15 +5,28 @@ use common::Bench;
 use morphlink::controller::Outputs;
 use morphlink::sequencer::Phase;
 
-const ZERO: Outputs = Outputs { pla_duty: 0.0, tca_duty: 0.0 };
-const PHASES: [Phase; 5] = [Phase::Idle, Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release];
+const ZERO: Outputs = Outputs {
+    pla_duty: 0.0,
+    tca_duty: 0.0,
+};
+const PHASES: [Phase; 5] = [
+    Phase::Idle,
+    Phase::Soften,
+    Phase::Bend,
+    Phase::Lock,
+    Phase::Release,
+];
 
 /// A bench in `phase` of a morph to `target_mm` (Idle: no morph started), a little way in.
 fn bench_in(phase: Phase, target_mm: f32) -> Bench {
     let mut b = Bench::new();
     if phase != Phase::Idle {
         assert_eq!(b.send(&format!("MORPH {target_mm}")), ["ok"]);
-        assert!(b.run_until(300.0, |b| b.phase() == phase), "never reached {phase:?}: {:?}", b.lines);
+        assert!(
+            b.run_until(300.0, |b| b.phase() == phase),
+            "never reached {phase:?}: {:?}",
+            b.lines
+        );
         b.run_for(0.5);
         assert_eq!(b.phase(), phase);
     }
@@ -27,8 +40,14 @@ fn expect_alarm(b: &mut Bench, code: &str, max_s: f64) -> String {
     while b.rig.now_ms() < end {
         let (out, ev) = b.tick();
         if let Some(a) = ev.iter().find(|l| l.starts_with("alarm: ")) {
-            assert!(a.starts_with(&format!("alarm: {code} ")), "expected {code}, got {a}");
-            assert_eq!(out, ZERO, "the tripping tick must turn both heaters off: {a}");
+            assert!(
+                a.starts_with(&format!("alarm: {code} ")),
+                "expected {code}, got {a}"
+            );
+            assert_eq!(
+                out, ZERO,
+                "the tripping tick must turn both heaters off: {a}"
+            );
             assert_eq!(b.rig.ctrl.outputs(), ZERO);
             assert_eq!(b.phase(), Phase::Fault);
             return a.clone();
@@ -79,7 +98,10 @@ fn assert_reset_rules(b: &mut Bench, clear: &[&str], settle_s: f64) {
 fn thermistor_open_and_short_trip_in_every_phase() {
     for phase in PHASES {
         for sensor in ["pla", "tca", "amb"] {
-            for (kind, code) in [("thermistor-open", "thermistor-open"), ("thermistor-short", "thermistor-short")] {
+            for (kind, code) in [
+                ("thermistor-open", "thermistor-open"),
+                ("thermistor-short", "thermistor-short"),
+            ] {
                 let mut b = bench_in(phase, 38.0);
                 assert!(b.send(&format!("SIM FAULT {kind} {sensor}"))[0].starts_with("ok"));
                 let a = expect_alarm(&mut b, code, 1.0);
@@ -117,7 +139,10 @@ fn stale_sensor_frames_trip_in_every_phase() {
         let old = b.rig.link.inputs(now - 1500);
         let out = b.rig.ctrl.step(now, &old);
         assert_eq!(out, ZERO);
-        assert_eq!(b.rig.ctrl.fault().map(|f| f.code.as_str()), Some("stale-sensor"));
+        assert_eq!(
+            b.rig.ctrl.fault().map(|f| f.code.as_str()),
+            Some("stale-sensor")
+        );
         let mut alarm = None;
         b.rig.drain_events(&mut |l| alarm = Some(l.to_string()));
         assert!(alarm.unwrap().starts_with("alarm: stale-sensor"));
@@ -131,7 +156,11 @@ fn stale_sensor_frames_trip_in_every_phase() {
 #[test]
 fn a_dead_heater_trips_heater_not_heating_wherever_it_is_on() {
     // PLA heater: on in soften and bend. TCA: on in bend (and lock) at 1 W (target 35 mm).
-    for (heater, phase) in [("pla", Phase::Soften), ("pla", Phase::Bend), ("tca", Phase::Bend)] {
+    for (heater, phase) in [
+        ("pla", Phase::Soften),
+        ("pla", Phase::Bend),
+        ("tca", Phase::Bend),
+    ] {
         {
             let mut b = bench_in(phase, 35.0);
             // Injecting at the start of the phase: re-enter it fresh for bend/lock.
@@ -151,7 +180,12 @@ fn a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph() {
     // A TCA that dies during lock cools too slowly to be told from a working one before the lock
     // ends (about 15 s); the PLA is freezing the shape by then, so the morph completes and the
     // next one trips in bend.
-    for (phase, heater) in [(Phase::Idle, "pla"), (Phase::Release, "pla"), (Phase::Lock, "tca"), (Phase::Idle, "tca")] {
+    for (phase, heater) in [
+        (Phase::Idle, "pla"),
+        (Phase::Release, "pla"),
+        (Phase::Lock, "tca"),
+        (Phase::Idle, "tca"),
+    ] {
         let mut b = bench_in(phase, 35.0);
         assert!(b.send(&format!("SIM FAULT heater-open {heater}"))[0].starts_with("ok"));
         assert!(b.run_until(30.0, |b| b.rig.ctrl.idle()));

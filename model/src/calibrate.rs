@@ -29,7 +29,8 @@ pub struct Point {
 
 /// Points of `source` (`measured` or `paper_model`) from a `p_tca_w,radius_mm,source` CSV.
 pub fn load_points(path: &Path, source: &str) -> Result<Vec<Point>, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     parse_points(&text, source)
 }
 
@@ -48,8 +49,15 @@ pub fn parse_points(text: &str, source: &str) -> Result<Vec<Point>, String> {
         if f[2].trim() != source {
             continue;
         }
-        let num = |s: &str| s.trim().parse::<f64>().map_err(|e| format!("line {}: {e}", n + 1));
-        out.push(Point { p_tca_w: num(f[0])?, radius_mm: num(f[1])? });
+        let num = |s: &str| {
+            s.trim()
+                .parse::<f64>()
+                .map_err(|e| format!("line {}: {e}", n + 1))
+        };
+        out.push(Point {
+            p_tca_w: num(f[0])?,
+            radius_mm: num(f[1])?,
+        });
     }
     Ok(out)
 }
@@ -71,7 +79,8 @@ pub struct Fit {
 pub fn prior_stiffness_nm2(p: &LinkParams) -> f64 {
     let d = p.geometry.body_diameter_m;
     let i_body = core::f64::consts::PI * d.powi(4) / 64.0;
-    SILICONE_E_PA * i_body + p.pla_stiffness.e_rubbery_pa * crate::mechanics::pla_second_moment_m4(p)
+    SILICONE_E_PA * i_body
+        + p.pla_stiffness.e_rubbery_pa * crate::mechanics::pla_second_moment_m4(p)
 }
 
 fn with_theta(p: &LinkParams, th: &Vector3<f64>) -> LinkParams {
@@ -84,7 +93,10 @@ fn with_theta(p: &LinkParams, th: &Vector3<f64>) -> LinkParams {
 
 fn residuals(p: &LinkParams, pts: &[Point], th: &Vector3<f64>, ln_prior: f64) -> Vec<f64> {
     let q = with_theta(p, th);
-    let mut r: Vec<f64> = pts.iter().map(|pt| radius_mm(&q, pt.p_tca_w) - pt.radius_mm).collect();
+    let mut r: Vec<f64> = pts
+        .iter()
+        .map(|pt| radius_mm(&q, pt.p_tca_w) - pt.radius_mm)
+        .collect();
     r.push(PRIOR_WEIGHT_MM * (th[0] - ln_prior));
     r
 }
@@ -92,7 +104,10 @@ fn residuals(p: &LinkParams, pts: &[Point], th: &Vector3<f64>, ln_prior: f64) ->
 /// Fits `EI`, `F0` and `c` of `p` to `pts` (at least three points).
 pub fn calibrate(p: &LinkParams, pts: &[Point]) -> Result<Fit, String> {
     if pts.len() < 3 {
-        return Err(format!("calibration needs at least three measured points, got {}", pts.len()));
+        return Err(format!(
+            "calibration needs at least three measured points, got {}",
+            pts.len()
+        ));
     }
     let prior = prior_stiffness_nm2(p);
     let ln_prior = prior.ln();
@@ -100,7 +115,12 @@ pub fn calibrate(p: &LinkParams, pts: &[Point]) -> Result<Fit, String> {
     let mean_k = pts.iter().map(|pt| 1e3 / pt.radius_mm).sum::<f64>() / pts.len() as f64;
     let f0 = mean_k * prior / p.geometry.tca_offset_m;
     let mut th = Vector3::new(ln_prior, f0, 0.01 * f0);
-    let cost = |th: &Vector3<f64>| residuals(p, pts, th, ln_prior).iter().map(|r| r * r).sum::<f64>();
+    let cost = |th: &Vector3<f64>| {
+        residuals(p, pts, th, ln_prior)
+            .iter()
+            .map(|r| r * r)
+            .sum::<f64>()
+    };
     let mut lambda = 1e-3;
     let mut iterations = 0;
     for it in 0..200 {
@@ -131,7 +151,9 @@ pub fn calibrate(p: &LinkParams, pts: &[Point]) -> Result<Fit, String> {
                 a[(k, k)] *= 1.0 + lambda;
                 a[(k, k)] += 1e-30;
             }
-            let Some(step) = a.lu().solve(&(-jtr)) else { break };
+            let Some(step) = a.lu().solve(&(-jtr)) else {
+                break;
+            };
             let cand = th + step;
             if cost(&cand) < c0 {
                 th = cand;
@@ -146,11 +168,19 @@ pub fn calibrate(p: &LinkParams, pts: &[Point]) -> Result<Fit, String> {
         }
     }
     let params = with_theta(p, &th);
-    let residuals_mm = pts.iter().map(|pt| radius_mm(&params, pt.p_tca_w) - pt.radius_mm).collect();
+    let residuals_mm = pts
+        .iter()
+        .map(|pt| radius_mm(&params, pt.p_tca_w) - pt.radius_mm)
+        .collect();
     if !params.mechanics.bending_stiffness_nm2.is_finite() {
         return Err("calibration diverged".into());
     }
-    Ok(Fit { params, residuals_mm, prior_stiffness_nm2: prior, iterations })
+    Ok(Fit {
+        params,
+        residuals_mm,
+        prior_stiffness_nm2: prior,
+        iterations,
+    })
 }
 
 #[cfg(test)]
@@ -185,7 +215,10 @@ mod tests {
 
     #[test]
     fn too_few_points_is_an_error() {
-        let pts = [Point { p_tca_w: 0.1, radius_mm: 45.0 }];
+        let pts = [Point {
+            p_tca_w: 0.1,
+            radius_mm: 45.0,
+        }];
         assert!(calibrate(&LinkParams::DEFAULT, &pts).is_err());
     }
 }

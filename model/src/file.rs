@@ -12,7 +12,8 @@ pub fn from_toml(text: &str) -> Result<LinkParams, String> {
 
 /// Reads and checks the parameters file at `path`.
 pub fn load(path: &Path) -> Result<LinkParams, String> {
-    let text = fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let text =
+        fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     from_toml(&text).map_err(|e| format!("{}: {e}", path.display()))
 }
 
@@ -33,7 +34,10 @@ pub fn check(p: &LinkParams) -> Result<(), String> {
         ("geometry.tca_offset_m", g.tca_offset_m),
         ("geometry.pla_offset_m", g.pla_offset_m),
         ("surroundings.h_w_m2k", p.surroundings.h_w_m2k),
-        ("mechanics.bending_stiffness_nm2", p.mechanics.bending_stiffness_nm2),
+        (
+            "mechanics.bending_stiffness_nm2",
+            p.mechanics.bending_stiffness_nm2,
+        ),
         ("table_max_power_w", p.table_max_power_w),
     ];
     for (name, v) in positive {
@@ -41,14 +45,19 @@ pub fn check(p: &LinkParams) -> Result<(), String> {
             return Err(format!("{name} must be a positive number, got {v}"));
         }
     }
-    if g.tca_offset_m + g.tca_outer_diameter_m / 2.0 >= a || g.pla_offset_m + g.pla_diameter_m / 2.0 >= a {
+    if g.tca_offset_m + g.tca_outer_diameter_m / 2.0 >= a
+        || g.pla_offset_m + g.pla_diameter_m / 2.0 >= a
+    {
         return Err("the TCA and the PLA rod must lie inside the body".into());
     }
     if g.tca_offset_m + g.pla_offset_m <= (g.tca_outer_diameter_m + g.pla_diameter_m) / 2.0 {
         return Err("the TCA and the PLA rod overlap".into());
     }
     if !(2..=64).contains(&p.table_entries) || crate::table::flash_bytes(p.table_entries) > 1024 {
-        return Err(format!("table_entries must be 2..=64 (at most 1 KiB of flash), got {}", p.table_entries));
+        return Err(format!(
+            "table_entries must be 2..=64 (at most 1 KiB of flash), got {}",
+            p.table_entries
+        ));
     }
     Ok(())
 }
@@ -67,6 +76,8 @@ mod tests {
     fn rejects_a_heater_outside_the_body() {
         let mut p = LinkParams::DEFAULT;
         p.geometry.tca_offset_m = 3.9e-3;
-        assert!(from_toml(&to_toml(&p)).unwrap_err().contains("inside the body"));
+        assert!(from_toml(&to_toml(&p))
+            .unwrap_err()
+            .contains("inside the body"));
     }
 }

@@ -20,7 +20,8 @@ pub fn modulus_ratio(m: &Mechanics, temp_c: f64) -> f64 {
 /// TCA push, N, at extension `delta_m` (m, positive = longer) and temperature `temp_c`.
 pub fn tca_force_n(m: &Mechanics, delta_m: f64, temp_c: f64) -> f64 {
     modulus_ratio(m, temp_c)
-        * (m.preload_n + m.force_coeff_n_per_k * (temp_c - T_REF_C) - m.tca_stiffness_n_per_m * delta_m)
+        * (m.preload_n + m.force_coeff_n_per_k * (temp_c - T_REF_C)
+            - m.tca_stiffness_n_per_m * delta_m)
 }
 
 /// Equilibrium curvature, 1/m, for a TCA at `tca_temp_c` with an extra elastic term
@@ -37,7 +38,8 @@ pub fn curvature_with_extra_per_m(
     let l = p.geometry.length_m;
     let e = modulus_ratio(m, tca_temp_c);
     let drive = r * e * (m.preload_n + m.force_coeff_n_per_k * (tca_temp_c - T_REF_C));
-    let stiffness = m.bending_stiffness_nm2 + extra_stiffness_nm2 + r * r * l * m.tca_stiffness_n_per_m * e;
+    let stiffness =
+        m.bending_stiffness_nm2 + extra_stiffness_nm2 + r * r * l * m.tca_stiffness_n_per_m * e;
     (drive + extra_stiffness_nm2 * extra_rest_per_m) / stiffness
 }
 
@@ -114,10 +116,19 @@ mod tests {
         let p = LinkParams::DEFAULT;
         let cold = pla_extra_stiffness_nm2(&p, 25.0);
         let soft = pla_extra_stiffness_nm2(&p, 80.0);
-        assert!(cold > 50.0 * p.mechanics.bending_stiffness_nm2, "cold PLA {cold}");
-        assert!(soft < 0.05 * p.mechanics.bending_stiffness_nm2, "soft PLA {soft}");
+        assert!(
+            cold > 50.0 * p.mechanics.bending_stiffness_nm2,
+            "cold PLA {cold}"
+        );
+        assert!(
+            soft < 0.05 * p.mechanics.bending_stiffness_nm2,
+            "soft PLA {soft}"
+        );
         let held = curvature_with_extra_per_m(&p, 90.0, cold, 20.0);
-        assert!((held - 20.0).abs() < 0.5, "rigid PLA moves only a little: {held}");
+        assert!(
+            (held - 20.0).abs() < 0.5,
+            "rigid PLA moves only a little: {held}"
+        );
     }
 
     #[test]

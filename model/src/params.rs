@@ -154,11 +154,26 @@ impl LinkParams {
             pla_offset_m: 2.5e-3,
         },
         materials: Materials {
-            tca: Material { k_w_mk: 4.6, rho_kg_m3: 1300.0, cp_j_kgk: 1267.0 },
-            pla: Material { k_w_mk: 0.13, rho_kg_m3: 1250.0, cp_j_kgk: 1200.0 },
-            silicone: Material { k_w_mk: 0.2, rho_kg_m3: 1040.0, cp_j_kgk: 1050.0 },
+            tca: Material {
+                k_w_mk: 4.6,
+                rho_kg_m3: 1300.0,
+                cp_j_kgk: 1267.0,
+            },
+            pla: Material {
+                k_w_mk: 0.13,
+                rho_kg_m3: 1250.0,
+                cp_j_kgk: 1200.0,
+            },
+            silicone: Material {
+                k_w_mk: 0.2,
+                rho_kg_m3: 1040.0,
+                cp_j_kgk: 1050.0,
+            },
         },
-        surroundings: Surroundings { h_w_m2k: H_WATER_W_M2K, ambient_c: 22.0 },
+        surroundings: Surroundings {
+            h_w_m2k: H_WATER_W_M2K,
+            ambient_c: 22.0,
+        },
         mechanics: Mechanics {
             bending_stiffness_nm2: FITTED_BENDING_STIFFNESS_NM2,
             preload_n: FITTED_PRELOAD_N,

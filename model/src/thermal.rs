@@ -148,7 +148,13 @@ impl Network {
     }
 
     /// Heat flows into each node, W, for heater powers and ambient temperature.
-    fn flows_w(&self, t: &[f64; node::COUNT], p_tca_w: f64, p_pla_w: f64, ambient_c: f64) -> [f64; node::COUNT] {
+    fn flows_w(
+        &self,
+        t: &[f64; node::COUNT],
+        p_tca_w: f64,
+        p_pla_w: f64,
+        ambient_c: f64,
+    ) -> [f64; node::COUNT] {
         use node::*;
         let g = &self.conductance_w_k;
         let q0 = g[0] * (t[TCA] - t[TCA_SHELL]);
@@ -197,7 +203,13 @@ impl Network {
         let bulk = ambient_c + (p_tca_w + p_pla_w) / g[4];
         let tca_shell = bulk + p_tca_w / g[1];
         let pla_shell = bulk + p_pla_w / g[3];
-        [tca_shell + p_tca_w / g[0], tca_shell, pla_shell + p_pla_w / g[2], pla_shell, bulk]
+        [
+            tca_shell + p_tca_w / g[0],
+            tca_shell,
+            pla_shell + p_pla_w / g[2],
+            pla_shell,
+            bulk,
+        ]
     }
 }
 
@@ -237,7 +249,12 @@ mod tests {
         let k = p.materials.silicone.k_w_mk;
         let exact = log(a / r0) / (2.0 * PI * k * g.length_m)
             + 1.0 / (2.0 * PI * a * p.surroundings.h_w_m2k * g.length_m);
-        assert!((r.r_pp - exact).abs() < 1e-6 * exact, "{} vs {}", r.r_pp, exact);
+        assert!(
+            (r.r_pp - exact).abs() < 1e-6 * exact,
+            "{} vs {}",
+            r.r_pp,
+            exact
+        );
     }
 
     #[test]
@@ -283,6 +300,9 @@ mod tests {
         assert!((end - 1.0).abs() < 1e-3, "end {end}");
         let single_lag_tau = -2.0 / libm::log(1.0 - fast);
         let single_lag_40 = 1.0 - libm::exp(-40.0 / single_lag_tau);
-        assert!(single_lag_40 - slow > 0.03, "single lag {single_lag_40}, network {slow}");
+        assert!(
+            single_lag_40 - slow > 0.03,
+            "single lag {single_lag_40}, network {slow}"
+        );
     }
 }

@@ -5,7 +5,9 @@
 
 use morphlink::controller::{Config, Inputs, Outputs};
 use morphlink::protocol::{Medium, SimFault};
-use morphlink_model::mechanics::{curvature_with_extra_per_m, pla_extra_stiffness_nm2, pla_flow_time_s};
+use morphlink_model::mechanics::{
+    curvature_with_extra_per_m, pla_extra_stiffness_nm2, pla_flow_time_s,
+};
 use morphlink_model::params::{H_AIR_W_M2K, H_WATER_W_M2K};
 use morphlink_model::thermal::{lag_remaining, node, Network};
 use morphlink_model::LinkParams;
@@ -115,7 +117,11 @@ impl SimLink {
         if self.heater_open[i] {
             return 0.0;
         }
-        let d = if self.heater_stuck[i] { 1.0 } else { (duty as f64).clamp(0.0, 1.0) };
+        let d = if self.heater_stuck[i] {
+            1.0
+        } else {
+            (duty as f64).clamp(0.0, 1.0)
+        };
         let v = self.plant.supply_v;
         d * v * v / self.plant.heater_ohm[i]
     }
@@ -175,7 +181,9 @@ impl SimLink {
     /// Injects a fault on a sensor (0 PLA, 1 TCA, 2 ambient) or a heater (0 PLA, 1 TCA).
     pub fn inject(&mut self, fault: SimFault, index: usize) {
         match fault {
-            SimFault::ThermistorOpen | SimFault::ThermistorShort => self.thermistor_fault[index.min(2)] = Some(fault),
+            SimFault::ThermistorOpen | SimFault::ThermistorShort => {
+                self.thermistor_fault[index.min(2)] = Some(fault)
+            }
             SimFault::HeaterOpen => self.heater_open[index.min(1)] = true,
             SimFault::HeaterStuck => self.heater_stuck[index.min(1)] = true,
         }

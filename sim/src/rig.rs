@@ -26,7 +26,11 @@ impl Rig {
     /// controller has a sensor frame).
     pub fn new(plant: Plant) -> Self {
         let board = Config::DEFAULT;
-        let mut rig = Rig { ctrl: Controller::new(board), link: SimLink::new(plant, board), now_ms: 0 };
+        let mut rig = Rig {
+            ctrl: Controller::new(board),
+            link: SimLink::new(plant, board),
+            now_ms: 0,
+        };
         rig.tick();
         rig
     }
@@ -85,7 +89,11 @@ impl Rig {
             }
             SimCommand::Supply(v) => {
                 if !(0.0..=SIM_SUPPLY_MAX_V).contains(&v) {
-                    let _ = write!(l, "error: out-of-range supply must be 0..{} V", Fixed(SIM_SUPPLY_MAX_V, 0));
+                    let _ = write!(
+                        l,
+                        "error: out-of-range supply must be 0..{} V",
+                        Fixed(SIM_SUPPLY_MAX_V, 0)
+                    );
                 } else {
                     self.link.set_supply_v(v as f64);
                     let _ = write!(l, "ok supply_v={}", Fixed(v, 2));
@@ -94,7 +102,12 @@ impl Rig {
             SimCommand::Ambient(c) => {
                 let (lo, hi) = SIM_AMBIENT_RANGE_C;
                 if !(lo..=hi).contains(&c) {
-                    let _ = write!(l, "error: out-of-range ambient must be {}..{} C", Fixed(lo, 0), Fixed(hi, 0));
+                    let _ = write!(
+                        l,
+                        "error: out-of-range ambient must be {}..{} C",
+                        Fixed(lo, 0),
+                        Fixed(hi, 0)
+                    );
                 } else {
                     self.link.set_ambient_c(c as f64);
                     let _ = write!(l, "ok t_amb_c={}", Fixed(c, 2));

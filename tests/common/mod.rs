@@ -17,13 +17,17 @@ impl Bench {
     }
 
     pub fn with_plant(plant: Plant) -> Self {
-        Bench { rig: Rig::new(plant), lines: Vec::new() }
+        Bench {
+            rig: Rig::new(plant),
+            lines: Vec::new(),
+        }
     }
 
     /// Sends one line; returns the lines written in reply.
     pub fn send(&mut self, line: &str) -> Vec<String> {
         let mut reply = Vec::new();
-        self.rig.handle_line(line, &mut |l| reply.push(l.to_string()));
+        self.rig
+            .handle_line(line, &mut |l| reply.push(l.to_string()));
         self.lines.extend(reply.iter().cloned());
         reply
     }
@@ -66,7 +70,11 @@ impl Bench {
         let r = self.send(&format!("MORPH {radius_mm} {mode}"));
         assert_eq!(r, ["ok"], "MORPH {radius_mm} {mode}");
         let t0 = self.rig.now_ms();
-        assert!(self.run_until(400.0, |b| !b.rig.ctrl.busy()), "morph did not finish: {:?}", self.lines);
+        assert!(
+            self.run_until(400.0, |b| !b.rig.ctrl.busy()),
+            "morph did not finish: {:?}",
+            self.lines
+        );
         (self.rig.now_ms() - t0) as f64 / 1000.0
     }
 
@@ -74,12 +82,16 @@ impl Bench {
     pub fn phases(&self) -> Vec<String> {
         self.lines
             .iter()
-            .filter_map(|l| l.strip_prefix("event: phase ").map(|r| r.split(' ').next().unwrap().to_string()))
+            .filter_map(|l| {
+                l.strip_prefix("event: phase ")
+                    .map(|r| r.split(' ').next().unwrap().to_string())
+            })
             .collect()
     }
 
     /// Value of `key=` in a reply line.
     pub fn field(line: &str, key: &str) -> Option<String> {
-        line.split(' ').find_map(|w| w.strip_prefix(&format!("{key}=")).map(str::to_string))
+        line.split(' ')
+            .find_map(|w| w.strip_prefix(&format!("{key}=")).map(str::to_string))
     }
 }

@@ -6,7 +6,11 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "morph-model", version, about = "Lumped model of the morphing link")]
+#[command(
+    name = "morph-model",
+    version,
+    about = "Lumped model of the morphing link"
+)]
 struct Cli {
     /// Parameters file; the paper's link under water when omitted.
     #[arg(long, global = true)]
@@ -42,16 +46,30 @@ fn run(cli: Cli) -> Result<(), String> {
             let pts = calibrate::load_points(&data, "measured")?;
             let fit = calibrate::calibrate(&p, &pts)?;
             let m = fit.params.mechanics;
-            println!("fitted to {} measured points in {} iterations", pts.len(), fit.iterations);
-            println!("  bending_stiffness_nm2 = {:.5e}  (prior {:.5e})", m.bending_stiffness_nm2, fit.prior_stiffness_nm2);
+            println!(
+                "fitted to {} measured points in {} iterations",
+                pts.len(),
+                fit.iterations
+            );
+            println!(
+                "  bending_stiffness_nm2 = {:.5e}  (prior {:.5e})",
+                m.bending_stiffness_nm2, fit.prior_stiffness_nm2
+            );
             println!("  preload_n             = {:.6}", m.preload_n);
             println!("  force_coeff_n_per_k   = {:.7}", m.force_coeff_n_per_k);
             println!("  p_tca_w  measured_mm  model_mm  error_mm");
             for (pt, r) in pts.iter().zip(&fit.residuals_mm) {
-                println!("  {:7.2}  {:11.2}  {:8.2}  {:+8.3}", pt.p_tca_w, pt.radius_mm, pt.radius_mm + r, r);
+                println!(
+                    "  {:7.2}  {:11.2}  {:8.2}  {:+8.3}",
+                    pt.p_tca_w,
+                    pt.radius_mm,
+                    pt.radius_mm + r,
+                    r
+                );
             }
             if let Some(path) = write {
-                std::fs::write(&path, file::to_toml(&fit.params)).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+                std::fs::write(&path, file::to_toml(&fit.params))
+                    .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
                 println!("wrote {}", path.display());
             }
         }

@@ -1,14 +1,20 @@
 //! `morph-sim`: the controller core driving the simulated link, speaking protocol v1 on
 //! stdin/stdout. At end of input it keeps simulating until the controller is idle or faulted.
 use clap::Parser;
-use morphlink::protocol::{format_error, Assembled, LineAssembler, ERR_INVALID_LINE, ERR_LINE_TOO_LONG};
+use morphlink::protocol::{
+    format_error, Assembled, LineAssembler, ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
+};
 use morphlink_sim::{Plant, Rig};
 use std::io::{Read, Write};
 use std::sync::mpsc::{self, TryRecvError};
 use std::time::{Duration, Instant};
 
 #[derive(Parser)]
-#[command(name = "morph-sim", version, about = "Simulated morphing link on the serial protocol (stdin/stdout)")]
+#[command(
+    name = "morph-sim",
+    version,
+    about = "Simulated morphing link on the serial protocol (stdin/stdout)"
+)]
 struct Cli {
     /// Simulation speed: a factor of real time (1 = real time) or `max` (as fast as possible).
     #[arg(long, default_value = "1", value_parser = parse_speed)]
@@ -33,7 +39,9 @@ fn parse_speed(s: &str) -> Result<Speed, String> {
     }
     match s.parse::<f64>() {
         Ok(f) if f > 0.0 && f.is_finite() => Ok(Speed::Factor(f)),
-        _ => Err(format!("speed must be a positive number or `max`, got `{s}`")),
+        _ => Err(format!(
+            "speed must be a positive number or `max`, got `{s}`"
+        )),
     }
 }
 
@@ -51,7 +59,10 @@ fn feed(rig: &mut Rig, asm: &mut LineAssembler, bytes: &[u8], emit: &mut impl Fn
 
 fn main() {
     let cli = Cli::parse();
-    let plant = Plant { seed: cli.seed, ..Plant::NOMINAL };
+    let plant = Plant {
+        seed: cli.seed,
+        ..Plant::NOMINAL
+    };
     let mut rig = Rig::new(plant);
     let (tx, rx) = mpsc::channel::<Vec<u8>>();
     std::thread::spawn(move || {
@@ -93,7 +104,10 @@ fn main() {
             break;
         }
         if sim_s >= cli.max_time_s {
-            eprintln!("morph-sim: stopped at the --max-time-s limit of {} s", cli.max_time_s);
+            eprintln!(
+                "morph-sim: stopped at the --max-time-s limit of {} s",
+                cli.max_time_s
+            );
             break;
         }
         match cli.speed {
