@@ -187,62 +187,33 @@ impl Supervisor {
         frame: &Frame,
         commanded: Powers,
     ) -> Result<Measurements, Fault> {
-        if now_ms.saturating_sub(frame.sample_ms) > STALE_AFTER_MS {
-            let age_s = now_ms.saturating_sub(frame.sample_ms) as f32 / 1000.0;
-            return Err(Fault {
-                code: FaultCode::StaleSensor,
-                subject: Subject::Frame,
-                value: age_s,
-            });
-        }
+        fresh(now_ms, frame)?;
         for i in 0..3 {
-            let subject = Subject::Sensor(SENSORS[i]);
-            match self.range[i].update(frame.readings[i]) {
-                Some(Reading::Open) => {
-                    return Err(Fault {
-                        code: FaultCode::ThermistorOpen,
-                        subject,
-                        value: f32::NAN,
-                    })
-                }
-                Some(Reading::Short) => {
-                    return Err(Fault {
-                        code: FaultCode::ThermistorShort,
-                        subject,
-                        value: f32::NAN,
-                    })
-                }
-                _ => {}
+            let reading = frame.readings[i];
+            // Open/short: latched once the ADC range check has seen it often enough in a row.
+            if let Some(r) = self.range[i].update(reading) {
+                return Err(reading_fault(i, r).unwrap_or(Fault {
+                    code: FaultCode::ThermistorOpen,
+                    subject: Subject::Sensor(SENSORS[i]),
+                    value: f32::NAN,
+                }));
             }
-            if let Reading::Ok(t) = frame.readings[i] {
-                let lim = LIMITS[i];
-                if t < lim.min_c || t > lim.max_c {
-                    self.limit_count[i] = self.limit_count[i].saturating_add(1);
-                    if self.limit_count[i] >= LIMIT_CONSECUTIVE {
-                        let code = if t > lim.max_c {
-                            FaultCode::OverTemperature
-                        } else {
-                            FaultCode::UnderTemperature
-                        };
-                        return Err(Fault {
-                            code,
-                            subject,
-                            value: t,
-                        });
+            if let Reading::Ok(t) = reading {
+                match reading_fault(i, reading) {
+                    Some(f) => {
+                        self.limit_count[i] = self.limit_count[i].saturating_add(1);
+                        if self.limit_count[i] >= LIMIT_CONSECUTIVE {
+                            return Err(f);
+                        }
                     }
-                } else {
-                    self.limit_count[i] = 0;
-                    self.last_c[i] = t;
+                    None => {
+                        self.limit_count[i] = 0;
+                        self.last_c[i] = t;
+                    }
                 }
             }
         }
-        if !(frame.supply_v >= SUPPLY_MIN_V && frame.supply_v <= SUPPLY_MAX_V) {
-            return Err(Fault {
-                code: FaultCode::SupplyOutOfRange,
-                subject: Subject::Supply,
-                value: frame.supply_v,
-            });
-        }
+        supply_ok(frame)?;
         self.check_heating(now_ms, commanded)?;
         Ok(self.measurements())
     }
@@ -294,56 +265,13 @@ impl Supervisor {
     /// Whether a latched fault's condition has cleared on this frame (RESET is allowed), or
     /// the fault that is still present. Sensor checks need a good reading now, not four.
     pub fn condition_clear(&self, now_ms: u64, frame: &Frame) -> Result<(), Fault> {
-        if now_ms.saturating_sub(frame.sample_ms) > STALE_AFTER_MS {
-            let age_s = now_ms.saturating_sub(frame.sample_ms) as f32 / 1000.0;
-            return Err(Fault {
-                code: FaultCode::StaleSensor,
-                subject: Subject::Frame,
-                value: age_s,
-            });
-        }
-        for i in 0..3 {
-            let subject = Subject::Sensor(SENSORS[i]);
-            match frame.readings[i] {
-                Reading::Open => {
-                    return Err(Fault {
-                        code: FaultCode::ThermistorOpen,
-                        subject,
-                        value: f32::NAN,
-                    })
-                }
-                Reading::Short => {
-                    return Err(Fault {
-                        code: FaultCode::ThermistorShort,
-                        subject,
-                        value: f32::NAN,
-                    })
-                }
-                Reading::Ok(t) if t > LIMITS[i].max_c => {
-                    return Err(Fault {
-                        code: FaultCode::OverTemperature,
-                        subject,
-                        value: t,
-                    })
-                }
-                Reading::Ok(t) if t < LIMITS[i].min_c => {
-                    return Err(Fault {
-                        code: FaultCode::UnderTemperature,
-                        subject,
-                        value: t,
-                    })
-                }
-                Reading::Ok(_) => {}
+        fresh(now_ms, frame)?;
+        for (i, r) in frame.readings.iter().enumerate() {
+            if let Some(f) = reading_fault(i, *r) {
+                return Err(f);
             }
         }
-        if !(frame.supply_v >= SUPPLY_MIN_V && frame.supply_v <= SUPPLY_MAX_V) {
-            return Err(Fault {
-                code: FaultCode::SupplyOutOfRange,
-                subject: Subject::Supply,
-                value: frame.supply_v,
-            });
-        }
-        Ok(())
+        supply_ok(frame)
     }
 
     /// Forgets counters and heater watches (after RESET), keeping last temperatures.
@@ -351,5 +279,107 @@ impl Supervisor {
         self.range = [RangeCheck::new(RangeCheck::DEFAULT_CONSECUTIVE); 3];
         self.limit_count = [0; 3];
         self.watch = [HeatWatch::default(); 2];
+    }
+}
+
+/// A frame older than [`STALE_AFTER_MS`] is a fault.
+fn fresh(now_ms: u64, frame: &Frame) -> Result<(), Fault> {
+    let age_ms = now_ms.saturating_sub(frame.sample_ms);
+    if age_ms > STALE_AFTER_MS {
+        return Err(Fault {
+            code: FaultCode::StaleSensor,
+            subject: Subject::Frame,
+            value: age_ms as f32 / 1000.0,
+        });
+    }
+    Ok(())
+}
+
+/// A supply outside [`SUPPLY_MIN_V`]..=[`SUPPLY_MAX_V`] is a fault.
+fn supply_ok(frame: &Frame) -> Result<(), Fault> {
+    if !(frame.supply_v >= SUPPLY_MIN_V && frame.supply_v <= SUPPLY_MAX_V) {
+        return Err(Fault {
+            code: FaultCode::SupplyOutOfRange,
+            subject: Subject::Supply,
+            value: frame.supply_v,
+        });
+    }
+    Ok(())
+}
+
+/// What one reading of sensor `i` says is wrong, if anything: open, short, or outside limits.
+fn reading_fault(i: usize, reading: Reading) -> Option<Fault> {
+    let subject = Subject::Sensor(SENSORS[i]);
+    let (code, value) = match reading {
+        Reading::Open => (FaultCode::ThermistorOpen, f32::NAN),
+        Reading::Short => (FaultCode::ThermistorShort, f32::NAN),
+        Reading::Ok(t) if t > LIMITS[i].max_c => (FaultCode::OverTemperature, t),
+        Reading::Ok(t) if t < LIMITS[i].min_c => (FaultCode::UnderTemperature, t),
+        Reading::Ok(_) => return None,
+    };
+    Some(Fault {
+        code,
+        subject,
+        value,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(ms: u64, pla: f32, tca: f32) -> Frame {
+        Frame {
+            readings: [Reading::Ok(pla), Reading::Ok(tca), Reading::Ok(22.0)],
+            supply_v: 12.0,
+            sample_ms: ms,
+        }
+    }
+
+    #[test]
+    fn a_heater_that_warms_passes_and_a_dead_one_trips_after_the_check_time() {
+        let on = Powers {
+            pla_w: 0.0,
+            tca_w: 1.0,
+        };
+        let (mut good, mut dead) = (Supervisor::new(), Supervisor::new());
+        for tick in 0..200u64 {
+            let ms = tick * 100;
+            let warming = 22.0 + 30.0 * (1.0 - libm::expf(-(ms as f32) / 5000.0));
+            assert!(
+                good.check(ms, &frame(ms, 22.0, warming), on).is_ok(),
+                "good heater tripped at {ms} ms"
+            );
+            let r = dead.check(ms, &frame(ms, 22.0, 22.5), on);
+            if (ms as f32) / 1000.0 < HEATING_CHECK_S {
+                assert!(r.is_ok());
+            } else {
+                let f = r.unwrap_err();
+                assert_eq!(
+                    (f.code, f.subject),
+                    (FaultCode::HeaterNotHeating, Subject::Heater(Heater::Tca))
+                );
+                return;
+            }
+        }
+        panic!("dead heater never tripped");
+    }
+
+    #[test]
+    fn limits_need_consecutive_readings_and_nan_never_passes() {
+        let mut s = Supervisor::new();
+        let off = Powers::default();
+        for i in 0..(LIMIT_CONSECUTIVE as u64 - 1) {
+            assert!(s.check(i * 100, &frame(i * 100, 140.0, 30.0), off).is_ok());
+        }
+        let f = s.check(400, &frame(400, 140.0, 30.0), off).unwrap_err();
+        assert_eq!(f.code, FaultCode::OverTemperature);
+        let mut nan = frame(0, 30.0, 30.0);
+        nan.supply_v = f32::NAN;
+        assert_eq!(
+            Supervisor::new().check(0, &nan, off).unwrap_err().code,
+            FaultCode::SupplyOutOfRange
+        );
+        assert!(Supervisor::new().condition_clear(0, &nan).is_err());
     }
 }
