@@ -23,9 +23,18 @@
 compile_error!("no board: build with exactly one `board-*` feature (see boards/README.md)");
 
 #[cfg(target_os = "none")]
-#[cfg_attr(feature = "board-nucleo-f401re", path = "../boards/nucleo-f401re/mod.rs")]
-#[cfg_attr(feature = "board-nucleo-g431rb", path = "../boards/nucleo-g431rb/mod.rs")]
-#[cfg_attr(feature = "board-b-l475e-iot01a", path = "../boards/b-l475e-iot01a/mod.rs")]
+#[cfg_attr(
+    feature = "board-nucleo-f401re",
+    path = "../boards/nucleo-f401re/mod.rs"
+)]
+#[cfg_attr(
+    feature = "board-nucleo-g431rb",
+    path = "../boards/nucleo-g431rb/mod.rs"
+)]
+#[cfg_attr(
+    feature = "board-b-l475e-iot01a",
+    path = "../boards/b-l475e-iot01a/mod.rs"
+)]
 mod board;
 
 #[cfg(target_os = "none")]
@@ -120,10 +129,10 @@ mod firmware {
 
     /// UART buffers, allocated once.
     pub fn uart_buffers() -> (&'static mut [u8], &'static mut [u8]) {
-        let tx = cortex_m::singleton!(: [u8; UART_TX_BYTES] = [0; UART_TX_BYTES])
-            .expect("called once");
-        let rx = cortex_m::singleton!(: [u8; UART_RX_BYTES] = [0; UART_RX_BYTES])
-            .expect("called once");
+        let tx =
+            cortex_m::singleton!(: [u8; UART_TX_BYTES] = [0; UART_TX_BYTES]).expect("called once");
+        let rx =
+            cortex_m::singleton!(: [u8; UART_RX_BYTES] = [0; UART_RX_BYTES]).expect("called once");
         (tx, rx)
     }
 
@@ -147,7 +156,9 @@ mod firmware {
             let SimplePwmChannels { ch1, ch2, ch3, ch4 } = pwm.split();
             let mut slots = [Some(ch1), Some(ch2), Some(ch3), Some(ch4)];
             let mut take = |c: Channel| {
-                let mut ch = slots[c.index()].take().expect("two different heater channels");
+                let mut ch = slots[c.index()]
+                    .take()
+                    .expect("two different heater channels");
                 ch.set_duty_cycle_fully_off();
                 ch.enable();
                 ch
@@ -190,11 +201,7 @@ mod firmware {
         cp.DWT.enable_cycle_counter();
 
         let mut ctrl = Controller::new(Config::DEFAULT);
-        ctrl.enable_timing(LoopTiming::new(
-            board::CPU_HZ,
-            TICK_MS as u32 * 1000,
-            cause,
-        ));
+        ctrl.enable_timing(LoopTiming::new(board::CPU_HZ, TICK_MS as u32 * 1000, cause));
         CONTROLLER.lock(|c| *c.borrow_mut() = Some(ctrl));
 
         let heaters = Heaters::new(b.pwm, board::PLA_CHANNEL, board::TCA_CHANNEL);
@@ -255,14 +262,23 @@ mod firmware {
 
     /// Appends `line` and a newline to `reply`; a line that does not fit is dropped (logged).
     fn push_line(reply: &mut heapless::String<REPLY_BYTES>, line: &str) {
-        if reply.push_str(line).and_then(|()| reply.push('\n')).is_err() {
+        if reply
+            .push_str(line)
+            .and_then(|()| reply.push('\n'))
+            .is_err()
+        {
             defmt::warn!("reply longer than {} bytes; line dropped", REPLY_BYTES);
         }
     }
 
     /// Answers one assembled line into `reply`. `SIM` commands get the core's
     /// `error: unsupported` reply: there is no simulated link on hardware.
-    fn answer(c: &mut Controller, now_ms: u64, line: Assembled<'_>, reply: &mut heapless::String<REPLY_BYTES>) {
+    fn answer(
+        c: &mut Controller,
+        now_ms: u64,
+        line: Assembled<'_>,
+        reply: &mut heapless::String<REPLY_BYTES>,
+    ) {
         let mut out = |l: &str| push_line(reply, l);
         match line {
             Assembled::Line(l) => {
@@ -280,7 +296,11 @@ mod firmware {
 
     /// The serial line: commands in, replies, events and alarms out.
     #[embassy_executor::task]
-    async fn serial(mut tx: BufferedUartTx<'static>, mut rx: BufferedUartRx<'static>, boot: OutLine) {
+    async fn serial(
+        mut tx: BufferedUartTx<'static>,
+        mut rx: BufferedUartRx<'static>,
+        boot: OutLine,
+    ) {
         let mut reply: heapless::String<REPLY_BYTES> = heapless::String::new();
         push_line(&mut reply, &boot);
         send(&mut tx, &reply).await;
@@ -329,7 +349,11 @@ mod firmware {
     fn panic(info: &core::panic::PanicInfo) -> ! {
         board::heater_pins_low();
         match info.location() {
-            Some(l) => defmt::error!("panic at {=str}:{=u32}; heaters off, resetting", l.file(), l.line()),
+            Some(l) => defmt::error!(
+                "panic at {=str}:{=u32}; heaters off, resetting",
+                l.file(),
+                l.line()
+            ),
             None => defmt::error!("panic; heaters off, resetting"),
         }
         cortex_m::peripheral::SCB::sys_reset()

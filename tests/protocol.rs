@@ -37,6 +37,7 @@ fn every_command_gets_exactly_one_final_reply() {
         "TABLE",
         "VERSION",
         "HELP",
+        "STATS",
         "RESET",
         "ABORT",
         "SIM STATE",
