@@ -6,10 +6,11 @@ use std::{env, fmt::Write as _, fs, path::PathBuf};
 
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("OUT_DIR"));
-    let memory = board_memory_x();
-    fs::copy(&memory, out.join("memory.x")).expect("copy memory.x");
-    println!("cargo:rustc-link-search={}", out.display());
-    println!("cargo:rerun-if-changed={}", memory.display());
+    if let Some(memory) = board_memory_x() {
+        fs::copy(&memory, out.join("memory.x")).expect("copy memory.x");
+        println!("cargo:rustc-link-search={}", out.display());
+        println!("cargo:rerun-if-changed={}", memory.display());
+    }
     println!("cargo:rerun-if-env-changed=MORPHLINK_LINK");
 
     let link_path = env::var("MORPHLINK_LINK")
@@ -64,34 +65,30 @@ fn main() {
     fs::write(out.join("link.rs"), s).expect("write link.rs");
 }
 
-/// The memory layout of the board picked by the `board-<name>` feature: `boards/<name>/memory.x`
-/// if the board has one, else the top-level `memory.x` (the default board's). Firmware builds
-/// need exactly one board feature; host builds ignore the layout.
-fn board_memory_x() -> PathBuf {
+/// The memory layout of the board picked by the `board-<name>` feature, `boards/<name>/memory.x`,
+/// for firmware builds (which need exactly one board feature); `None` on the host.
+///
+/// There is deliberately no top-level `memory.x`: the linker looks for `memory.x` in the
+/// package directory before its search path, so one there would override every board's.
+fn board_memory_x() -> Option<PathBuf> {
+    if env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("none") {
+        return None;
+    }
     let boards: Vec<String> = env::vars()
         .filter_map(|(k, _)| {
             k.strip_prefix("CARGO_FEATURE_BOARD_")
                 .map(|b| b.to_ascii_lowercase().replace('_', "-"))
         })
         .collect();
-    let firmware = env::var("CARGO_CFG_TARGET_OS").as_deref() == Ok("none");
-    if firmware && boards.len() != 1 {
+    let [board] = boards.as_slice() else {
         panic!(
             "firmware builds need exactly one board feature, got {boards:?}; e.g. \
              `--no-default-features --features board-nucleo-g431rb`"
         );
+    };
+    let memory = PathBuf::from("boards").join(board).join("memory.x");
+    if !memory.is_file() {
+        panic!("board feature `board-{board}` has no {}", memory.display());
     }
-    println!("cargo:rerun-if-changed=memory.x");
-    if let Some(board) = boards.first() {
-        let dir = PathBuf::from("boards").join(board);
-        if firmware && !dir.join("mod.rs").exists() {
-            panic!("board feature `board-{board}` has no boards/{board}/mod.rs");
-        }
-        let own = dir.join("memory.x");
-        println!("cargo:rerun-if-changed={}", own.display());
-        if own.exists() {
-            return own;
-        }
-    }
-    PathBuf::from("memory.x")
+    Some(memory)
 }

@@ -1,5 +1,5 @@
-//! NUCLEO-F401RE: STM32F401RE, Cortex-M4F, 512 KiB flash, 96 KiB RAM. The default board; its
-//! memory layout is the top-level `memory.x`.
+//! NUCLEO-F401RE: STM32F401RE, Cortex-M4F, 512 KiB flash, 96 KiB RAM (`memory.x` here). The
+//! default board.
 //!
 //! | signal | pin (Arduino) | peripheral |
 //! | --- | --- | --- |

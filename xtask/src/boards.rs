@@ -8,7 +8,7 @@
 //! - the default board's image also fits a small part of the same family:
 //!   [`SMALL_PART_FLASH_BYTES`] of flash and [`SMALL_PART_RAM_BYTES`] of RAM.
 use object::elf::{SHF_ALLOC, SHF_WRITE, SHT_NOBITS};
-use object::{Object, ObjectSection, SectionFlags};
+use object::{Object, ObjectSection, ObjectSymbol, SectionFlags};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -36,13 +36,13 @@ struct Image {
     ram_size: u64,
 }
 
-/// Boards: every folder in `boards/` with a `mod.rs`, the default first.
+/// Boards: every folder in `boards/` with a `mod.rs` and a `memory.x`, the default first.
 fn boards(root: &Path) -> Result<Vec<String>, String> {
     let dir = root.join("boards");
     let mut names: Vec<String> = std::fs::read_dir(&dir)
         .map_err(|e| format!("{}: {e}", dir.display()))?
         .filter_map(|e| e.ok())
-        .filter(|e| e.path().join("mod.rs").is_file())
+        .filter(|e| e.path().join("mod.rs").is_file() && e.path().join("memory.x").is_file())
         .filter_map(|e| e.file_name().into_string().ok())
         .collect();
     names.sort_by_key(|n| (n != DEFAULT_BOARD, n.clone()));
@@ -54,28 +54,27 @@ fn boards(root: &Path) -> Result<Vec<String>, String> {
     Ok(names)
 }
 
-/// The board's `memory.x`: its own, or the top-level one (the default board's).
+/// The board's `memory.x`.
 fn memory_x(root: &Path, board: &str) -> PathBuf {
-    let own = root.join("boards").join(board).join("memory.x");
-    if own.is_file() {
-        own
-    } else {
-        root.join("memory.x")
-    }
+    root.join("boards").join(board).join("memory.x")
 }
 
 /// `LENGTH` of region `name` in a linker `MEMORY` block, bytes (`512K`, `1M`, `0x8000`, `98304`).
 pub fn region_length(memory_x: &str, name: &str) -> Option<u64> {
+    region_field(memory_x, name, "LENGTH")
+}
+
+/// `ORIGIN` of region `name` in a linker `MEMORY` block.
+pub fn region_origin(memory_x: &str, name: &str) -> Option<u64> {
+    region_field(memory_x, name, "ORIGIN")
+}
+
+fn region_field(memory_x: &str, name: &str, field: &str) -> Option<u64> {
     let line = memory_x
         .lines()
-        .find(|l| l.trim_start().starts_with(name) && l.contains("LENGTH"))?;
-    let value = line
-        .split("LENGTH")
-        .nth(1)?
-        .trim_start()
-        .strip_prefix('=')?
-        .trim();
-    let value = value.trim_end_matches(|c: char| c == ',' || c.is_whitespace());
+        .find(|l| l.trim_start().starts_with(name) && l.contains(field))?;
+    let value = line.split(field).nth(1)?.trim_start().strip_prefix('=')?;
+    let value = value.split(',').next()?.trim();
     let (digits, scale) = match value.chars().last()? {
         'K' | 'k' => (&value[..value.len() - 1], 1024),
         'M' | 'm' => (&value[..value.len() - 1], 1024 * 1024),
@@ -114,6 +113,14 @@ pub fn image_sizes(elf: &[u8]) -> Result<(u64, u64), String> {
         }
     }
     Ok((flash, ram))
+}
+
+/// The initial stack pointer the image was linked with (cortex-m-rt's `_stack_start`): the
+/// end of the RAM region of the `memory.x` it was linked against.
+pub fn stack_start(elf: &[u8]) -> Option<u64> {
+    let file = object::File::parse(elf).ok()?;
+    let sym = file.symbols().find(|s| s.name() == Ok("_stack_start"))?;
+    Some(sym.address())
 }
 
 fn build(root: &Path, board: &str) -> Result<PathBuf, String> {
@@ -168,6 +175,16 @@ pub fn run(root: &Path) -> Result<(), String> {
             region_length(&mem, name)
                 .ok_or_else(|| format!("{}: no {name} LENGTH", mem_path.display()))
         };
+        // The linker takes `memory.x` from the package directory before the search path; make
+        // sure this image really was linked against its board's layout.
+        let ram_end = region_origin(&mem, "RAM").zip(region_length(&mem, "RAM"));
+        if stack_start(&elf) != ram_end.map(|(o, l)| o + l) {
+            return Err(format!(
+                "{board}: image not linked against {} (stack start {:x?})",
+                mem_path.display(),
+                stack_start(&elf)
+            ));
+        }
         images.push(Image {
             board,
             flash_bytes,
@@ -256,6 +273,7 @@ mod tests {
             Some(0x4000)
         );
         assert_eq!(region_length(m, "CCM"), None);
+        assert_eq!(region_origin(m, "RAM"), Some(0x2000_0000));
     }
 
     #[test]
