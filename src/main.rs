@@ -44,6 +44,7 @@ pub use firmware::*;
 mod firmware {
     use crate::board;
     use core::cell::RefCell;
+    use core::sync::atomic::{AtomicBool, Ordering};
     use cortex_m::peripheral::DWT;
     use defmt_rtt as _;
     use embassy_executor::Spawner;
@@ -345,24 +346,35 @@ mod firmware {
         }
     }
 
+    /// Set by the first panic or HardFault, so a fault while logging it skips straight to the
+    /// reset instead of recursing.
+    static FAULTED: AtomicBool = AtomicBool::new(false);
+
+    /// Heaters off first (raw writes), then one log line over RTT, then a system reset (reported
+    /// at the next boot as `reset=software`).
     #[panic_handler]
     fn panic(info: &core::panic::PanicInfo) -> ! {
         board::heater_pins_low();
-        match info.location() {
-            Some(l) => defmt::error!(
-                "panic at {=str}:{=u32}; heaters off, resetting",
-                l.file(),
-                l.line()
-            ),
-            None => defmt::error!("panic; heaters off, resetting"),
+        if !FAULTED.swap(true, Ordering::Relaxed) {
+            match info.location() {
+                Some(l) => defmt::error!(
+                    "panic at {=str}:{=u32}; heaters off, resetting",
+                    l.file(),
+                    l.line()
+                ),
+                None => defmt::error!("panic; heaters off, resetting"),
+            }
         }
         cortex_m::peripheral::SCB::sys_reset()
     }
 
+    /// As [`panic`], for faults the CPU raises (bus, memory, usage faults escalate here).
     #[cortex_m_rt::exception]
     unsafe fn HardFault(ef: &cortex_m_rt::ExceptionFrame) -> ! {
         board::heater_pins_low();
-        defmt::error!("HardFault at pc={=u32:#x}; heaters off, resetting", ef.pc());
+        if !FAULTED.swap(true, Ordering::Relaxed) {
+            defmt::error!("HardFault at pc={=u32:#x}; heaters off, resetting", ef.pc());
+        }
         cortex_m::peripheral::SCB::sys_reset()
     }
 }

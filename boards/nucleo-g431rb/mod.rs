@@ -16,6 +16,7 @@
 //! ADC12 kernel clock SYSCLK/4 = 42.5 MHz. TIM2 is the embassy time driver. (A2 is PA4, which
 //! only ADC2 reads, so the ambient thermistor sits on A3 on every board.)
 
+use embassy_stm32::adc::vals::{Rovsm, Trovs};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, AnyAdcChannel, SampleTime};
 use embassy_stm32::gpio::OutputType;
 use embassy_stm32::peripherals::{ADC1, IWDG, LPUART1, TIM3};
@@ -136,14 +137,15 @@ pub fn init() -> Board {
     );
 
     let sensors = Sensors {
-        adc: Adc::new(p.ADC1, {
-            use embassy_stm32::adc::vals::{Rovsm, Trovs};
-            let mut c = AdcConfig::default();
-            c.oversampling_ratio = Some(OVERSAMPLING_RATIO_X16);
-            c.oversampling_shift = Some(0);
-            c.oversampling_mode = Some((Rovsm::CONTINUED, Trovs::AUTOMATIC, true));
-            c
-        }),
+        adc: Adc::new(
+            p.ADC1,
+            AdcConfig {
+                oversampling_ratio: Some(OVERSAMPLING_RATIO_X16),
+                oversampling_shift: Some(0),
+                oversampling_mode: Some((Rovsm::CONTINUED, Trovs::AUTOMATIC, true)),
+                ..AdcConfig::default()
+            },
+        ),
         channels: [
             p.PA0.degrade_adc(),
             p.PA1.degrade_adc(),
