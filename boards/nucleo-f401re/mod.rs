@@ -3,13 +3,18 @@
 //!
 //! | signal | pin (Arduino) | peripheral |
 //! | --- | --- | --- |
-//! | PLA heater MOSFET gate | PB4 (D5) | TIM3_CH1, AF2 |
+//! | PLA heater MOSFET gate | PA6 (D12) | TIM3_CH1, AF2 |
 //! | TCA heater MOSFET gate | PA7 (D11) | TIM3_CH2, AF2 |
 //! | PLA thermistor | PA0 (A0) | ADC1_IN0 |
 //! | TCA thermistor | PA1 (A1) | ADC1_IN1 |
 //! | ambient thermistor | PB0 (A3) | ADC1_IN8 |
 //! | supply divider | PC1 (A4) | ADC1_IN11 |
 //! | ST-LINK virtual COM port | PA2 TX / PA3 RX | USART2, 115 200 8N1 |
+//!
+//! The heater gates are on PA6/PA7 because those pins have no pull-up from reset until `init`
+//! (input on the F4, analog on the G4 and L4), so the external gate pull-downs hold both heaters
+//! off. Not PB4 (Arduino D5): it is JTAG NJTRST with an internal pull-up at reset, which against
+//! a 100 kΩ pull-down would half-open a logic-level MOSFET.
 //!
 //! Clocks: HSI 16 MHz → PLL (/8 ×168 /4) → 84 MHz core, APB1 42 MHz, APB2 84 MHz; ADC clock
 //! PCLK2/4 = 21 MHz. TIM2 is the embassy time driver.
@@ -49,7 +54,7 @@ bind_interrupts!(struct Irqs {
 /// Drives both heater gates low by raw register writes (output mode, level low), whatever
 /// state the timer and the rest of the firmware are in. For the panic and HardFault handlers.
 pub fn heater_pins_low() {
-    crate::force_low(pac::GPIOB, 4);
+    crate::force_low(pac::GPIOA, 6);
     crate::force_low(pac::GPIOA, 7);
 }
 
@@ -124,7 +129,7 @@ pub fn init() -> Board {
 
     let pwm = SimplePwm::new(
         p.TIM3,
-        Some(PwmPin::new(p.PB4, OutputType::PushPull)),
+        Some(PwmPin::new(p.PA6, OutputType::PushPull)),
         Some(PwmPin::new(p.PA7, OutputType::PushPull)),
         None,
         None,
