@@ -120,6 +120,11 @@ pub enum Event {
 /// Depth of the unsolicited-line queue; a morph produces at most six events and a trip one.
 pub const EVENT_QUEUE: usize = 16;
 
+/// Longest reply to one command line, bytes: its `data:` lines and final line, each with a
+/// `\n`. A bound for a shell that collects a reply before sending it; HELP, the longest, is
+/// about 730 (checked in `tests/protocol.rs`).
+pub const MAX_REPLY_BYTES: usize = 1024;
+
 /// The controller state.
 pub struct Controller {
     cfg: Config,

@@ -63,7 +63,9 @@ mod firmware {
     use embassy_sync::signal::Signal;
     use embassy_time::{Duration, Instant, Ticker, Timer};
     use embedded_io_async::{Read, Write};
-    use morphlink::controller::{Config, Controller, Inputs, Outputs, OVERSAMPLE, TICK_MS};
+    use morphlink::controller::{
+        Config, Controller, Inputs, Outputs, MAX_REPLY_BYTES, OVERSAMPLE, TICK_MS,
+    };
     use morphlink::protocol::{
         format_error, Assembled, Command, LineAssembler, OutLine, ERR_INVALID_LINE,
         ERR_LINE_TOO_LONG,
@@ -89,9 +91,8 @@ mod firmware {
     pub const UART_RX_BYTES: usize = 256;
     /// UART transmit buffer, bytes: holds a whole HELP reply, so replies rarely wait.
     pub const UART_TX_BYTES: usize = 1024;
-    /// Largest reply the serial task collects under the controller lock, bytes (HELP, the
-    /// longest, is about 900).
-    pub const REPLY_BYTES: usize = 1536;
+    /// Largest reply the serial task collects under the controller lock, bytes: the core's bound.
+    pub const REPLY_BYTES: usize = MAX_REPLY_BYTES;
 
     /// Spacing of the ADC samples in a tick's burst: 16 samples 1 ms apart span 16 ms, about
     /// one mains period, so 50/60 Hz pickup averages out (the G4 sums in hardware instead).
@@ -290,8 +291,13 @@ mod firmware {
             Assembled::TooLong => out(&format_error(&ERR_LINE_TOO_LONG)),
             Assembled::Invalid => out(&format_error(&ERR_INVALID_LINE)),
         }
-        while let Some(e) = c.pop_event_line() {
-            out(&e);
+    }
+
+    /// Writes every queued event and alarm line, oldest first, taking the lock once per line.
+    async fn send_events(tx: &mut BufferedUartTx<'static>) {
+        while let Some(line) = with_controller(|c| c.pop_event_line()) {
+            send(tx, &line).await;
+            send(tx, "\n").await;
         }
     }
 
@@ -319,24 +325,19 @@ mod firmware {
                         with_controller(|c| answer(c, now_ms, line, &mut reply));
                         APPLY_NOW.signal(());
                         send(&mut tx, &reply).await;
+                        // A MORPH's first event follows its `ok`.
+                        send_events(&mut tx).await;
                     }
                     // A flood arrives faster than lines end: let the control task run.
                     yield_now().await;
                 }
                 Either::First(Err(e)) => defmt::warn!("uart receive error: {}", e),
-                Either::Second(()) => {
-                    reply.clear();
-                    with_controller(|c| {
-                        while let Some(e) = c.pop_event_line() {
-                            push_line(&mut reply, &e);
-                        }
-                    });
-                    send(&mut tx, &reply).await;
-                }
+                Either::Second(()) => send_events(&mut tx).await,
             }
         }
     }
 
+    /// Writes `s` to the UART (waiting for room in its transmit buffer); errors are logged.
     async fn send(tx: &mut BufferedUartTx<'static>, s: &str) {
         if s.is_empty() {
             return;
