@@ -22,9 +22,10 @@ pub const DEFAULT_BOARD: &str = "nucleo-f401re";
 pub const SMALL_PART_FLASH_BYTES: u64 = 64 * 1024;
 /// RAM of that small part, bytes: 16 KiB.
 pub const SMALL_PART_RAM_BYTES: u64 = 16 * 1024;
-/// RAM kept for the main stack on top of the static data, bytes. The tasks live in statics,
-/// so the stack only holds `main`, interrupt handlers and the deepest call of a task poll
-/// (`Controller::step` or a reply with a few 192-byte lines); 4 KiB is several times that.
+/// RAM kept for the main stack on top of the static data, bytes. The tasks live in statics, so
+/// the stack only holds `main`, interrupt handlers and the deepest call of a task poll
+/// (`Controller::step`, or a reply with a few 192-byte lines). An estimate with a wide margin,
+/// not a measurement: stable Rust cannot report stack sizes.
 pub const STACK_RESERVE_BYTES: u64 = 4 * 1024;
 
 /// One board's image.
