@@ -1,13 +1,16 @@
 //! Build script: generates the link's constants and the power/radius table from `link.toml`
-//! (or the file named by `MORPHLINK_LINK`), and puts `memory.x` on the linker path.
+//! (or the file named by `MORPHLINK_LINK`), and puts the selected board's `memory.x` on the
+//! linker path.
 use morphlink_model::{file, table, thermal};
 use std::{env, fmt::Write as _, fs, path::PathBuf};
 
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("OUT_DIR"));
-    fs::copy("memory.x", out.join("memory.x")).expect("copy memory.x");
-    println!("cargo:rustc-link-search={}", out.display());
-    println!("cargo:rerun-if-changed=memory.x");
+    if let Some(memory) = board_memory_x() {
+        fs::copy(&memory, out.join("memory.x")).expect("copy memory.x");
+        println!("cargo:rustc-link-search={}", out.display());
+        println!("cargo:rerun-if-changed={}", memory.display());
+    }
     println!("cargo:rerun-if-env-changed=MORPHLINK_LINK");
 
     let link_path = env::var("MORPHLINK_LINK")
@@ -60,4 +63,32 @@ fn main() {
     }
     writeln!(s, "];").unwrap();
     fs::write(out.join("link.rs"), s).expect("write link.rs");
+}
+
+/// The memory layout of the board picked by the `board-<name>` feature, `boards/<name>/memory.x`,
+/// for firmware builds (which need exactly one board feature); `None` on the host.
+///
+/// There is deliberately no top-level `memory.x`: the linker looks for `memory.x` in the
+/// package directory before its search path, so one there would override every board's.
+fn board_memory_x() -> Option<PathBuf> {
+    if env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("none") {
+        return None;
+    }
+    let boards: Vec<String> = env::vars()
+        .filter_map(|(k, _)| {
+            k.strip_prefix("CARGO_FEATURE_BOARD_")
+                .map(|b| b.to_ascii_lowercase().replace('_', "-"))
+        })
+        .collect();
+    let [board] = boards.as_slice() else {
+        panic!(
+            "firmware builds need exactly one board feature, got {boards:?}; e.g. \
+             `--no-default-features --features board-nucleo-g431rb`"
+        );
+    };
+    let memory = PathBuf::from("boards").join(board).join("memory.x");
+    if !memory.is_file() {
+        panic!("board feature `board-{board}` has no {}", memory.display());
+    }
+    Some(memory)
 }

@@ -9,6 +9,7 @@ use crate::fixed::Fixed;
 use crate::heater::HeaterConfig;
 use crate::protocol::{self, Command, ErrorCode, Mode, OutLine, ProtoError, SimCommand};
 use crate::sequencer::{Phase, Powers, SeqEvent, Sequencer};
+use crate::stats::LoopTiming;
 use crate::supervisor::{Fault, FaultCode, Frame, Subject, Supervisor, SUPPLY_MAX_V, SUPPLY_MIN_V};
 use crate::table;
 use crate::thermistor::ThermistorConfig;
@@ -119,6 +120,11 @@ pub enum Event {
 /// Depth of the unsolicited-line queue; a morph produces at most six events and a trip one.
 pub const EVENT_QUEUE: usize = 16;
 
+/// Longest reply to one command line, bytes: its `data:` lines and final line, each with a
+/// `\n`. A bound for a shell that collects a reply before sending it; HELP, the longest, is
+/// about 730 (checked in `tests/protocol.rs`).
+pub const MAX_REPLY_BYTES: usize = 1024;
+
 /// The controller state.
 pub struct Controller {
     cfg: Config,
@@ -130,6 +136,7 @@ pub struct Controller {
     outputs: Outputs,
     supply_v: f32,
     events: Deque<Event, EVENT_QUEUE>,
+    timing: Option<LoopTiming>,
 }
 
 /// Firmware version reported by VERSION.
@@ -148,7 +155,27 @@ impl Controller {
             outputs: Outputs::default(),
             supply_v: f32::NAN,
             events: Deque::new(),
+            timing: None,
         }
+    }
+
+    /// Starts answering `STATS` from `timing`, which the firmware then feeds through
+    /// [`Controller::record_timing`]. Without it (simulated builds) `STATS` is unsupported.
+    pub fn enable_timing(&mut self, timing: LoopTiming) {
+        self.timing = Some(timing);
+    }
+
+    /// Records one control tick's cycle-counter readings (see [`LoopTiming::record`]); does
+    /// nothing unless [`Controller::enable_timing`] was called.
+    pub fn record_timing(&mut self, start: u32, adc_done: u32, applied: u32) {
+        if let Some(t) = &mut self.timing {
+            t.record(start, adc_done, applied);
+        }
+    }
+
+    /// The control-loop timing, if this build records it.
+    pub fn timing(&self) -> Option<&LoopTiming> {
+        self.timing.as_ref()
     }
 
     /// Current phase (Fault while a fault is latched).
@@ -327,6 +354,16 @@ impl Controller {
                 }
                 out("ok");
             }
+            Command::Stats => match &self.timing {
+                Some(t) => {
+                    t.write_stats(&mut l);
+                    out(&l);
+                }
+                None => out(&protocol::format_error(&ProtoError {
+                    code: ErrorCode::Unsupported,
+                    text: "STATS measures the control loop on hardware; this build has none",
+                })),
+            },
             Command::Sim(_) => out(&protocol::format_error(&ProtoError {
                 code: ErrorCode::Unsupported,
                 text: "SIM commands exist only in simulated builds (morph-sim, the emulator)",
@@ -504,7 +541,7 @@ fn write_fault_text(l: &mut OutLine, f: &Fault) {
 }
 
 /// HELP text, one `data:` line each.
-const HELP: [&str; 9] = [
+const HELP: [&str; 10] = [
     "MORPH <radius_mm> [auto|paper]  morph to a radius (RANGE shows the reachable ones)",
     "STATUS                          phase, temperatures, powers, supply, fault",
     "ABORT                           both heaters off at once, phase idle",
@@ -513,5 +550,6 @@ const HELP: [&str; 9] = [
     "TABLE                           TCA power / radius table",
     "VERSION                         firmware and protocol version",
     "HELP                            this list",
+    "STATS                           control-loop timing (us) and reset cause; hardware only",
     "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|CLEAR  simulated builds only",
 ];

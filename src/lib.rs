@@ -17,6 +17,7 @@ pub mod link;
 pub mod mathf;
 pub mod protocol;
 pub mod sequencer;
+pub mod stats;
 pub mod supervisor;
 pub mod table;
 pub mod thermistor;

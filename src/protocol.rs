@@ -100,6 +100,8 @@ pub enum Command {
     Version,
     /// `HELP`.
     Help,
+    /// `STATS`: control-loop timing and reset cause (firmware builds).
+    Stats,
     /// `SIM ...` (simulated builds only).
     Sim(SimCommand),
 }
@@ -265,6 +267,7 @@ pub fn parse_line(line: &str) -> Result<Option<Command>, ProtoError> {
         ("TABLE", Command::Table, "TABLE takes no arguments."),
         ("VERSION", Command::Version, "VERSION takes no arguments."),
         ("HELP", Command::Help, "HELP takes no arguments."),
+        ("STATS", Command::Stats, "STATS takes no arguments."),
     ];
     for (word, command, extra) in simple {
         if first.eq_ignore_ascii_case(word) {

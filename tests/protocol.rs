@@ -37,6 +37,7 @@ fn every_command_gets_exactly_one_final_reply() {
         "TABLE",
         "VERSION",
         "HELP",
+        "STATS",
         "RESET",
         "ABORT",
         "SIM STATE",
@@ -171,5 +172,25 @@ proptest! {
         let line = words.join(" ");
         let r = b.send(&line);
         prop_assert_eq!(r.iter().filter(|l| is_final(l)).count(), 1, "{}: {:?}", line, r);
+    }
+}
+
+#[test]
+fn every_reply_fits_the_shell_reply_buffer() {
+    let mut b = Bench::new();
+    for cmd in [
+        "HELP", "TABLE", "STATUS", "RANGE", "VERSION", "STATS", "RESET", "ABORT", "MORPH 38",
+        "MORPH 1", "bogus",
+    ] {
+        let bytes: usize = b
+            .send(cmd)
+            .iter()
+            .filter(|l| !l.starts_with("event:") && !l.starts_with("alarm:"))
+            .map(|l| l.len() + 1)
+            .sum();
+        assert!(
+            bytes <= morphlink::controller::MAX_REPLY_BYTES,
+            "{cmd}: {bytes} bytes"
+        );
     }
 }

@@ -1,5 +1,7 @@
 //! `cargo xtask <task>`: project automation in Rust (the xtask convention), one module per task.
 use clap::{Parser, Subcommand};
+
+mod boards;
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -13,6 +15,8 @@ struct Cli {
 enum Task {
     /// Print the workspace root (a check that the task runner works).
     Root,
+    /// Build the firmware for every board in release, print flash/RAM use, check budgets.
+    Boards,
 }
 
 fn main() -> ExitCode {
@@ -21,6 +25,7 @@ fn main() -> ExitCode {
             println!("{}", workspace_root().display());
             Ok(())
         }
+        Task::Boards => boards::run(&workspace_root()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

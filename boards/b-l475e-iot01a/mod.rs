@@ -1,0 +1,171 @@
+//! B-L475E-IOT01A (Discovery kit IoT node): STM32L475VG, Cortex-M4F, 1 MiB flash, 128 KiB RAM
+//! (96 KiB SRAM1 used, see `memory.x` here). The board the emulation issue runs under QEMU:
+//! [`init`] builds the peripheral drivers one by one ([`Sensors`], the heater timer, the
+//! UART), so an emulated variant can swap each for a simulated link without touching the
+//! tasks.
+//!
+//! | signal | pin (Arduino) | peripheral |
+//! | --- | --- | --- |
+//! | PLA heater MOSFET gate | PA6 (D12) | TIM3_CH1, AF2 |
+//! | TCA heater MOSFET gate | PA7 (D11) | TIM3_CH2, AF2 |
+//! | PLA thermistor | PC5 (A0) | ADC1_IN14 |
+//! | TCA thermistor | PC4 (A1) | ADC1_IN13 |
+//! | ambient thermistor | PC2 (A3) | ADC1_IN3 |
+//! | supply divider | PC1 (A4) | ADC1_IN2 |
+//! | ST-LINK virtual COM port | PB6 TX / PB7 RX | USART1, 115 200 8N1 |
+//!
+//! The heater gates are on PA6/PA7 because those pins have no pull-up from reset until `init`
+//! (input on the F4, analog on the G4 and L4), so the external gate pull-downs hold both heaters
+//! off. Not PB4 (Arduino D5): it is JTAG NJTRST with an internal pull-up at reset, which against
+//! a 100 kΩ pull-down would half-open a logic-level MOSFET.
+//!
+//! Clocks: HSI 16 MHz → PLL (/1 ×10 /2) → 80 MHz core, APB1 = APB2 = 80 MHz; ADC kernel
+//! clock SYSCLK. TIM2 is the embassy time driver.
+
+use embassy_stm32::adc::{Adc, AdcChannel, AnyAdcChannel, SampleTime};
+use embassy_stm32::gpio::OutputType;
+use embassy_stm32::peripherals::{ADC1, IWDG, TIM3, USART1};
+use embassy_stm32::timer::low_level::CountingMode;
+use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
+use embassy_stm32::timer::Channel;
+use embassy_stm32::usart::{self, BufferedUart};
+use embassy_stm32::{bind_interrupts, pac, Peri};
+use morphlink::stats::ResetFlags;
+
+/// Board name, as in the `board-b-l475e-iot01a` feature and the boot line.
+pub const NAME: &str = "b-l475e-iot01a";
+/// Core clock, Hz (converts cycle counts to µs for `STATS`).
+pub const CPU_HZ: u32 = 80_000_000;
+/// Conversions the ADC sums in hardware per read: none here (the L4 oversampler is left off so the
+/// emulated ADC stays simple), so the control task sums
+/// 16 reads spread over the burst.
+pub const HW_OVERSAMPLE: u32 = 1;
+/// Timer driving both heaters.
+pub type HeaterTimer = TIM3;
+/// Timer channel of the PLA heater.
+pub const PLA_CHANNEL: Channel = Channel::Ch1;
+/// Timer channel of the TCA heater.
+pub const TCA_CHANNEL: Channel = Channel::Ch2;
+
+/// ADC sample time: the longest, because the thermistor dividers are 5–10 kΩ sources and the
+/// supply divider 8.2 kΩ; 640.5 cycles at 80 MHz is 8 µs per conversion.
+const SAMPLE_TIME: SampleTime = SampleTime::CYCLES640_5;
+
+bind_interrupts!(struct Irqs {
+    USART1 => usart::BufferedInterruptHandler<USART1>;
+});
+
+/// Drives both heater gates low by raw register writes (output mode, level low), whatever
+/// state the timer and the rest of the firmware are in. For the panic and HardFault handlers.
+pub fn heater_pins_low() {
+    crate::force_low(pac::GPIOA, 6);
+    crate::force_low(pac::GPIOA, 7);
+}
+
+/// The thermistor and supply inputs on ADC1.
+pub struct Sensors {
+    adc: Adc<'static, ADC1>,
+    channels: [AnyAdcChannel<'static, ADC1>; 4],
+}
+
+impl Sensors {
+    /// One conversion each of the PLA, TCA and ambient thermistors and the supply divider,
+    /// counts (12-bit).
+    pub fn read(&mut self) -> [u16; 4] {
+        let adc = &mut self.adc;
+        self.channels
+            .each_mut()
+            .map(|ch| adc.blocking_read(ch, SAMPLE_TIME))
+    }
+}
+
+/// The board's peripherals, configured: heaters at 0 % duty, UART running.
+pub struct Board {
+    /// Thermistor and supply inputs.
+    pub sensors: Sensors,
+    /// Heater PWM timer (both channels at 0 % duty, outputs not yet enabled).
+    pub pwm: SimplePwm<'static, HeaterTimer>,
+    /// The ST-LINK virtual COM port.
+    pub serial: BufferedUart<'static>,
+    /// The independent watchdog, not started yet.
+    pub iwdg: Peri<'static, IWDG>,
+    /// Reset flags read (and cleared) at boot.
+    pub reset_flags: ResetFlags,
+}
+
+/// Reads and clears the reset flags in RCC_CSR.
+fn take_reset_flags() -> ResetFlags {
+    let csr = pac::RCC.csr().read();
+    pac::RCC.csr().modify(|w| w.set_rmvf(true));
+    ResetFlags {
+        watchdog: csr.iwdgrstf(),
+        window_watchdog: csr.wwdgrstf(),
+        software: csr.sftrstf() || csr.oblrstf() || csr.fwrstf(),
+        low_power: csr.lpwrrstf(),
+        power_on: csr.borrstf(),
+        pin: csr.pinrstf(),
+    }
+}
+
+/// Sets up clocks and peripherals.
+pub fn init() -> Board {
+    let reset_flags = take_reset_flags();
+    let mut config = embassy_stm32::Config::default();
+    {
+        use embassy_stm32::rcc::*;
+        // HSI, not the MSI: ±1 % over temperature without LSE trimming is plenty for
+        // 115 200 Bd and for thermal timing.
+        config.rcc.hsi = true;
+        config.rcc.pll = Some(Pll {
+            source: PllSource::HSI,
+            prediv: PllPreDiv::DIV1,
+            mul: PllMul::MUL10,
+            divp: None,
+            divq: None,
+            divr: Some(PllRDiv::DIV2),
+        });
+        config.rcc.sys = Sysclk::PLL1_R;
+        config.rcc.mux.adcsel = mux::Adcsel::SYS;
+    }
+    let p = embassy_stm32::init(config);
+
+    let pwm = SimplePwm::new(
+        p.TIM3,
+        Some(PwmPin::new(p.PA6, OutputType::PushPull)),
+        Some(PwmPin::new(p.PA7, OutputType::PushPull)),
+        None,
+        None,
+        crate::PWM_FREQUENCY,
+        CountingMode::EdgeAlignedUp,
+    );
+
+    let sensors = Sensors {
+        adc: Adc::new(p.ADC1),
+        channels: [
+            p.PC5.degrade_adc(),
+            p.PC4.degrade_adc(),
+            p.PC2.degrade_adc(),
+            p.PC1.degrade_adc(),
+        ],
+    };
+
+    let (tx_buf, rx_buf) = crate::uart_buffers();
+    let serial = BufferedUart::new(
+        p.USART1,
+        p.PB7,
+        p.PB6,
+        tx_buf,
+        rx_buf,
+        Irqs,
+        crate::uart_config(),
+    )
+    .expect("USART1 accepts 115200 8N1");
+
+    Board {
+        sensors,
+        pwm,
+        serial,
+        iwdg: p.IWDG,
+        reset_flags,
+    }
+}

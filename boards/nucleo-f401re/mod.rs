@@ -1,0 +1,169 @@
+//! NUCLEO-F401RE: STM32F401RE, Cortex-M4F, 512 KiB flash, 96 KiB RAM (`memory.x` here). The
+//! default board.
+//!
+//! | signal | pin (Arduino) | peripheral |
+//! | --- | --- | --- |
+//! | PLA heater MOSFET gate | PA6 (D12) | TIM3_CH1, AF2 |
+//! | TCA heater MOSFET gate | PA7 (D11) | TIM3_CH2, AF2 |
+//! | PLA thermistor | PA0 (A0) | ADC1_IN0 |
+//! | TCA thermistor | PA1 (A1) | ADC1_IN1 |
+//! | ambient thermistor | PB0 (A3) | ADC1_IN8 |
+//! | supply divider | PC1 (A4) | ADC1_IN11 |
+//! | ST-LINK virtual COM port | PA2 TX / PA3 RX | USART2, 115 200 8N1 |
+//!
+//! The heater gates are on PA6/PA7 because those pins have no pull-up from reset until `init`
+//! (input on the F4, analog on the G4 and L4), so the external gate pull-downs hold both heaters
+//! off. Not PB4 (Arduino D5): it is JTAG NJTRST with an internal pull-up at reset, which against
+//! a 100 kΩ pull-down would half-open a logic-level MOSFET.
+//!
+//! Clocks: HSI 16 MHz → PLL (/8 ×168 /4) → 84 MHz core, APB1 42 MHz, APB2 84 MHz; ADC clock
+//! PCLK2/4 = 21 MHz. TIM2 is the embassy time driver.
+
+use embassy_stm32::adc::{Adc, AdcChannel, AnyAdcChannel, SampleTime};
+use embassy_stm32::gpio::OutputType;
+use embassy_stm32::peripherals::{ADC1, IWDG, TIM3, USART2};
+use embassy_stm32::timer::low_level::CountingMode;
+use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
+use embassy_stm32::timer::Channel;
+use embassy_stm32::usart::{self, BufferedUart};
+use embassy_stm32::{bind_interrupts, pac, Peri};
+use morphlink::stats::ResetFlags;
+
+/// Board name, as in the `board-nucleo-f401re` feature and the boot line.
+pub const NAME: &str = "nucleo-f401re";
+/// Core clock, Hz (converts cycle counts to µs for `STATS`).
+pub const CPU_HZ: u32 = 84_000_000;
+/// Conversions the ADC sums in hardware per read: none on the F4, so the control task sums
+/// 16 reads spread over the burst.
+pub const HW_OVERSAMPLE: u32 = 1;
+/// Timer driving both heaters.
+pub type HeaterTimer = TIM3;
+/// Timer channel of the PLA heater.
+pub const PLA_CHANNEL: Channel = Channel::Ch1;
+/// Timer channel of the TCA heater.
+pub const TCA_CHANNEL: Channel = Channel::Ch2;
+
+/// ADC sample time: the longest, because the thermistor dividers are 5–10 kΩ sources and the
+/// supply divider 8.2 kΩ; 480 cycles at 21 MHz is 23 µs per conversion.
+const SAMPLE_TIME: SampleTime = SampleTime::CYCLES480;
+
+bind_interrupts!(struct Irqs {
+    USART2 => usart::BufferedInterruptHandler<USART2>;
+});
+
+/// Drives both heater gates low by raw register writes (output mode, level low), whatever
+/// state the timer and the rest of the firmware are in. For the panic and HardFault handlers.
+pub fn heater_pins_low() {
+    crate::force_low(pac::GPIOA, 6);
+    crate::force_low(pac::GPIOA, 7);
+}
+
+/// The thermistor and supply inputs on ADC1.
+pub struct Sensors {
+    adc: Adc<'static, ADC1>,
+    channels: [AnyAdcChannel<'static, ADC1>; 4],
+}
+
+impl Sensors {
+    /// One conversion each of the PLA, TCA and ambient thermistors and the supply divider,
+    /// counts (12-bit).
+    pub fn read(&mut self) -> [u16; 4] {
+        let adc = &mut self.adc;
+        self.channels
+            .each_mut()
+            .map(|ch| adc.blocking_read(ch, SAMPLE_TIME))
+    }
+}
+
+/// The board's peripherals, configured: heaters at 0 % duty, UART running.
+pub struct Board {
+    /// Thermistor and supply inputs.
+    pub sensors: Sensors,
+    /// Heater PWM timer (both channels at 0 % duty, outputs not yet enabled).
+    pub pwm: SimplePwm<'static, HeaterTimer>,
+    /// The ST-LINK virtual COM port.
+    pub serial: BufferedUart<'static>,
+    /// The independent watchdog, not started yet.
+    pub iwdg: Peri<'static, IWDG>,
+    /// Reset flags read (and cleared) at boot.
+    pub reset_flags: ResetFlags,
+}
+
+/// Reads and clears the reset flags in RCC_CSR.
+fn take_reset_flags() -> ResetFlags {
+    let csr = pac::RCC.csr().read();
+    pac::RCC.csr().modify(|w| w.set_rmvf(true));
+    ResetFlags {
+        watchdog: csr.wdgrstf(),
+        window_watchdog: csr.wwdgrstf(),
+        software: csr.sftrstf(),
+        low_power: csr.lpwrrstf(),
+        power_on: csr.porrstf() || csr.borrstf(),
+        pin: csr.padrstf(),
+    }
+}
+
+/// Sets up clocks and peripherals.
+pub fn init() -> Board {
+    let reset_flags = take_reset_flags();
+    let mut config = embassy_stm32::Config::default();
+    {
+        use embassy_stm32::rcc::*;
+        // HSI, not the ST-LINK's 8 MHz MCO: no solder-bridge dependence, and its ±1 % is
+        // plenty for 115 200 Bd and for thermal timing.
+        config.rcc.hsi = true;
+        config.rcc.pll_src = PllSource::HSI;
+        config.rcc.pll = Some(Pll {
+            prediv: PllPreDiv::DIV8,
+            mul: PllMul::MUL168,
+            divp: Some(PllPDiv::DIV4),
+            divq: Some(PllQDiv::DIV7),
+            divr: None,
+        });
+        config.rcc.sys = Sysclk::PLL1_P;
+        config.rcc.ahb_pre = AHBPrescaler::DIV1;
+        config.rcc.apb1_pre = APBPrescaler::DIV2;
+        config.rcc.apb2_pre = APBPrescaler::DIV1;
+    }
+    let p = embassy_stm32::init(config);
+
+    let pwm = SimplePwm::new(
+        p.TIM3,
+        Some(PwmPin::new(p.PA6, OutputType::PushPull)),
+        Some(PwmPin::new(p.PA7, OutputType::PushPull)),
+        None,
+        None,
+        crate::PWM_FREQUENCY,
+        CountingMode::EdgeAlignedUp,
+    );
+
+    let sensors = Sensors {
+        adc: Adc::new(p.ADC1),
+        channels: [
+            p.PA0.degrade_adc(),
+            p.PA1.degrade_adc(),
+            p.PB0.degrade_adc(),
+            p.PC1.degrade_adc(),
+        ],
+    };
+
+    let (tx_buf, rx_buf) = crate::uart_buffers();
+    let serial = BufferedUart::new(
+        p.USART2,
+        p.PA3,
+        p.PA2,
+        tx_buf,
+        rx_buf,
+        Irqs,
+        crate::uart_config(),
+    )
+    .expect("USART2 accepts 115200 8N1");
+
+    Board {
+        sensors,
+        pwm,
+        serial,
+        iwdg: p.IWDG,
+        reset_flags,
+    }
+}

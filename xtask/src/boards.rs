@@ -1,0 +1,300 @@
+//! `cargo xtask boards`: builds the firmware for every board in `boards/` (release, one after
+//! the other in the shared `target/`), prints a table of flash and RAM use, and fails if an
+//! image breaks its budget.
+//!
+//! Budgets:
+//! - every image fits its board: flash ≤ the `FLASH` length of the board's `memory.x`, and
+//!   static RAM plus [`STACK_RESERVE_BYTES`] ≤ its `RAM` length;
+//! - the default board's image also fits a small part of the same family:
+//!   [`SMALL_PART_FLASH_BYTES`] of flash and [`SMALL_PART_RAM_BYTES`] of RAM.
+use object::elf::{SHF_ALLOC, SHF_WRITE, SHT_NOBITS};
+use object::{Object, ObjectSection, ObjectSymbol, SectionFlags};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The firmware target.
+pub const TARGET: &str = "thumbv7em-none-eabihf";
+/// The default board (the `default` feature), which must also fit the small part.
+pub const DEFAULT_BOARD: &str = "nucleo-f401re";
+/// Flash of the small part the default image must fit, bytes: 64 KiB, the smallest STM32F4
+/// with this pinout (STM32F401RB/C-class parts start at 128 KiB; 64 KiB also covers
+/// STM32G431K6-class G4s).
+pub const SMALL_PART_FLASH_BYTES: u64 = 64 * 1024;
+/// RAM of that small part, bytes: 16 KiB.
+pub const SMALL_PART_RAM_BYTES: u64 = 16 * 1024;
+/// RAM kept for the main stack on top of the static data, bytes. The tasks live in statics, so
+/// the stack only holds `main`, interrupt handlers and the deepest call of a task poll
+/// (`Controller::step`, or a reply with a few 192-byte lines). An estimate with a wide margin,
+/// not a measurement: stable Rust cannot report stack sizes.
+pub const STACK_RESERVE_BYTES: u64 = 4 * 1024;
+
+/// One board's image.
+struct Image {
+    board: String,
+    flash_bytes: u64,
+    ram_bytes: u64,
+    flash_size: u64,
+    ram_size: u64,
+}
+
+/// Boards: every folder in `boards/` with a `mod.rs` and a `memory.x`, the default first.
+fn boards(root: &Path) -> Result<Vec<String>, String> {
+    let dir = root.join("boards");
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .map_err(|e| format!("{}: {e}", dir.display()))?
+        .filter_map(|e| e.ok())
+        .filter(|e| e.path().join("mod.rs").is_file() && e.path().join("memory.x").is_file())
+        .filter_map(|e| e.file_name().into_string().ok())
+        .collect();
+    names.sort_by_key(|n| (n != DEFAULT_BOARD, n.clone()));
+    if names.first().map(String::as_str) != Some(DEFAULT_BOARD) {
+        return Err(format!(
+            "the default board {DEFAULT_BOARD} is missing from boards/"
+        ));
+    }
+    Ok(names)
+}
+
+/// The board's `memory.x`.
+fn memory_x(root: &Path, board: &str) -> PathBuf {
+    root.join("boards").join(board).join("memory.x")
+}
+
+/// `LENGTH` of region `name` in a linker `MEMORY` block, bytes (`512K`, `1M`, `0x8000`, `98304`).
+pub fn region_length(memory_x: &str, name: &str) -> Option<u64> {
+    region_field(memory_x, name, "LENGTH")
+}
+
+/// `ORIGIN` of region `name` in a linker `MEMORY` block.
+pub fn region_origin(memory_x: &str, name: &str) -> Option<u64> {
+    region_field(memory_x, name, "ORIGIN")
+}
+
+fn region_field(memory_x: &str, name: &str, field: &str) -> Option<u64> {
+    let line = memory_x
+        .lines()
+        .find(|l| l.trim_start().starts_with(name) && l.contains(field))?;
+    let value = line.split(field).nth(1)?.trim_start().strip_prefix('=')?;
+    let value = value.split(',').next()?.trim();
+    let (digits, scale) = match value.chars().last()? {
+        'K' | 'k' => (&value[..value.len() - 1], 1024),
+        'M' | 'm' => (&value[..value.len() - 1], 1024 * 1024),
+        _ => (value, 1),
+    };
+    let n = match digits
+        .strip_prefix("0x")
+        .or_else(|| digits.strip_prefix("0X"))
+    {
+        Some(hex) => u64::from_str_radix(hex, 16).ok()?,
+        None => digits.parse().ok()?,
+    };
+    Some(n * scale)
+}
+
+/// Flash and static RAM of an ELF image, bytes: flash holds every allocated section with
+/// contents (code, read-only data, the initial values of `.data`); RAM holds the writable
+/// allocated sections (`.data`, `.bss`, `.uninit`).
+pub fn image_sizes(elf: &[u8]) -> Result<(u64, u64), String> {
+    let file = object::File::parse(elf).map_err(|e| format!("not an ELF: {e}"))?;
+    let (mut flash, mut ram) = (0, 0);
+    for s in file.sections() {
+        let SectionFlags::Elf { sh_type, sh_flags } = s.flags() else {
+            continue;
+        };
+        if (sh_flags.0 & SHF_ALLOC.0) == 0 {
+            continue;
+        }
+        let writable = (sh_flags.0 & SHF_WRITE.0) != 0;
+        let no_bits = sh_type == SHT_NOBITS;
+        if !no_bits {
+            flash += s.size();
+        }
+        if writable {
+            ram += s.size();
+        }
+    }
+    Ok((flash, ram))
+}
+
+/// The initial stack pointer the image was linked with (cortex-m-rt's `_stack_start`): the
+/// end of the RAM region of the `memory.x` it was linked against.
+pub fn stack_start(elf: &[u8]) -> Option<u64> {
+    let file = object::File::parse(elf).ok()?;
+    let sym = file.symbols().find(|s| s.name() == Ok("_stack_start"))?;
+    Some(sym.address())
+}
+
+fn build(root: &Path, board: &str) -> Result<PathBuf, String> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(root)
+        .args([
+            "build",
+            "--release",
+            "--target",
+            TARGET,
+            "--bin",
+            "morphlink",
+        ])
+        .args([
+            "--no-default-features",
+            "--features",
+            &format!("board-{board}"),
+        ])
+        .status()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !status.success() {
+        return Err(format!("building {board} failed"));
+    }
+    // Each build overwrites the same ELF; keep a copy per board (e.g. to flash with probe-rs).
+    let elf = root
+        .join("target")
+        .join(TARGET)
+        .join("release")
+        .join("morphlink");
+    let dir = root.join("target").join("boards");
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let copy = dir.join(format!("morphlink-{board}.elf"));
+    std::fs::copy(&elf, &copy).map_err(|e| format!("{}: {e}", elf.display()))?;
+    Ok(copy)
+}
+
+fn kib(bytes: u64) -> String {
+    format!("{:.1} KiB", bytes as f64 / 1024.0)
+}
+
+/// Runs the task: build every board, print the table, check the budgets.
+pub fn run(root: &Path) -> Result<(), String> {
+    let mut images = Vec::new();
+    for board in boards(root)? {
+        let elf_path = build(root, &board)?;
+        let elf = std::fs::read(&elf_path).map_err(|e| e.to_string())?;
+        let (flash_bytes, ram_bytes) = image_sizes(&elf)?;
+        let mem_path = memory_x(root, &board);
+        let mem = std::fs::read_to_string(&mem_path).map_err(|e| e.to_string())?;
+        let region = |name| {
+            region_length(&mem, name)
+                .ok_or_else(|| format!("{}: no {name} LENGTH", mem_path.display()))
+        };
+        // The linker takes `memory.x` from the package directory before the search path; make
+        // sure this image really was linked against its board's layout.
+        let ram_end = region_origin(&mem, "RAM").zip(region_length(&mem, "RAM"));
+        if stack_start(&elf) != ram_end.map(|(o, l)| o + l) {
+            return Err(format!(
+                "{board}: image not linked against {} (stack start {:x?})",
+                mem_path.display(),
+                stack_start(&elf)
+            ));
+        }
+        images.push(Image {
+            board,
+            flash_bytes,
+            ram_bytes,
+            flash_size: region("FLASH")?,
+            ram_size: region("RAM")?,
+        });
+    }
+
+    println!();
+    println!("| board | flash used | of | static RAM used | of |");
+    println!("| --- | --- | --- | --- | --- |");
+    for i in &images {
+        println!(
+            "| {} | {} ({} B) | {} | {} ({} B) | {} |",
+            i.board,
+            kib(i.flash_bytes),
+            i.flash_bytes,
+            kib(i.flash_size),
+            kib(i.ram_bytes),
+            i.ram_bytes,
+            kib(i.ram_size)
+        );
+    }
+    println!();
+
+    let mut errors = Vec::new();
+    for i in &images {
+        if i.flash_bytes > i.flash_size {
+            errors.push(format!(
+                "{}: flash {} > {}",
+                i.board, i.flash_bytes, i.flash_size
+            ));
+        }
+        if i.ram_bytes + STACK_RESERVE_BYTES > i.ram_size {
+            errors.push(format!(
+                "{}: RAM {} + {} stack > {}",
+                i.board, i.ram_bytes, STACK_RESERVE_BYTES, i.ram_size
+            ));
+        }
+        if i.board == DEFAULT_BOARD {
+            if i.flash_bytes > SMALL_PART_FLASH_BYTES {
+                errors.push(format!(
+                    "{}: flash {} > the {} of the small-part budget",
+                    i.board, i.flash_bytes, SMALL_PART_FLASH_BYTES
+                ));
+            }
+            if i.ram_bytes + STACK_RESERVE_BYTES > SMALL_PART_RAM_BYTES {
+                errors.push(format!(
+                    "{}: RAM {} + {} stack > the {} of the small-part budget",
+                    i.board, i.ram_bytes, STACK_RESERVE_BYTES, SMALL_PART_RAM_BYTES
+                ));
+            }
+        }
+    }
+    if errors.is_empty() {
+        println!(
+            "budgets ok: every image fits its board with {} of stack to spare; {} also fits \
+             {} flash / {} RAM",
+            kib(STACK_RESERVE_BYTES),
+            DEFAULT_BOARD,
+            kib(SMALL_PART_FLASH_BYTES),
+            kib(SMALL_PART_RAM_BYTES)
+        );
+        Ok(())
+    } else {
+        Err(format!("over budget:\n  {}", errors.join("\n  ")))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_memory_x_lengths() {
+        let m = "MEMORY\n{\n  FLASH : ORIGIN = 0x08000000, LENGTH = 512K\n  RAM   : ORIGIN = 0x20000000, LENGTH = 96K\n}\n";
+        assert_eq!(region_length(m, "FLASH"), Some(512 * 1024));
+        assert_eq!(region_length(m, "RAM"), Some(96 * 1024));
+        assert_eq!(
+            region_length("RAM : ORIGIN = 0, LENGTH = 1M", "RAM"),
+            Some(1 << 20)
+        );
+        assert_eq!(
+            region_length("RAM : ORIGIN = 0, LENGTH = 0x4000", "RAM"),
+            Some(0x4000)
+        );
+        assert_eq!(region_length(m, "CCM"), None);
+        assert_eq!(region_origin(m, "RAM"), Some(0x2000_0000));
+    }
+
+    #[test]
+    fn every_board_memory_x_parses() {
+        let root = crate::workspace_root();
+        for b in boards(&root).unwrap() {
+            let m = std::fs::read_to_string(memory_x(&root, &b)).unwrap();
+            assert!(region_length(&m, "FLASH").unwrap() >= 64 * 1024, "{b}");
+            assert!(region_length(&m, "RAM").unwrap() >= 16 * 1024, "{b}");
+        }
+    }
+
+    #[test]
+    fn sizes_of_a_host_elf_are_plausible() {
+        // The test binary itself is an ELF with code and writable data on Linux.
+        let exe = std::env::current_exe().unwrap();
+        let elf = std::fs::read(exe).unwrap();
+        if elf.starts_with(b"\x7fELF") {
+            let (flash, ram) = image_sizes(&elf).unwrap();
+            assert!(flash > 10_000 && ram > 0, "{flash} {ram}");
+        }
+    }
+}
