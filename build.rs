@@ -12,6 +12,11 @@ fn main() {
         println!("cargo:rerun-if-changed={}", memory.display());
     }
     println!("cargo:rerun-if-env-changed=MORPHLINK_LINK");
+    // `cfg(emulated)`: the QEMU build, which swaps the peripherals QEMU lacks.
+    println!("cargo::rustc-check-cfg=cfg(emulated)");
+    if env::var_os("CARGO_FEATURE_BOARD_B_L475E_IOT01A_EMULATED").is_some() {
+        println!("cargo:rustc-cfg=emulated");
+    }
 
     let link_path = env::var("MORPHLINK_LINK")
         .map(PathBuf::from)

@@ -17,7 +17,8 @@
     not(any(
         feature = "board-nucleo-f401re",
         feature = "board-nucleo-g431rb",
-        feature = "board-b-l475e-iot01a"
+        feature = "board-b-l475e-iot01a",
+        feature = "board-b-l475e-iot01a-emulated"
     ))
 ))]
 compile_error!("no board: build with exactly one `board-*` feature (see boards/README.md)");
@@ -35,6 +36,10 @@ compile_error!("no board: build with exactly one `board-*` feature (see boards/R
     feature = "board-b-l475e-iot01a",
     path = "../boards/b-l475e-iot01a/mod.rs"
 )]
+#[cfg_attr(
+    feature = "board-b-l475e-iot01a-emulated",
+    path = "../boards/b-l475e-iot01a-emulated/mod.rs"
+)]
 mod board;
 
 #[cfg(target_os = "none")]
@@ -51,27 +56,28 @@ mod firmware {
     use embassy_futures::select::{select, Either};
     use embassy_futures::yield_now;
     use embassy_stm32::pac;
-    use embassy_stm32::peripherals::IWDG;
+    #[cfg(not(emulated))]
     use embassy_stm32::time::Hertz;
+    #[cfg(not(emulated))]
     use embassy_stm32::timer::simple_pwm::{SimplePwm, SimplePwmChannel, SimplePwmChannels};
+    #[cfg(not(emulated))]
     use embassy_stm32::timer::{Channel, GeneralInstance4Channel};
-    use embassy_stm32::usart::{self, BufferedUartRx, BufferedUartTx};
-    use embassy_stm32::wdg::IndependentWatchdog;
-    use embassy_stm32::Peri;
+    #[cfg(not(emulated))]
+    use embassy_stm32::usart;
     use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
     use embassy_sync::blocking_mutex::Mutex;
     use embassy_sync::signal::Signal;
     use embassy_time::{Duration, Instant, Ticker, Timer};
     use embedded_io_async::{Read, Write};
-    use morphlink::controller::{
-        Config, Controller, Inputs, Outputs, MAX_REPLY_BYTES, OVERSAMPLE, TICK_MS,
-    };
+    #[cfg(not(emulated))]
+    use morphlink::controller::Outputs;
+    use morphlink::controller::{Config, Controller, Inputs, MAX_REPLY_BYTES, OVERSAMPLE, TICK_MS};
     use morphlink::protocol::{
-        format_error, Assembled, Command, LineAssembler, OutLine, ERR_INVALID_LINE,
-        ERR_LINE_TOO_LONG,
+        format_error, Assembled, LineAssembler, OutLine, ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
     };
     use morphlink::stats::{write_boot_line, LoopTiming, ResetCause};
 
+    #[cfg(not(emulated))]
     /// Heater PWM frequency: 1 kHz. The heaters' thermal time constants are ≥ 1 s, so any
     /// frequency above ~10 Hz gives a ripple-free temperature; 1 kHz keeps switching losses of
     /// a GPIO-driven logic-level MOSFET negligible (edges of ~1 µs are 0.2 % of the period)
@@ -114,6 +120,31 @@ mod firmware {
     /// Serial → control: a command changed the duties (ABORT); apply them now, not next tick.
     static APPLY_NOW: Signal<ThreadModeRawMutex, ()> = Signal::new();
 
+    /// Heater driver, serial halves and watchdog of a hardware board.
+    #[cfg(not(emulated))]
+    mod parts {
+        /// Both heaters on the board's PWM timer.
+        pub type HeaterDriver = super::Heaters<crate::board::HeaterTimer>;
+        /// The buffered UART's transmit half.
+        pub type SerialTx = embassy_stm32::usart::BufferedUartTx<'static>;
+        /// The buffered UART's receive half.
+        pub type SerialRx = embassy_stm32::usart::BufferedUartRx<'static>;
+        /// The independent watchdog.
+        pub type Watchdog =
+            embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>;
+    }
+
+    /// The emulated board's replacements (see `boards/b-l475e-iot01a-emulated`).
+    #[cfg(emulated)]
+    mod parts {
+        pub use crate::board::{HeaterDriver, Watchdog};
+        /// Register-level USART1, transmit half.
+        pub type SerialTx = crate::board::usart::Tx;
+        /// Register-level USART1, receive half.
+        pub type SerialRx = crate::board::usart::Rx;
+    }
+    use parts::{HeaterDriver, SerialRx, SerialTx, Watchdog};
+
     /// Runs `f` on the controller, briefly holding the lock.
     fn with_controller<R>(f: impl FnOnce(&mut Controller) -> R) -> R {
         CONTROLLER.lock(|c| f(c.borrow_mut().as_mut().expect("set up in main")))
@@ -129,6 +160,7 @@ mod firmware {
             .modify(|w| w.set_moder(pin, pac::gpio::vals::Moder::OUTPUT));
     }
 
+    #[cfg(not(emulated))]
     /// UART buffers, allocated once.
     pub fn uart_buffers() -> (&'static mut [u8], &'static mut [u8]) {
         let tx =
@@ -138,6 +170,7 @@ mod firmware {
         (tx, rx)
     }
 
+    #[cfg(not(emulated))]
     /// 115 200 8N1.
     pub fn uart_config() -> usart::Config {
         let mut c = usart::Config::default();
@@ -145,12 +178,14 @@ mod firmware {
         c
     }
 
+    #[cfg(not(emulated))]
     /// Both heater channels of one PWM timer.
     pub struct Heaters<T: GeneralInstance4Channel> {
         pla: SimplePwmChannel<'static, T>,
         tca: SimplePwmChannel<'static, T>,
     }
 
+    #[cfg(not(emulated))]
     impl<T: GeneralInstance4Channel> Heaters<T> {
         /// Takes the board's timer and its two heater channels (which must differ); both
         /// outputs are enabled at 0 % duty, so the timer drives both gates low.
@@ -177,6 +212,7 @@ mod firmware {
         }
     }
 
+    #[cfg(not(emulated))]
     /// Sets one channel's duty from a fraction: 0 (or not a number) is fully off.
     fn set_duty<T: GeneralInstance4Channel>(ch: &mut SimplePwmChannel<'static, T>, duty: f32) {
         if duty > 0.0 {
@@ -206,12 +242,18 @@ mod firmware {
         ctrl.enable_timing(LoopTiming::new(board::CPU_HZ, TICK_MS as u32 * 1000, cause));
         CONTROLLER.lock(|c| *c.borrow_mut() = Some(ctrl));
 
-        let heaters = Heaters::new(b.pwm, board::PLA_CHANNEL, board::TCA_CHANNEL);
+        #[cfg(not(emulated))]
+        let (heaters, (tx, rx), wdg) = (
+            Heaters::new(b.pwm, board::PLA_CHANNEL, board::TCA_CHANNEL),
+            b.serial.split(),
+            Watchdog::new(b.iwdg, WATCHDOG_TIMEOUT_US),
+        );
+        #[cfg(emulated)]
+        let (heaters, (tx, rx), wdg) = (b.heaters, (b.tx, b.rx), b.watchdog);
         let mut boot = OutLine::new();
         write_boot_line(&mut boot, cause, board::NAME);
-        let (tx, rx) = b.serial.split();
 
-        spawner.spawn(control(b.sensors, heaters, b.iwdg).expect("spawned once"));
+        spawner.spawn(control(b.sensors, heaters, wdg).expect("spawned once"));
         spawner.spawn(serial(tx, rx, boot).expect("spawned once"));
     }
 
@@ -231,12 +273,7 @@ mod firmware {
 
     /// The control loop at [`TICK_MS`]; the only feeder of the watchdog.
     #[embassy_executor::task]
-    async fn control(
-        mut sensors: board::Sensors,
-        mut heaters: Heaters<board::HeaterTimer>,
-        iwdg: Peri<'static, IWDG>,
-    ) {
-        let mut wdg = IndependentWatchdog::new(iwdg, WATCHDOG_TIMEOUT_US);
+    async fn control(mut sensors: board::Sensors, mut heaters: HeaterDriver, mut wdg: Watchdog) {
         wdg.unleash();
         let mut ticker = Ticker::every(Duration::from_millis(TICK_MS));
         loop {
@@ -285,7 +322,10 @@ mod firmware {
         match line {
             Assembled::Line(l) => {
                 if let Some(sim) = c.handle_line(now_ms, l, &mut out) {
-                    c.handle(now_ms, Command::Sim(sim), &mut out);
+                    #[cfg(not(emulated))]
+                    c.handle(now_ms, morphlink::protocol::Command::Sim(sim), &mut out);
+                    #[cfg(emulated)]
+                    board::sim_command(sim, &mut out);
                 }
             }
             Assembled::TooLong => out(&format_error(&ERR_LINE_TOO_LONG)),
@@ -294,7 +334,7 @@ mod firmware {
     }
 
     /// Writes every queued event and alarm line, oldest first, taking the lock once per line.
-    async fn send_events(tx: &mut BufferedUartTx<'static>) {
+    async fn send_events(tx: &mut SerialTx) {
         while let Some(line) = with_controller(|c| c.pop_event_line()) {
             send(tx, &line).await;
             send(tx, "\n").await;
@@ -303,11 +343,7 @@ mod firmware {
 
     /// The serial line: commands in, replies, events and alarms out.
     #[embassy_executor::task]
-    async fn serial(
-        mut tx: BufferedUartTx<'static>,
-        mut rx: BufferedUartRx<'static>,
-        boot: OutLine,
-    ) {
+    async fn serial(mut tx: SerialTx, mut rx: SerialRx, boot: OutLine) {
         let mut reply: heapless::String<REPLY_BYTES> = heapless::String::new();
         push_line(&mut reply, &boot);
         send(&mut tx, &reply).await;
@@ -338,7 +374,7 @@ mod firmware {
     }
 
     /// Writes `s` to the UART (waiting for room in its transmit buffer); errors are logged.
-    async fn send(tx: &mut BufferedUartTx<'static>, s: &str) {
+    async fn send(tx: &mut SerialTx, s: &str) {
         if s.is_empty() {
             return;
         }
@@ -366,6 +402,9 @@ mod firmware {
                 None => defmt::error!("panic; heaters off, resetting"),
             }
         }
+        #[cfg(emulated)]
+        board::fatal_panic(info);
+        #[cfg(not(emulated))]
         cortex_m::peripheral::SCB::sys_reset()
     }
 
@@ -376,6 +415,9 @@ mod firmware {
         if !FAULTED.swap(true, Ordering::Relaxed) {
             defmt::error!("HardFault at pc={=u32:#x}; heaters off, resetting", ef.pc());
         }
+        #[cfg(emulated)]
+        board::fatal("HardFault; heaters off");
+        #[cfg(not(emulated))]
         cortex_m::peripheral::SCB::sys_reset()
     }
 }

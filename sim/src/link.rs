@@ -3,14 +3,21 @@
 //! with lag and noise read through the ADC model, and PWM duty → watts from the true supply
 //! and heater resistances. `no_std` and allocation-free.
 
+use core::fmt::Write;
 use morphlink::controller::{Config, Inputs, Outputs};
-use morphlink::protocol::{Medium, SimFault};
+use morphlink::fixed::Fixed;
+use morphlink::protocol::{Medium, OutLine, Sensor, SimCommand, SimFault};
 use morphlink_model::mechanics::{
     curvature_with_extra_per_m, pla_extra_stiffness_nm2, pla_flow_time_s,
 };
 use morphlink_model::params::{H_AIR_W_M2K, H_WATER_W_M2K};
 use morphlink_model::thermal::{lag_remaining, node, Network};
 use morphlink_model::LinkParams;
+
+/// Highest supply `SIM SUPPLY` accepts, V (the supervisor's limit is lower, so faults can be tried).
+pub const SIM_SUPPLY_MAX_V: f32 = 30.0;
+/// Range `SIM AMBIENT` accepts, °C.
+pub const SIM_AMBIENT_RANGE_C: (f32, f32) = (-10.0, 60.0);
 
 /// What differs between the real (simulated) link and what the controller assumes.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -213,5 +220,67 @@ impl SimLink {
             Medium::Air => H_AIR_W_M2K,
         };
         self.net.set_params(&self.plant.params);
+    }
+
+    /// Carries out a `SIM` command and writes its one reply line through `out`.
+    pub fn command(&mut self, cmd: SimCommand, out: &mut impl FnMut(&str)) {
+        let mut l = OutLine::new();
+        match cmd {
+            SimCommand::State => {
+                let (pla, tca) = self.temps_c();
+                let _ = write!(
+                    l,
+                    "ok time_s={} radius_mm={} t_pla_c={} t_tca_c={}",
+                    Fixed(self.time_s() as f32, 1),
+                    Fixed(self.radius_mm() as f32, 2),
+                    Fixed(pla as f32, 2),
+                    Fixed(tca as f32, 2)
+                );
+            }
+            SimCommand::Fault(kind, target) => {
+                let index = match target {
+                    Sensor::Pla => 0,
+                    Sensor::Tca => 1,
+                    Sensor::Amb => 2,
+                };
+                self.inject(kind, index);
+                let _ = write!(l, "ok fault={} target={}", kind.as_str(), target.as_str());
+            }
+            SimCommand::Supply(v) => {
+                if !(0.0..=SIM_SUPPLY_MAX_V).contains(&v) {
+                    let _ = write!(
+                        l,
+                        "error: out-of-range supply must be 0..{} V",
+                        Fixed(SIM_SUPPLY_MAX_V, 0)
+                    );
+                } else {
+                    self.set_supply_v(v as f64);
+                    let _ = write!(l, "ok supply_v={}", Fixed(v, 2));
+                }
+            }
+            SimCommand::Ambient(c) => {
+                let (lo, hi) = SIM_AMBIENT_RANGE_C;
+                if !(lo..=hi).contains(&c) {
+                    let _ = write!(
+                        l,
+                        "error: out-of-range ambient must be {}..{} C",
+                        Fixed(lo, 0),
+                        Fixed(hi, 0)
+                    );
+                } else {
+                    self.set_ambient_c(c as f64);
+                    let _ = write!(l, "ok t_amb_c={}", Fixed(c, 2));
+                }
+            }
+            SimCommand::Medium(m) => {
+                self.set_medium(m);
+                let _ = write!(l, "ok medium={}", m.as_str());
+            }
+            SimCommand::Clear => {
+                self.clear_faults();
+                let _ = write!(l, "ok");
+            }
+        }
+        out(&l);
     }
 }

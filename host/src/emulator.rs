@@ -1,0 +1,229 @@
+//! Booting the emulated firmware image under QEMU's `b-l475e-iot01a` machine and talking
+//! protocol v1 to it over USART1 on a loopback TCP socket.
+//!
+//! Used by `cargo xtask emulate` and by the emulator tests. QEMU 10 is needed (Debian
+//! bookworm-backports: `apt-get install -t bookworm-backports qemu-system-arm`).
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::thread;
+use std::time::{Duration, Instant};
+
+/// QEMU machine that models the STM32L475 of the B-L475E-IOT01A board.
+pub const MACHINE: &str = "b-l475e-iot01a";
+/// Cargo features of the emulated build.
+pub const FEATURES: &str = "board-b-l475e-iot01a,emulated";
+/// Firmware target triple.
+pub const TARGET: &str = "thumbv7em-none-eabihf";
+/// Oldest QEMU major version with a working `b-l475e-iot01a` machine (Debian bookworm has 7.2).
+pub const MIN_QEMU_MAJOR: u32 = 9;
+/// Longest wait for the first byte after boot.
+pub const BOOT_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// The `qemu-system-arm` binary, or a sentence saying how to install it.
+pub fn find_qemu() -> Result<PathBuf, String> {
+    let name = std::env::var("QEMU_SYSTEM_ARM").unwrap_or_else(|_| "qemu-system-arm".into());
+    let out = Command::new(&name).arg("--version").output().map_err(|e| {
+        format!(
+            "cannot run `{name}` ({e}): install QEMU 10 from Debian bookworm-backports \
+             (`apt-get install -t bookworm-backports qemu-system-arm`)"
+        )
+    })?;
+    let version = String::from_utf8_lossy(&out.stdout);
+    let major = version
+        .split("version ")
+        .nth(1)
+        .and_then(|v| v.split('.').next())
+        .and_then(|m| m.trim().parse::<u32>().ok());
+    match major {
+        Some(m) if m >= MIN_QEMU_MAJOR => {}
+        _ => return Err(format!("`{name}` is too old or unknown for machine {MACHINE} (QEMU {MIN_QEMU_MAJOR}+ needed): {}", version.trim())),
+    }
+    Ok(PathBuf::from(name))
+}
+
+/// Builds the emulated image in release into `target_dir`; returns the ELF path.
+pub fn build_image(workspace: &Path, target_dir: &Path) -> Result<PathBuf, String> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(workspace)
+        .args(["build", "--release", "--target", TARGET, "--bin", "morphlink", "--no-default-features"])
+        .args(["--features", FEATURES])
+        .env("CARGO_TARGET_DIR", target_dir)
+        .status()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !status.success() {
+        return Err(format!("building the emulated image failed ({status})"));
+    }
+    Ok(target_dir.join(TARGET).join("release").join("morphlink"))
+}
+
+/// A free loopback TCP port (bound and released; a race with another process is possible but
+/// harmless: QEMU then fails to start and says so).
+pub fn free_port() -> Result<u16, String> {
+    let l = TcpListener::bind("127.0.0.1:0").map_err(|e| format!("no free port: {e}"))?;
+    l.local_addr().map(|a| a.port()).map_err(|e| e.to_string())
+}
+
+/// The QEMU command line that boots `image` with USART1 as a TCP server on `port`.
+pub fn qemu_command(qemu: &Path, image: &Path, port: u16) -> Command {
+    let mut c = Command::new(qemu);
+    c.args(["-M", MACHINE, "-nographic", "-monitor", "none"])
+        .args(["-semihosting-config", "enable=on,target=native"])
+        .arg("-serial")
+        .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on"))
+        .arg("-kernel")
+        .arg(image);
+    c
+}
+
+/// A running emulated board: QEMU plus the protocol connection to its USART1.
+pub struct Emulator {
+    child: Child,
+    stream: TcpStream,
+    lines: Receiver<String>,
+    log: Receiver<String>,
+    log_kept: Vec<String>,
+    /// Every line received from the firmware, in order.
+    pub transcript: Vec<String>,
+    /// Wall time from QEMU start to the first line received.
+    pub boot_time: Duration,
+}
+
+impl Emulator {
+    /// Starts QEMU on `image`, connects to USART1 and waits for the boot banner.
+    pub fn boot(qemu: &Path, image: &Path) -> Result<Emulator, String> {
+        let port = free_port()?;
+        let started = Instant::now();
+        let mut child = qemu_command(qemu, image, port)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .map_err(|e| format!("cannot start {}: {e}", qemu.display()))?;
+        // QEMU's semihosting console and errors, kept for the report on failure.
+        let (log_tx, log) = mpsc::channel();
+        for pipe in [child.stdout.take().map(|p| Box::new(p) as Box<dyn Read + Send>), child.stderr.take().map(|p| Box::new(p) as Box<dyn Read + Send>)]
+            .into_iter()
+            .flatten()
+        {
+            let tx = log_tx.clone();
+            thread::spawn(move || {
+                for l in BufReader::new(pipe).lines().map_while(Result::ok) {
+                    let _ = tx.send(l);
+                }
+            });
+        }
+        let stream = loop {
+            match TcpStream::connect(("127.0.0.1", port)) {
+                Ok(s) => break s,
+                Err(e) => {
+                    if let Ok(Some(status)) = child.try_wait() {
+                        return Err(format!("QEMU exited before accepting a connection ({status})"));
+                    }
+                    if started.elapsed() > BOOT_TIMEOUT {
+                        let _ = child.kill();
+                        return Err(format!("cannot connect to QEMU's USART1 on port {port}: {e}"));
+                    }
+                    thread::sleep(Duration::from_millis(20));
+                }
+            }
+        };
+        stream.set_nodelay(true).map_err(|e| e.to_string())?;
+        let reader = stream.try_clone().map_err(|e| e.to_string())?;
+        let (tx, lines) = mpsc::channel();
+        thread::spawn(move || {
+            for l in BufReader::new(reader).lines().map_while(Result::ok) {
+                if tx.send(l.trim_end_matches('\r').to_string()).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut emu = Emulator { child, stream, lines, log, log_kept: Vec::new(), transcript: Vec::new(), boot_time: Duration::ZERO };
+        let first = emu.next_line(BOOT_TIMEOUT)?;
+        emu.boot_time = started.elapsed();
+        let _ = first;
+        Ok(emu)
+    }
+
+    /// Next line from the firmware, or an error after `timeout` (with QEMU's log attached).
+    pub fn next_line(&mut self, timeout: Duration) -> Result<String, String> {
+        match self.lines.recv_timeout(timeout) {
+            Ok(l) => {
+                self.transcript.push(l.clone());
+                Ok(l)
+            }
+            Err(RecvTimeoutError::Timeout) => Err(format!("no line from the firmware within {timeout:?}\n{}", self.report())),
+            Err(RecvTimeoutError::Disconnected) => Err(format!("the firmware's serial port closed\n{}", self.report())),
+        }
+    }
+
+    /// Sends raw bytes to USART1.
+    pub fn write_raw(&mut self, bytes: &[u8]) -> Result<(), String> {
+        self.stream.write_all(bytes).map_err(|e| format!("write to USART1: {e}"))
+    }
+
+    /// Sends a command line and collects lines up to and including its final reply (`ok...` or
+    /// `error: ...`); unsolicited `event:`/`alarm:` lines that arrive meanwhile are included.
+    pub fn command(&mut self, line: &str, timeout: Duration) -> Result<Vec<String>, String> {
+        self.write_raw(format!("{line}\n").as_bytes())?;
+        let end = Instant::now() + timeout;
+        let mut got = Vec::new();
+        loop {
+            let left = end.saturating_duration_since(Instant::now());
+            let l = self.next_line(left).map_err(|e| format!("`{line}`: {e}"))?;
+            let last = l == "ok" || l.starts_with("ok ") || l.starts_with("error: ");
+            got.push(l);
+            if last {
+                return Ok(got);
+            }
+        }
+    }
+
+    /// Waits for a line starting with `prefix`; returns it and every line before it.
+    pub fn wait_for(&mut self, prefix: &str, timeout: Duration) -> Result<Vec<String>, String> {
+        let end = Instant::now() + timeout;
+        let mut got = Vec::new();
+        loop {
+            let left = end.saturating_duration_since(Instant::now());
+            let l = self.next_line(left).map_err(|e| format!("waiting for `{prefix}`: {e}"))?;
+            let hit = l.starts_with(prefix);
+            got.push(l);
+            if hit {
+                return Ok(got);
+            }
+        }
+    }
+
+    /// QEMU's exit status, if it has exited.
+    pub fn exited(&mut self) -> Option<ExitStatus> {
+        self.child.try_wait().ok().flatten()
+    }
+
+    /// What QEMU and the firmware's semihosting console printed, plus the serial transcript's tail.
+    pub fn report(&mut self) -> String {
+        while let Ok(l) = self.log.try_recv() {
+            self.log_kept.push(l);
+        }
+        let status = match self.child.try_wait() {
+            Ok(Some(s)) => format!("QEMU exited: {s}"),
+            _ => "QEMU still running".to_string(),
+        };
+        let tail: Vec<&String> = self.transcript.iter().rev().take(20).collect::<Vec<_>>().into_iter().rev().collect();
+        format!(
+            "{status}\n--- QEMU / semihosting log ---\n{}\n--- last serial lines ---\n{}",
+            self.log_kept.join("\n"),
+            tail.iter().map(|s| s.as_str()).collect::<Vec<_>>().join("\n")
+        )
+    }
+}
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
