@@ -551,5 +551,5 @@ const HELP: [&str; 10] = [
     "VERSION                         firmware and protocol version",
     "HELP                            this list",
     "STATS                           control-loop timing (us) and reset cause; hardware only",
-    "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|CLEAR  simulated builds only",
+    "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|CLEAR|PANIC  simulated builds only",
 ];

@@ -74,6 +74,9 @@ pub enum SimCommand {
     Medium(Medium),
     /// `SIM CLEAR`: remove every injected fault.
     Clear,
+    /// `SIM PANIC`: the emulated image panics on purpose, to prove the panic path (heaters
+    /// off, failing exit); the host simulator refuses it.
+    Panic,
 }
 
 /// A parsed command line.
@@ -320,13 +323,15 @@ fn parse_morph<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<Command, P
 
 /// `SIM <subcommand> ...` after the command word.
 fn parse_sim<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<SimCommand, ProtoError> {
-    const NEEDS_SUB: &str = "SIM needs STATE, FAULT, SUPPLY, AMBIENT, MEDIUM or CLEAR.";
+    const NEEDS_SUB: &str = "SIM needs STATE, FAULT, SUPPLY, AMBIENT, MEDIUM, CLEAR or PANIC.";
     let sub = args.next().ok_or(bad(NEEDS_SUB))?;
     let is = |word: &str| sub.eq_ignore_ascii_case(word);
     let sim = if is("STATE") {
         SimCommand::State
     } else if is("CLEAR") {
         SimCommand::Clear
+    } else if is("PANIC") {
+        SimCommand::Panic
     } else if is("FAULT") {
         parse_sim_fault(&mut args)?
     } else if is("SUPPLY") {
@@ -353,6 +358,7 @@ fn parse_sim<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<SimCommand, 
     let extra = match sim {
         SimCommand::State => "SIM STATE takes no arguments.",
         SimCommand::Clear => "SIM CLEAR takes no arguments.",
+        SimCommand::Panic => "SIM PANIC takes no arguments.",
         SimCommand::Fault(..) => "SIM FAULT takes a kind and an optional target (pla, tca or amb).",
         SimCommand::Supply(_) => "SIM SUPPLY takes one voltage.",
         SimCommand::Ambient(_) => "SIM AMBIENT takes one temperature.",

@@ -163,6 +163,9 @@ pub fn fatal_panic(info: &core::panic::PanicInfo) -> ! {
 
 /// Carries out a `SIM` command on the simulated link (at the current firmware time).
 pub fn sim_command(cmd: SimCommand, out: &mut impl FnMut(&str)) {
+    if cmd == SimCommand::Panic {
+        panic!("SIM PANIC asked for a panic");
+    }
     with_sim(|s| {
         s.advance_to(now_ms());
         s.link.command(cmd, out);

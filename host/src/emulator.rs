@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 /// QEMU machine that models the STM32L475 of the B-L475E-IOT01A board.
 pub const MACHINE: &str = "b-l475e-iot01a";
 /// Cargo features of the emulated build.
-pub const FEATURES: &str = "board-b-l475e-iot01a,emulated";
+pub const FEATURES: &str = "board-b-l475e-iot01a-emulated";
 /// Firmware target triple.
 pub const TARGET: &str = "thumbv7em-none-eabihf";
 /// Oldest QEMU major version with a working `b-l475e-iot01a` machine (Debian bookworm has 7.2).
@@ -50,7 +50,15 @@ pub fn build_image(workspace: &Path, target_dir: &Path) -> Result<PathBuf, Strin
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo)
         .current_dir(workspace)
-        .args(["build", "--release", "--target", TARGET, "--bin", "morphlink", "--no-default-features"])
+        .args([
+            "build",
+            "--release",
+            "--target",
+            TARGET,
+            "--bin",
+            "morphlink",
+            "--no-default-features",
+        ])
         .args(["--features", FEATURES])
         .env("CARGO_TARGET_DIR", target_dir)
         .status()
@@ -106,9 +114,18 @@ impl Emulator {
             .map_err(|e| format!("cannot start {}: {e}", qemu.display()))?;
         // QEMU's semihosting console and errors, kept for the report on failure.
         let (log_tx, log) = mpsc::channel();
-        for pipe in [child.stdout.take().map(|p| Box::new(p) as Box<dyn Read + Send>), child.stderr.take().map(|p| Box::new(p) as Box<dyn Read + Send>)]
-            .into_iter()
-            .flatten()
+        for pipe in [
+            child
+                .stdout
+                .take()
+                .map(|p| Box::new(p) as Box<dyn Read + Send>),
+            child
+                .stderr
+                .take()
+                .map(|p| Box::new(p) as Box<dyn Read + Send>),
+        ]
+        .into_iter()
+        .flatten()
         {
             let tx = log_tx.clone();
             thread::spawn(move || {
@@ -122,11 +139,15 @@ impl Emulator {
                 Ok(s) => break s,
                 Err(e) => {
                     if let Ok(Some(status)) = child.try_wait() {
-                        return Err(format!("QEMU exited before accepting a connection ({status})"));
+                        return Err(format!(
+                            "QEMU exited before accepting a connection ({status})"
+                        ));
                     }
                     if started.elapsed() > BOOT_TIMEOUT {
                         let _ = child.kill();
-                        return Err(format!("cannot connect to QEMU's USART1 on port {port}: {e}"));
+                        return Err(format!(
+                            "cannot connect to QEMU's USART1 on port {port}: {e}"
+                        ));
                     }
                     thread::sleep(Duration::from_millis(20));
                 }
@@ -142,7 +163,15 @@ impl Emulator {
                 }
             }
         });
-        let mut emu = Emulator { child, stream, lines, log, log_kept: Vec::new(), transcript: Vec::new(), boot_time: Duration::ZERO };
+        let mut emu = Emulator {
+            child,
+            stream,
+            lines,
+            log,
+            log_kept: Vec::new(),
+            transcript: Vec::new(),
+            boot_time: Duration::ZERO,
+        };
         let first = emu.next_line(BOOT_TIMEOUT)?;
         emu.boot_time = started.elapsed();
         let _ = first;
@@ -156,14 +185,22 @@ impl Emulator {
                 self.transcript.push(l.clone());
                 Ok(l)
             }
-            Err(RecvTimeoutError::Timeout) => Err(format!("no line from the firmware within {timeout:?}\n{}", self.report())),
-            Err(RecvTimeoutError::Disconnected) => Err(format!("the firmware's serial port closed\n{}", self.report())),
+            Err(RecvTimeoutError::Timeout) => Err(format!(
+                "no line from the firmware within {timeout:?}\n{}",
+                self.report()
+            )),
+            Err(RecvTimeoutError::Disconnected) => Err(format!(
+                "the firmware's serial port closed\n{}",
+                self.report()
+            )),
         }
     }
 
     /// Sends raw bytes to USART1.
     pub fn write_raw(&mut self, bytes: &[u8]) -> Result<(), String> {
-        self.stream.write_all(bytes).map_err(|e| format!("write to USART1: {e}"))
+        self.stream
+            .write_all(bytes)
+            .map_err(|e| format!("write to USART1: {e}"))
     }
 
     /// Sends a command line and collects lines up to and including its final reply (`ok...` or
@@ -189,7 +226,9 @@ impl Emulator {
         let mut got = Vec::new();
         loop {
             let left = end.saturating_duration_since(Instant::now());
-            let l = self.next_line(left).map_err(|e| format!("waiting for `{prefix}`: {e}"))?;
+            let l = self
+                .next_line(left)
+                .map_err(|e| format!("waiting for `{prefix}`: {e}"))?;
             let hit = l.starts_with(prefix);
             got.push(l);
             if hit {
@@ -212,11 +251,22 @@ impl Emulator {
             Ok(Some(s)) => format!("QEMU exited: {s}"),
             _ => "QEMU still running".to_string(),
         };
-        let tail: Vec<&String> = self.transcript.iter().rev().take(20).collect::<Vec<_>>().into_iter().rev().collect();
+        let tail: Vec<&String> = self
+            .transcript
+            .iter()
+            .rev()
+            .take(20)
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+            .collect();
         format!(
             "{status}\n--- QEMU / semihosting log ---\n{}\n--- last serial lines ---\n{}",
             self.log_kept.join("\n"),
-            tail.iter().map(|s| s.as_str()).collect::<Vec<_>>().join("\n")
+            tail.iter()
+                .map(|s| s.as_str())
+                .collect::<Vec<_>>()
+                .join("\n")
         )
     }
 }

@@ -276,6 +276,12 @@ impl SimLink {
                 self.set_medium(m);
                 let _ = write!(l, "ok medium={}", m.as_str());
             }
+            SimCommand::Panic => {
+                let _ = write!(
+                    l,
+                    "error: unsupported SIM PANIC exists only in the emulated image"
+                );
+            }
             SimCommand::Clear => {
                 self.clear_faults();
                 let _ = write!(l, "ok");
