@@ -2,9 +2,12 @@
 //! plus Fault. It turns measured temperatures into heater powers; it never touches hardware
 //! and never decides about safety (the supervisor does, every tick, before it).
 
+use crate::heater::HeaterConfig;
 use crate::link::{HOLD_POWER_W, R_TP_K_PER_W, R_TT_K_PER_W};
+use crate::observer::{HeatedNode, Observer};
 use crate::protocol::Mode;
 use crate::table;
+use crate::target;
 
 /// Phase of the morph sequence.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -94,6 +97,33 @@ pub const PAPER_HOLD_END_S: f32 = 70.0;
 /// See [`PAPER_SOFTEN_END_S`].
 pub const PAPER_TCA_END_S: f32 = 120.0;
 
+/// The strategy `auto` runs: the one the strategy chart (`cargo xtask strategies`,
+/// `docs/strategies.md`) puts on the Pareto front with a 95th-percentile radius error under 2 %
+/// and the shortest 95th-percentile morph time.
+pub const AUTO_STRATEGY: Mode = Mode::Closed;
+
+/// PLA temperature the `boost` and `closed` strategies hold while bending, °C: 5 K above the
+/// [`SOFT_THRESHOLD_C`] (so thermistor noise and the observer's error do not drop it below the
+/// threshold) and no hotter, because every kelvin above Tg must be cooled off again in lock.
+pub const PLA_SOFT_TARGET_C: f32 = 75.0;
+/// Largest PLA heater power of the model strategies, W: the heater's cap (5 W, above the
+/// paper's 4 W) is the overdrive.
+pub const PLA_BOOST_MAX_W: f32 = HeaterConfig::PLA.max_power_w;
+/// Largest TCA power of the model strategies, W: the TCA heater's cap (2 W, about 110 °C steady
+/// under water); the target temperature, not this cap, bounds the TCA.
+pub const TCA_BOOST_MAX_W: f32 = HeaterConfig::TCA.max_power_w;
+/// The model strategies count the TCA as at its target once within this band, K: 0.27 mm of
+/// radius per kelvin, so 0.3 K is under 0.1 mm.
+pub const MODEL_SETTLE_BAND_C: f32 = 0.3;
+/// ...for this long, s: a few ticks more than the observer's correction needs to move after a
+/// step, so a passing crossing of the band does not count.
+pub const MODEL_SETTLE_S: f32 = 1.5;
+/// `closed` ends lock on the observer's PLA estimate; the lagging PLA thermistor must also read
+/// below [`RIGID_THRESHOLD_C`] plus this margin, K. Under water the thermistor trails the rod by
+/// about 3 K while it cools; if the observer is wrong by more than that (a far slower sensor,
+/// air instead of water) the measurement holds the lock.
+pub const CLOSED_RIGID_MARGIN_K: f32 = 4.0;
+
 /// Something the sequencer reports to the user.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SeqEvent {
@@ -131,6 +161,12 @@ pub struct Sequencer {
     window_ms: u64,
     window_temp_c: f32,
     estimate_mm: f32,
+    observer: Observer,
+    tca_target_c: f32,
+    last_ms: u64,
+    applied: Powers,
+    supply_v: f32,
+    settled_since_ms: Option<u64>,
 }
 
 impl Default for Sequencer {
@@ -152,7 +188,45 @@ impl Sequencer {
             window_ms: 0,
             window_temp_c: f32::NAN,
             estimate_mm: f32::NAN,
+            observer: Observer::IDLE,
+            tca_target_c: f32::NAN,
+            last_ms: 0,
+            applied: Powers {
+                pla_w: 0.0,
+                tca_w: 0.0,
+            },
+            supply_v: f32::NAN,
+            settled_since_ms: None,
         }
+    }
+
+    /// The strategy a morph in `mode` runs (`auto` resolved to [`AUTO_STRATEGY`]).
+    pub fn strategy_of(mode: Mode) -> Mode {
+        match mode {
+            Mode::Auto => AUTO_STRATEGY,
+            m => m,
+        }
+    }
+
+    /// Strategy of the running or last morph (never `Auto`).
+    pub fn strategy(&self) -> Mode {
+        self.mode
+    }
+
+    /// TCA temperature the `boost` or `closed` morph aims at, °C (NaN for the others).
+    pub fn tca_target_c(&self) -> f32 {
+        self.tca_target_c
+    }
+
+    /// The controller's thermal model of the link (meaningful during `boost`/`closed` morphs).
+    pub fn observer(&self) -> &Observer {
+        &self.observer
+    }
+
+    /// Tells the sequencer the measured heater supply, V, so the model strategies know what
+    /// power the heaters can actually deliver. Call before [`Sequencer::step`].
+    pub fn set_supply_v(&mut self, supply_v: f32) {
+        self.supply_v = supply_v;
     }
 
     /// Current phase.
@@ -173,7 +247,9 @@ impl Sequencer {
         )
     }
 
-    /// Starts a morph to `radius_mm` with TCA power `tca_power_w` (from the table).
+    /// Starts a morph to `radius_mm` with TCA power `tca_power_w` (from the table) in `mode`
+    /// (`auto` runs [`AUTO_STRATEGY`]). Equivalent to [`Sequencer::start_from`] with the link at
+    /// the built-in ambient temperature.
     pub fn start(
         &mut self,
         now_ms: u64,
@@ -182,7 +258,38 @@ impl Sequencer {
         mode: Mode,
         emit: &mut impl FnMut(SeqEvent),
     ) {
+        let amb = crate::link::LINK.surroundings.ambient_c as f32;
+        let m = Measurements {
+            t_pla_c: amb,
+            t_tca_c: amb,
+            t_amb_c: amb,
+        };
+        self.start_from(now_ms, radius_mm, tca_power_w, mode, &m, emit);
+    }
+
+    /// Starts a morph to `radius_mm` with TCA power `tca_power_w` (from the table) in `mode`
+    /// (`auto` runs [`AUTO_STRATEGY`]) from the measured temperatures `m` (they start the
+    /// model strategies' observer and set the spring-back compensation's ambient).
+    pub fn start_from(
+        &mut self,
+        now_ms: u64,
+        radius_mm: f32,
+        tca_power_w: f32,
+        mode: Mode,
+        m: &Measurements,
+        emit: &mut impl FnMut(SeqEvent),
+    ) {
+        let mode = Self::strategy_of(mode);
         self.mode = mode;
+        self.observer = Observer::from_measured(m.t_pla_c, m.t_tca_c, m.t_amb_c);
+        self.tca_target_c = match mode {
+            Mode::Boost => target::tca_temp_for_radius_c(radius_mm),
+            Mode::Closed => target::lock_temp_for_final_radius_c(radius_mm, m.t_amb_c),
+            _ => f32::NAN,
+        };
+        self.last_ms = now_ms;
+        self.applied = Powers::default();
+        self.settled_since_ms = None;
         self.target_mm = radius_mm;
         self.tca_power_w = tca_power_w;
         self.start_ms = now_ms;
@@ -213,6 +320,7 @@ impl Sequencer {
 
     fn enter(&mut self, phase: Phase, now_ms: u64, emit: &mut impl FnMut(SeqEvent)) {
         self.phase = phase;
+        self.settled_since_ms = None;
         self.phase_ms = now_ms;
         self.window_ms = now_ms;
         self.window_temp_c = f32::NAN;
@@ -240,8 +348,9 @@ impl Sequencer {
         emit: &mut impl FnMut(SeqEvent),
     ) -> Result<Powers, PhaseTimeout> {
         match self.mode {
-            Mode::Auto => self.step_gated(now_ms, m, emit),
             Mode::Paper => self.step_paper(now_ms, m, emit),
+            Mode::Boost | Mode::Closed => self.step_model(now_ms, m, emit),
+            Mode::Auto | Mode::Gated => self.step_gated(now_ms, m, emit),
         }
     }
 
@@ -353,6 +462,120 @@ impl Sequencer {
         Ok(self.powers())
     }
 
+    /// Power a heater delivers when asked for `w` (W) at the measured supply: capped by the
+    /// heater and by full duty (`V²/R`); unknown supply assumes the request is met.
+    fn deliverable_w(heater: &HeaterConfig, w: f32, supply_v: f32) -> f32 {
+        let w = w.clamp(0.0, heater.max_power_w);
+        if supply_v.is_finite() && supply_v > 0.0 {
+            w.min(supply_v * supply_v / heater.resistance_ohm)
+        } else {
+            w
+        }
+    }
+
+    /// True once `ok` has held for [`MODEL_SETTLE_S`].
+    fn held(&mut self, now_ms: u64, ok: bool) -> bool {
+        if !ok {
+            self.settled_since_ms = None;
+            return false;
+        }
+        let since = *self.settled_since_ms.get_or_insert(now_ms);
+        self.since_s(now_ms, since) >= MODEL_SETTLE_S
+    }
+
+    /// `boost` and `closed`: both heaters driven through the thermal model to target
+    /// temperatures (PLA [`PLA_SOFT_TARGET_C`], TCA the radius's temperature), the TCA from the
+    /// start of soften on. `boost` drives the bare model (feed-forward) and gates soften and
+    /// lock on the thermistors; `closed` drives the observer's corrected estimate and gates
+    /// every phase on it.
+    fn step_model(
+        &mut self,
+        now_ms: u64,
+        m: &Measurements,
+        emit: &mut impl FnMut(SeqEvent),
+    ) -> Result<Powers, PhaseTimeout> {
+        self.check_timeout(now_ms)?;
+        if !self.busy() {
+            return Ok(Powers::default());
+        }
+        let closed = self.mode == Mode::Closed;
+        let dt_s = self.since_s(now_ms, self.last_ms);
+        self.last_ms = now_ms;
+        if dt_s > 0.0 {
+            let a = self.applied;
+            self.observer.predict(dt_s, a.pla_w, a.tca_w, m.t_amb_c);
+            self.observer.correct(dt_s, m.t_pla_c, m.t_tca_c);
+        }
+        let o = &self.observer;
+        let (pla_c, tca_c) = if closed {
+            (o.estimate_c(HeatedNode::Pla), o.estimate_c(HeatedNode::Tca))
+        } else {
+            (o.model_c(HeatedNode::Pla), o.model_c(HeatedNode::Tca))
+        };
+        let in_phase_s = self.since_s(now_ms, self.phase_ms);
+        match self.phase {
+            Phase::Soften => {
+                let soft = if closed { pla_c } else { m.t_pla_c };
+                if soft >= SOFT_THRESHOLD_C {
+                    self.enter(Phase::Bend, now_ms, emit);
+                }
+            }
+            Phase::Bend => {
+                let at_target = (tca_c - self.tca_target_c).abs() <= MODEL_SETTLE_BAND_C
+                    && pla_c >= SOFT_THRESHOLD_C;
+                if self.held(now_ms, at_target) && in_phase_s >= MODEL_SETTLE_S {
+                    self.estimate_mm = target::final_radius_mm(tca_c, m.t_amb_c);
+                    self.enter(Phase::Lock, now_ms, emit);
+                }
+            }
+            Phase::Lock => {
+                let rigid = if closed {
+                    pla_c < RIGID_THRESHOLD_C
+                        && m.t_pla_c < RIGID_THRESHOLD_C + CLOSED_RIGID_MARGIN_K
+                } else {
+                    m.t_pla_c < RIGID_THRESHOLD_C
+                };
+                if rigid {
+                    self.enter(Phase::Release, now_ms, emit);
+                }
+            }
+            Phase::Release => {
+                if in_phase_s >= RELEASE_S {
+                    self.finish(now_ms, emit);
+                }
+            }
+            Phase::Idle | Phase::Fault => {}
+        }
+        let o = &self.observer;
+        // The model is driven to `target − disturbance`, so the estimate meets the target.
+        let (d_pla, d_tca) = if closed {
+            (
+                o.disturbance_k(HeatedNode::Pla),
+                o.disturbance_k(HeatedNode::Tca),
+            )
+        } else {
+            (0.0, 0.0)
+        };
+        let pla_on = matches!(self.phase, Phase::Soften | Phase::Bend);
+        let tca_on = matches!(self.phase, Phase::Soften | Phase::Bend | Phase::Lock);
+        let pla_w = if pla_on {
+            o.power_to_reach_w(HeatedNode::Pla, PLA_SOFT_TARGET_C - d_pla, PLA_BOOST_MAX_W)
+        } else {
+            0.0
+        };
+        let tca_w = if tca_on {
+            o.power_to_reach_w(HeatedNode::Tca, self.tca_target_c - d_tca, TCA_BOOST_MAX_W)
+        } else {
+            0.0
+        };
+        let p = Powers { pla_w, tca_w };
+        self.applied = Powers {
+            pla_w: Self::deliverable_w(&HeaterConfig::PLA, p.pla_w, self.supply_v),
+            tca_w: Self::deliverable_w(&HeaterConfig::TCA, p.tca_w, self.supply_v),
+        };
+        Ok(p)
+    }
+
     /// Powers of the current phase, W.
     fn powers(&self) -> Powers {
         let paper = self.mode == Mode::Paper;
@@ -400,7 +623,7 @@ mod tests {
     fn gated_sequence_walks_every_phase_in_order() {
         let mut s = Sequencer::new();
         let mut ev = Vec::new();
-        s.start(0, 38.0, 0.6, Mode::Auto, &mut |e| ev.push(e));
+        s.start(0, 38.0, 0.6, Mode::Gated, &mut |e| ev.push(e));
         assert_eq!(
             run(&mut s, 100, meas(30.0, 22.0), &mut ev),
             Powers {
@@ -468,7 +691,7 @@ mod tests {
         ] {
             let mut s = Sequencer::new();
             let mut ev = Vec::new();
-            s.start(0, 38.0, 0.6, Mode::Auto, &mut |e| ev.push(e));
+            s.start(0, 38.0, 0.6, Mode::Gated, &mut |e| ev.push(e));
             let mut now = 0;
             if phase_at >= 1 {
                 now += 100;
@@ -570,7 +793,7 @@ mod tests {
         for steps in 0..4 {
             let mut s = Sequencer::new();
             let mut ev = Vec::new();
-            s.start(0, 38.0, 0.6, Mode::Auto, &mut |e| ev.push(e));
+            s.start(0, 38.0, 0.6, Mode::Gated, &mut |e| ev.push(e));
             let ms = [meas(75.0, 30.0), meas(75.0, 50.0), meas(40.0, 50.0)];
             let mut t = 0;
             for m in ms.iter().take(steps) {
