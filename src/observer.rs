@@ -23,6 +23,16 @@ pub const SENSOR_TAU_S: f32 = 3.0;
 /// more thermistor noise into the heater power; 2 s is below the 3 s sensor lag, so a steady
 /// model error is removed within a few seconds, and averages the 0.05 °C noise over 20 ticks.
 pub const DISTURBANCE_TAU_S: f32 = 2.0;
+/// The disturbance estimate only learns while the thermistor changes slower than this, K/s.
+/// While it moves fast, `measured − modelled thermistor` is mostly the error of the assumed
+/// lag (a 5 s bead read as a 3 s one is 2 s × the rate off), not a model error; frozen, the
+/// estimate is the feed-forward's. 0.3 K/s times the 3 s spread of real lags is under 1 K.
+pub const LEARN_MAX_RATE_K_PER_S: f32 = 0.6;
+/// Time constants of the two smoothings whose difference gives the thermistor's rate, s: the
+/// difference of a 0.5 s and a 1.5 s exponential average is the rate delayed by about 1 s,
+/// with the 0.05–0.2 °C noise of single readings averaged down to under 0.05 K/s.
+pub const RATE_FILTER_S: (f32, f32) = (0.5, 1.5);
+
 /// Time over which the heater power brings a node to its target temperature, s. The TCA's own
 /// time constant is about 1 s: 1 s asks for a fast approach without a power spike the PWM cannot
 /// deliver anyway (the heater caps clip it).
@@ -60,6 +70,7 @@ pub struct Observer {
     sensor_c: [f64; 2],
     disturbance_k: [f64; 2],
     ambient_c: f64,
+    smooth_c: [[f64; 2]; 2],
 }
 
 impl Observer {
@@ -74,6 +85,7 @@ impl Observer {
         sensor_c: [0.0; 2],
         disturbance_k: [0.0; 2],
         ambient_c: 0.0,
+        smooth_c: [[f64::NAN; 2]; 2],
     };
 
     /// A model at rest at `ambient_c` (°C) with the built-in link parameters.
@@ -86,6 +98,7 @@ impl Observer {
             sensor_c: [ambient_c as f64; 2],
             disturbance_k: [0.0; 2],
             ambient_c: ambient_c as f64,
+            smooth_c: [[f64::NAN; 2]; 2],
         }
     }
 
@@ -124,13 +137,35 @@ impl Observer {
     /// Corrects the disturbance estimates with the thermistor readings (°C) after `dt_s`.
     /// Non-finite readings are ignored (the supervisor deals with broken sensors).
     pub fn correct(&mut self, dt_s: f32, t_pla_c: f32, t_tca_c: f32) {
-        let gain = 1.0 - lag_remaining(dt_s as f64, DISTURBANCE_TAU_S as f64);
+        let dt = dt_s as f64;
+        let gain = 1.0 - lag_remaining(dt, DISTURBANCE_TAU_S as f64);
         for (i, m) in [t_pla_c, t_tca_c].into_iter().enumerate() {
             if m.is_finite() {
-                let err = m as f64 - self.sensor_c[i] - self.disturbance_k[i];
+                let m = m as f64;
+                let sm = &mut self.smooth_c[i];
+                for (k, tau) in [RATE_FILTER_S.0, RATE_FILTER_S.1].into_iter().enumerate() {
+                    if sm[k].is_nan() {
+                        sm[k] = m;
+                    }
+                    sm[k] = m + (sm[k] - m) * lag_remaining(dt, tau as f64);
+                }
+                if !(self.rate_k_per_s_of(i).abs() <= LEARN_MAX_RATE_K_PER_S as f64) {
+                    continue;
+                }
+                let err = m - self.sensor_c[i] - self.disturbance_k[i];
                 self.disturbance_k[i] += gain * err;
             }
         }
+    }
+
+    fn rate_k_per_s_of(&self, i: usize) -> f64 {
+        let sm = &self.smooth_c[i];
+        (sm[0] - sm[1]) / (RATE_FILTER_S.1 - RATE_FILTER_S.0) as f64
+    }
+
+    /// How fast a heated node's thermistor is changing (smoothed), K/s.
+    pub fn measured_rate_k_per_s(&self, n: HeatedNode) -> f32 {
+        self.rate_k_per_s_of(n.index()) as f32
     }
 
     /// The model's temperature of a heated node, °C (feed-forward: no correction).

@@ -118,11 +118,23 @@ pub const MODEL_SETTLE_BAND_C: f32 = 0.3;
 /// ...for this long, s: a few ticks more than the observer's correction needs to move after a
 /// step, so a passing crossing of the band does not count.
 pub const MODEL_SETTLE_S: f32 = 1.5;
-/// `closed` ends lock on the observer's PLA estimate; the lagging PLA thermistor must also read
-/// below [`RIGID_THRESHOLD_C`] plus this margin, K. Under water the thermistor trails the rod by
-/// about 3 K while it cools; if the observer is wrong by more than that (a far slower sensor,
-/// air instead of water) the measurement holds the lock.
-pub const CLOSED_RIGID_MARGIN_K: f32 = 4.0;
+/// `closed` ends lock when the observer's PLA estimate and the PLA thermistor corrected for its
+/// lag (reading + assumed lag × its rate, what a first-order sensor trails by) are both below
+/// [`RIGID_THRESHOLD_C`]. Under water this ends lock about 3 s before the bare thermistor would;
+/// a thermistor that stops falling (warm surroundings) holds the lock, whatever the model says.
+pub const CLOSED_RIGID_LEAD_S: f32 = crate::observer::SENSOR_TAU_S;
+/// The lag correction of [`CLOSED_RIGID_LEAD_S`] is used only while the surroundings read at
+/// least this far below [`RIGID_THRESHOLD_C`], K: then the rod keeps cooling after release and a
+/// lock ended a kelvin early freezes the same shape. In surroundings nearer the threshold the
+/// rod may stall just above it, so the bare thermistor decides, as in `gated`.
+pub const CLOSED_LEAD_AMBIENT_MARGIN_K: f32 = 10.0;
+
+/// Thermistor guard of the model strategies, K: a heater is switched off for the tick while its
+/// thermistor reads more than this above the heater's target temperature. The model assumes
+/// water; in still air the same power heats about five times as much, and the feed-forward
+/// alone would run into the supervisor's 130 °C limit. 10 K is far outside the observer's
+/// normal error (under 2 K) and keeps every target (at most 110 °C) 10 K under the limit.
+pub const MODEL_GUARD_K: f32 = 10.0;
 
 /// Something the sequencer reports to the user.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -521,8 +533,16 @@ impl Sequencer {
                 }
             }
             Phase::Bend => {
-                let at_target = (tca_c - self.tca_target_c).abs() <= MODEL_SETTLE_BAND_C
-                    && pla_c >= SOFT_THRESHOLD_C;
+                // `closed` also waits for the TCA thermistor to slow down, so the observer has
+                // learnt the model's error before the PLA freezes the shape.
+                let learnt = !closed
+                    || self.observer.measured_rate_k_per_s(HeatedNode::Tca).abs()
+                        <= crate::observer::LEARN_MAX_RATE_K_PER_S;
+                // Above the target with the TCA off is as close as the link can get (warm
+                // surroundings and the PLA's heat keep it there): lock as it is.
+                let reached = (tca_c - self.tca_target_c).abs() <= MODEL_SETTLE_BAND_C
+                    || (tca_c > self.tca_target_c && self.applied.tca_w == 0.0);
+                let at_target = reached && pla_c >= SOFT_THRESHOLD_C && learnt;
                 if self.held(now_ms, at_target) && in_phase_s >= MODEL_SETTLE_S {
                     self.estimate_mm = target::final_radius_mm(tca_c, m.t_amb_c);
                     self.enter(Phase::Lock, now_ms, emit);
@@ -530,8 +550,15 @@ impl Sequencer {
             }
             Phase::Lock => {
                 let rigid = if closed {
-                    pla_c < RIGID_THRESHOLD_C
-                        && m.t_pla_c < RIGID_THRESHOLD_C + CLOSED_RIGID_MARGIN_K
+                    let rate = self.observer.measured_rate_k_per_s(HeatedNode::Pla);
+                    let cool_surroundings =
+                        m.t_amb_c < RIGID_THRESHOLD_C - CLOSED_LEAD_AMBIENT_MARGIN_K;
+                    let lead_c = if cool_surroundings {
+                        m.t_pla_c + CLOSED_RIGID_LEAD_S * rate.min(0.0)
+                    } else {
+                        m.t_pla_c
+                    };
+                    pla_c < RIGID_THRESHOLD_C && lead_c < RIGID_THRESHOLD_C
                 } else {
                     m.t_pla_c < RIGID_THRESHOLD_C
                 };
@@ -567,6 +594,17 @@ impl Sequencer {
             o.power_to_reach_w(HeatedNode::Tca, self.tca_target_c - d_tca, TCA_BOOST_MAX_W)
         } else {
             0.0
+        };
+        // The guard: whatever the model says, a thermistor well above target turns its heater off.
+        let pla_w = if m.t_pla_c > PLA_SOFT_TARGET_C + MODEL_GUARD_K {
+            0.0
+        } else {
+            pla_w
+        };
+        let tca_w = if m.t_tca_c > self.tca_target_c + MODEL_GUARD_K {
+            0.0
+        } else {
+            tca_w
         };
         let p = Powers { pla_w, tca_w };
         self.applied = Powers {

@@ -1,5 +1,6 @@
 //! `cargo xtask <task>`: project automation in Rust (the xtask convention), one module per task.
 use clap::{Parser, Subcommand};
+mod strategies;
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -13,6 +14,8 @@ struct Cli {
 enum Task {
     /// Print the workspace root (a check that the task runner works).
     Root,
+    /// Compare the morph strategies over a mismatch ensemble: docs/strategies.csv and charts.
+    Strategies(strategies::Args),
 }
 
 fn main() -> ExitCode {
@@ -21,6 +24,7 @@ fn main() -> ExitCode {
             println!("{}", workspace_root().display());
             Ok(())
         }
+        Task::Strategies(a) => strategies::run(&a, &workspace_root()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
