@@ -136,6 +136,18 @@ pub const CLOSED_LEAD_AMBIENT_MARGIN_K: f32 = 10.0;
 /// normal error (under 2 K) and keeps every target (at most 110 °C) 10 K under the limit.
 pub const MODEL_GUARD_K: f32 = 10.0;
 
+/// Least power the model strategies ask of a heater in a phase that has it on, W. The
+/// supervisor's heater watch starts afresh whenever a heater's command drops to 0 W; restarted
+/// on a hot heater that the controller is letting cool towards its target, it would read the
+/// fall as a dead heater. 0.05 W keeps the watch running and heats the TCA by under 2 K.
+pub const MODEL_KEEP_ALIVE_W: f32 = 0.05;
+
+/// A TCA at full power whose thermistor rises slower than this has reached as close to its
+/// target as the 2 W cap allows, K/s (strong convection in cold water, a low supply): the model
+/// strategies lock there instead of waiting for the bend timeout. The bulk's 17 s time constant
+/// makes 0.05 K/s about 1 K short of where it would end.
+pub const MODEL_STALL_RATE_K_PER_S: f32 = 0.05;
+
 /// Something the sequencer reports to the user.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SeqEvent {
@@ -541,7 +553,16 @@ impl Sequencer {
                 // Above the target with the TCA off is as close as the link can get (warm
                 // surroundings and the PLA's heat keep it there): lock as it is.
                 let reached = (tca_c - self.tca_target_c).abs() <= MODEL_SETTLE_BAND_C
-                    || (tca_c > self.tca_target_c && self.applied.tca_w == 0.0);
+                    || (tca_c > self.tca_target_c && self.applied.tca_w <= MODEL_KEEP_ALIVE_W)
+                    || (tca_c < self.tca_target_c
+                        && self.applied.tca_w
+                            >= Self::deliverable_w(
+                                &HeaterConfig::TCA,
+                                TCA_BOOST_MAX_W,
+                                self.supply_v,
+                            ) - 1e-3
+                        && self.observer.measured_rate_k_per_s(HeatedNode::Tca)
+                            < MODEL_STALL_RATE_K_PER_S);
                 let at_target = reached && pla_c >= SOFT_THRESHOLD_C && learnt;
                 if self.held(now_ms, at_target) && in_phase_s >= MODEL_SETTLE_S {
                     self.estimate_mm = target::final_radius_mm(tca_c, m.t_amb_c);
@@ -595,17 +616,19 @@ impl Sequencer {
         } else {
             0.0
         };
-        // The guard: whatever the model says, a thermistor well above target turns its heater off.
-        let pla_w = if m.t_pla_c > PLA_SOFT_TARGET_C + MODEL_GUARD_K {
-            0.0
-        } else {
-            pla_w
+        // The guard: whatever the model says, a thermistor well above target turns its heater
+        // down to the keep-alive power.
+        let keep = |on: bool, w: f32, too_hot: bool| {
+            if !on {
+                0.0
+            } else if too_hot {
+                MODEL_KEEP_ALIVE_W
+            } else {
+                w.max(MODEL_KEEP_ALIVE_W)
+            }
         };
-        let tca_w = if m.t_tca_c > self.tca_target_c + MODEL_GUARD_K {
-            0.0
-        } else {
-            tca_w
-        };
+        let pla_w = keep(pla_on, pla_w, m.t_pla_c > PLA_SOFT_TARGET_C + MODEL_GUARD_K);
+        let tca_w = keep(tca_on, tca_w, m.t_tca_c > self.tca_target_c + MODEL_GUARD_K);
         let p = Powers { pla_w, tca_w };
         self.applied = Powers {
             pla_w: Self::deliverable_w(&HeaterConfig::PLA, p.pla_w, self.supply_v),
