@@ -160,11 +160,6 @@ impl Controller {
         }
     }
 
-    /// The sequencer (its phase, strategy, targets and the thermal model of the model strategies).
-    pub fn sequencer(&self) -> &Sequencer {
-        &self.seq
-    }
-
     /// The latched fault, if any.
     pub fn fault(&self) -> Option<Fault> {
         self.fault

@@ -310,7 +310,7 @@ fn no_more<'a>(
     }
 }
 
-/// `MORPH <radius_mm> [auto|paper]` after the command word.
+/// `MORPH <radius_mm> [auto|paper|gated|boost|closed]` after the command word.
 fn parse_morph<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<Command, ProtoError> {
     let radius = args
         .next()
