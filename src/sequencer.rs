@@ -871,4 +871,83 @@ mod tests {
             );
         }
     }
+
+    #[test]
+    fn auto_runs_the_charted_strategy() {
+        let mut s = Sequencer::new();
+        s.start(0, 38.0, 0.6, Mode::Auto, &mut |_| {});
+        assert_eq!(s.strategy(), AUTO_STRATEGY);
+        assert_ne!(AUTO_STRATEGY, Mode::Auto);
+        for m in [Mode::Paper, Mode::Gated, Mode::Boost, Mode::Closed] {
+            assert_eq!(Sequencer::strategy_of(m), m);
+        }
+    }
+
+    #[test]
+    fn model_strategies_overdrive_both_heaters_from_the_start() {
+        for mode in [Mode::Boost, Mode::Closed] {
+            let mut s = Sequencer::new();
+            s.set_supply_v(12.0);
+            s.start(0, 35.0, 1.0, mode, &mut |_| {});
+            let p = s.step(100, &meas(22.0, 22.0), &mut |_| {}).unwrap();
+            assert_eq!(p.pla_w, PLA_BOOST_MAX_W, "{mode:?}");
+            assert_eq!(p.tca_w, TCA_BOOST_MAX_W, "{mode:?}");
+            assert!(s.tca_target_c() > 60.0 && s.tca_target_c() < 90.0);
+        }
+    }
+
+    #[test]
+    fn the_guard_turns_a_hot_heater_down_but_never_to_zero_while_its_phase_has_it_on() {
+        for mode in [Mode::Boost, Mode::Closed] {
+            let mut s = Sequencer::new();
+            s.set_supply_v(12.0);
+            s.start(0, 35.0, 1.0, mode, &mut |_| {});
+            let hot = meas(PLA_SOFT_TARGET_C + MODEL_GUARD_K + 1.0, 22.0);
+            let p = s.step(100, &hot, &mut |_| {}).unwrap();
+            assert_eq!(p.pla_w, MODEL_KEEP_ALIVE_W, "{mode:?}");
+            let t = s.tca_target_c();
+            let p = s
+                .step(200, &meas(30.0, t + MODEL_GUARD_K + 1.0), &mut |_| {})
+                .unwrap();
+            assert_eq!(p.tca_w, MODEL_KEEP_ALIVE_W, "{mode:?}");
+            // Far above target on the model too: still the keep-alive, not zero.
+            let mut now = 200;
+            for _ in 0..50 {
+                now += 100;
+                let p = s.step(now, &meas(30.0, t + 5.0), &mut |_| {}).unwrap();
+                assert!(p.tca_w >= MODEL_KEEP_ALIVE_W, "{mode:?} {p:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn model_strategies_end_in_idle_with_both_heaters_off() {
+        for mode in [Mode::Boost, Mode::Closed] {
+            let mut s = Sequencer::new();
+            let mut ev = Vec::new();
+            s.set_supply_v(12.0);
+            s.start(0, 38.0, 0.7, mode, &mut |e| ev.push(e));
+            // A plant that follows the request exactly: read the observer's own estimates.
+            let mut now = 0;
+            let mut p = Powers::default();
+            while s.busy() && now < 300_000 {
+                now += 100;
+                let o = s.observer();
+                let m = Measurements {
+                    t_pla_c: o.estimate_c(HeatedNode::Pla),
+                    t_tca_c: o.estimate_c(HeatedNode::Tca),
+                    t_amb_c: 22.0,
+                };
+                p = s.step(now, &m, &mut |e| ev.push(e)).unwrap();
+            }
+            assert_eq!(s.phase(), Phase::Idle, "{mode:?}");
+            assert_eq!(p, Powers::default());
+            assert!(now < 60_000, "{mode:?} took {now} ms");
+            assert!(
+                matches!(ev.last(), Some(SeqEvent::Done { radius_mm, .. }) if (radius_mm - 38.0).abs() < 0.5),
+                "{mode:?}: {:?}",
+                ev.last()
+            );
+        }
+    }
 }
