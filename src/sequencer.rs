@@ -128,6 +128,14 @@ pub const CLOSED_RIGID_LEAD_S: f32 = crate::observer::SENSOR_TAU_S;
 /// lock ended a kelvin early freezes the same shape. In surroundings nearer the threshold the
 /// rod may stall just above it, so the bare thermistor decides, as in `gated`.
 pub const CLOSED_LEAD_AMBIENT_MARGIN_K: f32 = 10.0;
+/// Where `closed` counts the PLA as rigid in cool surroundings (see
+/// [`CLOSED_LEAD_AMBIENT_MARGIN_K`]), °C: 12 K below Tg the PLA's modulus is 98 % of the way to
+/// glassy on a log scale (about 1.5 GPa) and its flow time 27 s, growing e-fold with every 3 K it
+/// keeps cooling after release, so the shape is frozen. Waiting for [`RIGID_THRESHOLD_C`] costs
+/// 3–8 s under water with no measurable change of the final radius over the ensemble. In warm
+/// surroundings the rod may stall near these temperatures, so there `closed` waits for
+/// [`RIGID_THRESHOLD_C`] on the bare thermistor, as `gated` does.
+pub const CLOSED_RIGID_COOL_C: f32 = 50.0;
 
 /// Thermistor guard of the model strategies, K: a heater is switched off for the tick while its
 /// thermistor reads more than this above the heater's target temperature. The model assumes
@@ -147,6 +155,10 @@ pub const MODEL_KEEP_ALIVE_W: f32 = 0.05;
 /// strategies lock there instead of waiting for the bend timeout. The bulk's 17 s time constant
 /// makes 0.05 K/s about 1 K short of where it would end.
 pub const MODEL_STALL_RATE_K_PER_S: f32 = 0.05;
+/// A stall counts only this long after MORPH, s: after the supervisor's heater-not-heating check
+/// has judged the TCA (on from MORPH, judged after 10 s), so a dead TCA, which does not rise at
+/// all, trips instead of passing for a stalled one.
+pub const STALL_AFTER_S: f32 = crate::supervisor::HEATING_CHECK_S + MODEL_SETTLE_S;
 
 /// Something the sequencer reports to the user.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -562,7 +574,8 @@ impl Sequencer {
                                 self.supply_v,
                             ) - 1e-3
                         && self.observer.measured_rate_k_per_s(HeatedNode::Tca)
-                            < MODEL_STALL_RATE_K_PER_S);
+                            < MODEL_STALL_RATE_K_PER_S
+                        && self.since_s(now_ms, self.start_ms) > STALL_AFTER_S);
                 let at_target = reached && pla_c >= SOFT_THRESHOLD_C && learnt;
                 if self.held(now_ms, at_target) && in_phase_s >= MODEL_SETTLE_S {
                     self.estimate_mm = target::final_radius_mm(tca_c, m.t_amb_c);
@@ -574,12 +587,15 @@ impl Sequencer {
                     let rate = self.observer.measured_rate_k_per_s(HeatedNode::Pla);
                     let cool_surroundings =
                         m.t_amb_c < RIGID_THRESHOLD_C - CLOSED_LEAD_AMBIENT_MARGIN_K;
-                    let lead_c = if cool_surroundings {
-                        m.t_pla_c + CLOSED_RIGID_LEAD_S * rate.min(0.0)
+                    let (lead_c, rigid_c) = if cool_surroundings {
+                        (
+                            m.t_pla_c + CLOSED_RIGID_LEAD_S * rate.min(0.0),
+                            CLOSED_RIGID_COOL_C,
+                        )
                     } else {
-                        m.t_pla_c
+                        (m.t_pla_c, RIGID_THRESHOLD_C)
                     };
-                    pla_c < RIGID_THRESHOLD_C && lead_c < RIGID_THRESHOLD_C
+                    pla_c < rigid_c && lead_c < rigid_c
                 } else {
                     m.t_pla_c < RIGID_THRESHOLD_C
                 };
