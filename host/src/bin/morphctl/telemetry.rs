@@ -124,7 +124,7 @@ pub fn plot(samples: &[Sample], title: &str, out: &Path) -> Result<(), String> {
             title,
             true,
         ),
-        // No font ships with the tool, so the PNG carries curves, grid and phase marks only.
+        // No font ships with the tool, so the PNG carries the curves and the phase marks only.
         Some("png") => draw(
             BitMapBackend::new(out, size).into_drawing_area(),
             samples,
