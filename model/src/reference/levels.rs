@@ -221,6 +221,87 @@ pub fn radius_curve_with_matrix_mm(
     Ok(out)
 }
 
+/// Fits `EI`, `F0` and `c` of `p` to measured `(power_w, radius_mm)` points with `level`'s own
+/// model (thermal matrix `r` given), exactly as the lumped calibration does for the lumped
+/// model: Levenberg–Marquardt on `(ln EI, F0, c)` with the same weak prior on `EI`
+/// ([`crate::calibrate::PRIOR_WEIGHT_MM`] per e-fold), started from `p`'s constants. Each level
+/// is compared with the data after its own fit, as a user of that level would use it.
+pub fn calibrate_level(
+    p: &LinkParams,
+    level: &Level,
+    r: &ResistanceMatrix,
+    points: &[(f64, f64)],
+) -> Result<LinkParams, ReferenceError> {
+    use nalgebra::{Matrix3, Vector3};
+    let ln_prior = crate::calibrate::prior_stiffness_nm2(p).ln();
+    let with = |th: &Vector3<f64>| {
+        let mut q = *p;
+        q.mechanics.bending_stiffness_nm2 = th[0].exp();
+        q.mechanics.preload_n = th[1];
+        q.mechanics.force_coeff_n_per_k = th[2];
+        q
+    };
+    let powers: Vec<f64> = points.iter().map(|x| x.0).collect();
+    let residuals = |th: &Vector3<f64>| -> Result<Vec<f64>, ReferenceError> {
+        let c = radius_curve_with_matrix_mm(&with(th), level, r, &powers)?;
+        let mut v: Vec<f64> = c.iter().zip(points).map(|(m, x)| m - x.1).collect();
+        v.push(crate::calibrate::PRIOR_WEIGHT_MM * (th[0] - ln_prior));
+        Ok(v)
+    };
+    let cost = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
+    let m = &p.mechanics;
+    let mut th = Vector3::new(m.bending_stiffness_nm2.ln(), m.preload_n, m.force_coeff_n_per_k);
+    let mut lambda = 1e-3;
+    for _ in 0..200 {
+        let r0 = residuals(&th)?;
+        let c0 = cost(&r0);
+        let mut jtj = Matrix3::zeros();
+        let mut jtr = Vector3::zeros();
+        let mut cols = [Vec::new(), Vec::new(), Vec::new()];
+        for (k, col) in cols.iter_mut().enumerate() {
+            let h = 1e-6 * th[k].abs().max(1e-6);
+            let mut t2 = th;
+            t2[k] += h;
+            *col = residuals(&t2)?.iter().zip(&r0).map(|(a, b)| (a - b) / h).collect();
+        }
+        for i in 0..r0.len() {
+            let j = Vector3::new(cols[0][i], cols[1][i], cols[2][i]);
+            jtj += j * j.transpose();
+            jtr += j * r0[i];
+        }
+        let mut improved = false;
+        for _ in 0..20 {
+            let mut a = jtj;
+            for k in 0..3 {
+                a[(k, k)] *= 1.0 + lambda;
+                a[(k, k)] += 1e-30;
+            }
+            let Some(step) = a.lu().solve(&(-jtr)) else {
+                break;
+            };
+            let cand = th + step;
+            // A trial the model cannot solve is a step too far, not a failure.
+            if let Ok(rc) = residuals(&cand) {
+                if cost(&rc) < c0 {
+                    th = cand;
+                    lambda = (lambda * 0.3).max(1e-12);
+                    improved = true;
+                    break;
+                }
+            }
+            lambda *= 10.0;
+        }
+        if !improved || c0 - cost(&residuals(&th)?) < 1e-12 * c0.max(1e-30) {
+            break;
+        }
+    }
+    let q = with(&th);
+    if !(q.mechanics.bending_stiffness_nm2.is_finite() && q.mechanics.bending_stiffness_nm2 > 0.0) {
+        return Err(ReferenceError::NonFinite("calibrated bending stiffness"));
+    }
+    Ok(q)
+}
+
 /// A level's result in the study.
 #[derive(Clone, Debug)]
 pub struct Scored {
@@ -234,6 +315,11 @@ pub struct Scored {
     pub error_vs_reference_mm: f64,
     /// Largest difference from the measured points, mm.
     pub error_vs_measured_mm: f64,
+    /// Largest difference from the reference with the lumped model's constants, not refitted
+    /// (what swapping the level in without recalibrating would change), mm.
+    pub uncalibrated_difference_mm: f64,
+    /// The level's own fitted constants `(EI N m², F0 N, c N/K)`.
+    pub constants: (f64, f64, f64),
 }
 
 /// Median wall time of `f`, repeated until about `budget_s` has passed (at least 3 runs), s.
@@ -275,8 +361,10 @@ fn interpolate(xs: &[f64], ys: &[f64], x: f64) -> f64 {
     ys[0]
 }
 
-/// Scores every level against the reference and the measured points; `progress` is called
-/// after each level. Timing spends about `budget_s` per level.
+/// Scores every level against the reference and the measured points, each level (the
+/// reference too) calibrated to `measured` with its own model first; `progress` is called after
+/// each level. Timing (of one curve with the fitted constants, thermal solve included) spends
+/// about `budget_s` per level.
 pub fn score(
     p: &LinkParams,
     levels: &[Level],
@@ -284,11 +372,27 @@ pub fn score(
     budget_s: f64,
     mut progress: impl FnMut(&Level),
 ) -> Result<Vec<Scored>, ReferenceError> {
-    let reference = radius_curve_mm(p, &Level::REFERENCE, &POWERS_W)?;
+    let r_ref = thermal_matrix(p, Level::REFERENCE.thermal)?;
+    let p_ref = calibrate_level(p, &Level::REFERENCE, &r_ref, measured)?;
+    let reference = radius_curve_with_matrix_mm(&p_ref, &Level::REFERENCE, &r_ref, &POWERS_W)?;
+    let uncalibrated_ref = radius_curve_with_matrix_mm(p, &Level::REFERENCE, &r_ref, &POWERS_W)?;
     let mut out = Vec::new();
     for level in levels {
-        let (curve, seconds) = time_it(budget_s, || radius_curve_mm(p, level, &POWERS_W));
+        let r = if level.thermal == Level::REFERENCE.thermal {
+            r_ref
+        } else {
+            thermal_matrix(p, level.thermal)?
+        };
+        let uncal = radius_curve_with_matrix_mm(p, level, &r, &POWERS_W)?;
+        let uncalibrated_difference_mm = uncal
+            .iter()
+            .zip(&uncalibrated_ref)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        let q = calibrate_level(p, level, &r, measured)?;
+        let (curve, seconds) = time_it(budget_s, || radius_curve_mm(&q, level, &POWERS_W));
         let curve = curve?;
+        let m = &q.mechanics;
         let error_vs_reference_mm = curve
             .iter()
             .zip(&reference)
@@ -300,6 +404,8 @@ pub fn score(
             radius_mm: curve,
             seconds,
             error_vs_reference_mm,
+            uncalibrated_difference_mm,
+            constants: (m.bending_stiffness_nm2, m.preload_n, m.force_coeff_n_per_k),
         });
         progress(level);
     }
@@ -307,14 +413,14 @@ pub fn score(
 }
 
 /// Indices of the levels on the Pareto front of (seconds, error): no other level is both
-/// cheaper and at least as accurate.
+/// cheaper and at least as accurate (errors closer than 1e-6 mm count as equal).
 pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
     let mut idx: Vec<usize> = (0..points.len()).collect();
     idx.sort_by(|&a, &b| points[a].0.total_cmp(&points[b].0));
     let mut best = f64::INFINITY;
     let mut front = Vec::new();
     for i in idx {
-        if points[i].1 < best {
+        if points[i].1 < best - 1e-6 {
             best = points[i].1;
             front.push(i);
         }
