@@ -20,8 +20,8 @@ pub struct Fig9 {
 
 /// Reads both sources from the calibration CSV.
 pub fn load_fig9(path: &Path) -> Result<Fig9, String> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     let rows = |src: &str| -> Result<Vec<(f64, f64)>, String> {
         Ok(morphlink_model::calibrate::parse_points(&text, src)?
             .iter()
@@ -42,10 +42,7 @@ fn err<E: std::fmt::Display>(e: E) -> String {
 pub fn score_all(p: &LinkParams, fig9: &Fig9, budget_s: f64) -> Result<Vec<Scored>, String> {
     let study = Level::study();
     let bar = ProgressBar::new(study.len() as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} levels, {msg}")
-            .map_err(err)?,
-    );
+    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} levels, {msg}").map_err(err)?);
     let out = levels::score(p, &study, &fig9.measured, budget_s, |l| {
         bar.set_message(l.name());
         bar.inc(1);
@@ -98,7 +95,8 @@ pub fn grid_study(p: &LinkParams) -> Result<Vec<GridRow>, String> {
         length_m: l,
     };
     let pi = core::f64::consts::PI;
-    let exact = ((a / r0).ln() / (2.0 * pi * k) + 1.0 / (2.0 * pi * a * h) + 1.0 / (8.0 * pi * k_rod)) / l;
+    let exact =
+        ((a / r0).ln() / (2.0 * pi * k) + 1.0 / (2.0 * pi * a * h) + 1.0 / (8.0 * pi * k_rod)) / l;
     let mut rows = Vec::new();
     for n in [8usize, 12, 16, 24, 32, 48, 64] {
         let c = CrossSection::new(&lay, n, 8)
@@ -152,8 +150,12 @@ fn pareto_chart(
         .map(|s| (s.seconds, error(s).max(1e-6)))
         .collect();
     let front = levels::pareto_front(&pts);
-    let (xmin, xmax) = pts.iter().fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.0), b.max(p.0)));
-    let (ymin, ymax) = pts.iter().fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    let (xmin, xmax) = pts
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let (ymin, ymax) = pts
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.1), b.max(p.1)));
     let root = SVGBackend::new(path, (1000, 700)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let mut chart = ChartBuilder::on(&root)
@@ -207,7 +209,10 @@ fn radius_chart(path: &Path, scored: &[Scored], fig9: &Fig9, shown: &[&str]) -> 
     let root = SVGBackend::new(path, (1000, 700)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
     let mut chart = ChartBuilder::on(&root)
-        .caption("Radius versus TCA power (PLA held at 1.5 W, under water)", ("sans-serif", 20))
+        .caption(
+            "Radius versus TCA power (PLA held at 1.5 W, under water)",
+            ("sans-serif", 20),
+        )
         .margin(15)
         .x_label_area_size(45)
         .y_label_area_size(60)
@@ -225,7 +230,11 @@ fn radius_chart(path: &Path, scored: &[Scored], fig9: &Fig9, shown: &[&str]) -> 
         .enumerate()
     {
         let c = color(i);
-        let data: Vec<(f64, f64)> = POWERS_W.iter().copied().zip(s.radius_mm.iter().copied()).collect();
+        let data: Vec<(f64, f64)> = POWERS_W
+            .iter()
+            .copied()
+            .zip(s.radius_mm.iter().copied())
+            .collect();
         chart
             .draw_series(LineSeries::new(data, c.stroke_width(2)))
             .map_err(err)?
@@ -233,12 +242,20 @@ fn radius_chart(path: &Path, scored: &[Scored], fig9: &Fig9, shown: &[&str]) -> 
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
     }
     chart
-        .draw_series(fig9.paper_model.iter().map(|p| Cross::new(*p, 5, BLACK.stroke_width(1))))
+        .draw_series(
+            fig9.paper_model
+                .iter()
+                .map(|p| Cross::new(*p, 5, BLACK.stroke_width(1))),
+        )
         .map_err(err)?
         .label("paper's model (Fig. 9)")
         .legend(|(x, y)| Cross::new((x + 10, y), 5, BLACK.stroke_width(1)));
     chart
-        .draw_series(fig9.measured.iter().map(|p| Circle::new(*p, 6, BLACK.filled())))
+        .draw_series(
+            fig9.measured
+                .iter()
+                .map(|p| Circle::new(*p, 6, BLACK.filled())),
+        )
         .map_err(err)?
         .label("measured (Fig. 9)")
         .legend(|(x, y)| Circle::new((x + 10, y), 5, BLACK.filled()));
@@ -318,8 +335,14 @@ fn grid_chart(path: &Path, rows: &[GridRow]) -> Result<(), String> {
         .y_label_formatter(&|v| format!("{v:.0e}"))
         .draw()
         .map_err(err)?;
-    let c: Vec<(f64, f64)> = rows.iter().map(|r| (r.rings as f64, r.concentric_error)).collect();
-    let l: Vec<(f64, f64)> = rows.iter().map(|r| (r.rings as f64, r.link_error)).collect();
+    let c: Vec<(f64, f64)> = rows
+        .iter()
+        .map(|r| (r.rings as f64, r.concentric_error))
+        .collect();
+    let l: Vec<(f64, f64)> = rows
+        .iter()
+        .map(|r| (r.rings as f64, r.link_error))
+        .collect();
     chart
         .draw_series(LineSeries::new(c, BLUE.stroke_width(2)))
         .map_err(err)?
@@ -332,6 +355,96 @@ fn grid_chart(path: &Path, rows: &[GridRow]) -> Result<(), String> {
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
     chart
         .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)
+}
+
+/// One transient sample: `(t_s, fv_tca_k, fv_pla_k, net_tca_k, net_pla_k)`.
+pub type TransientRow = (f64, f64, f64, f64, f64);
+
+/// TCA and PLA rises over the paper's bend phase (TCA 1 W, PLA 1.5 W from ambient, 60 s):
+/// the reference grid stepped implicitly (0.1 s) against the lumped five-node network.
+/// Returns `(t_s, fv_tca, fv_pla, net_tca, net_pla)` rows.
+pub fn transient_study(p: &LinkParams, rings: usize) -> Result<Vec<TransientRow>, String> {
+    use morphlink_model::reference::fv_thermal::Stepping;
+    use morphlink_model::thermal::{node, Network};
+    let dt = 0.1;
+    let steps = 600;
+    let x = CrossSection::of_link(p, rings).map_err(err)?;
+    let fv = x
+        .transient(1.0, 1.5, dt, steps, Stepping::Implicit)
+        .map_err(err)?;
+    let mut net = Network::new(p);
+    let amb = p.surroundings.ambient_c;
+    let mut rows = Vec::with_capacity(steps);
+    for k in 0..steps {
+        net.advance(dt, 1.0, 1.5, amb);
+        rows.push((
+            (k + 1) as f64 * dt,
+            fv.tca_rise_k[k],
+            fv.pla_rise_k[k],
+            net.temp_c[node::TCA] - amb,
+            net.temp_c[node::PLA] - amb,
+        ));
+    }
+    Ok(rows)
+}
+
+fn transient_chart(path: &Path, rows: &[TransientRow], rings: usize) -> Result<(), String> {
+    let root = SVGBackend::new(path, (1000, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let ymax = rows
+        .iter()
+        .map(|r| r.1.max(r.2).max(r.3).max(r.4))
+        .fold(0.0, f64::max)
+        * 1.1;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "Heater rises, TCA 1 W + PLA 1.5 W from ambient: reference grid vs lumped network",
+            ("sans-serif", 20),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..60.0, 0.0..ymax)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("time, s")
+        .y_desc("rise above ambient, K")
+        .draw()
+        .map_err(err)?;
+    let pick = |r: &TransientRow, i: usize| [r.1, r.2, r.3, r.4][i];
+    let series = [
+        ("TCA, finite volumes", 0usize),
+        ("PLA, finite volumes", 1),
+        ("TCA, lumped network", 2),
+        ("PLA, lumped network", 3),
+    ];
+    for (name, i) in series {
+        let c = color(i);
+        chart
+            .draw_series(LineSeries::new(
+                rows.iter().map(|r| (r.0, pick(r, i))),
+                c.stroke_width(2),
+            ))
+            .map_err(err)?
+            .label(format!(
+                "{name}{}",
+                if name.contains("finite") {
+                    format!(" ({rings} rings)")
+                } else {
+                    String::new()
+                }
+            ))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .draw()
@@ -410,6 +523,9 @@ pub fn run(p: &LinkParams, fig9: &Fig9, out: &Path, budget_s: f64) -> Result<Str
         ],
     )?;
     table_chart(&out.join("table-size.svg"), &table)?;
+    let transient_rings = 32;
+    let transient = transient_study(p, transient_rings)?;
+    transient_chart(&out.join("transient.svg"), &transient, transient_rings)?;
     grid_chart(&out.join("grid-convergence.svg"), &grid)?;
 
     let mut csv = String::from("level,seconds,error_vs_reference_mm,error_vs_measured_mm");
@@ -436,8 +552,14 @@ pub fn run(p: &LinkParams, fig9: &Fig9, out: &Path, budget_s: f64) -> Result<Str
     let mut t = String::new();
     let _ = writeln!(t, "| level | time per curve | error vs reference, mm | error vs measured, mm | not refitted: diff vs reference, mm | fitted EI, N m² | F0, N | c, mN/K |");
     let _ = writeln!(t, "| --- | --- | --- | --- | --- | --- | --- | --- |");
-    let pts_ref: Vec<(f64, f64)> = scored.iter().map(|s| (s.seconds, s.error_vs_reference_mm)).collect();
-    let pts_meas: Vec<(f64, f64)> = scored.iter().map(|s| (s.seconds, s.error_vs_measured_mm)).collect();
+    let pts_ref: Vec<(f64, f64)> = scored
+        .iter()
+        .map(|s| (s.seconds, s.error_vs_reference_mm))
+        .collect();
+    let pts_meas: Vec<(f64, f64)> = scored
+        .iter()
+        .map(|s| (s.seconds, s.error_vs_measured_mm))
+        .collect();
     let fr = levels::pareto_front(&pts_ref);
     let fm = levels::pareto_front(&pts_meas);
     for (i, s) in scored.iter().enumerate() {
@@ -471,14 +593,43 @@ pub fn run(p: &LinkParams, fig9: &Fig9, out: &Path, budget_s: f64) -> Result<Str
             human_time(r.explicit_limit_s)
         );
     }
-    let oc = orders(&grid.iter().map(|r| (r.rings, r.concentric_error)).collect::<Vec<_>>());
-    let ol = orders(&grid.iter().map(|r| (r.rings, r.link_error)).collect::<Vec<_>>());
+    let oc = orders(
+        &grid
+            .iter()
+            .map(|r| (r.rings, r.concentric_error))
+            .collect::<Vec<_>>(),
+    );
+    let ol = orders(
+        &grid
+            .iter()
+            .map(|r| (r.rings, r.link_error))
+            .collect::<Vec<_>>(),
+    );
     let _ = writeln!(t, "\nobserved orders, concentric: {}", fmt_list(&oc));
     let _ = writeln!(t, "observed orders, link R_tt:  {}\n", fmt_list(&ol));
-    let _ = writeln!(t, "| table entries | flash bytes | worst interpolation error, mm |");
+    let _ = writeln!(
+        t,
+        "| table entries | flash bytes | worst interpolation error, mm |"
+    );
     let _ = writeln!(t, "| --- | --- | --- |");
     for (n, e, b) in &table {
         let _ = writeln!(t, "| {n} | {b} | {e:.4} |");
+    }
+    let _ = writeln!(
+        t,
+        "\n| t, s | TCA rise FV, K | TCA rise network, K | PLA rise FV, K | PLA rise network, K |"
+    );
+    let _ = writeln!(t, "| --- | --- | --- | --- | --- |");
+    for r in transient.iter().filter(|r| {
+        [1.0, 2.0, 5.0, 10.0, 20.0, 40.0, 60.0]
+            .iter()
+            .any(|t| (r.0 - t).abs() < 1e-9)
+    }) {
+        let _ = writeln!(
+            t,
+            "| {:.0} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            r.0, r.1, r.3, r.2, r.4
+        );
     }
     let reference = scored
         .iter()
@@ -494,7 +645,10 @@ pub fn run(p: &LinkParams, fig9: &Fig9, out: &Path, budget_s: f64) -> Result<Str
 }
 
 fn fmt_list(v: &[f64]) -> String {
-    v.iter().map(|x| format!("{x:.2}")).collect::<Vec<_>>().join(", ")
+    v.iter()
+        .map(|x| format!("{x:.2}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Seconds in a readable unit.

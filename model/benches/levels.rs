@@ -25,7 +25,11 @@ fn thermal(c: &mut Criterion) {
     let p = LinkParams::DEFAULT;
     let mut g = c.benchmark_group("fv thermal matrix");
     g.sample_size(10);
-    let grids: &[usize] = if full_run() { &[8, 16, 32, 64, 96] } else { &[8] };
+    let grids: &[usize] = if full_run() {
+        &[8, 16, 32, 64, 96]
+    } else {
+        &[8]
+    };
     for &rings in grids {
         g.bench_function(format!("{rings} rings"), |b| {
             b.iter(|| {
@@ -37,9 +41,10 @@ fn thermal(c: &mut Criterion) {
         });
     }
     g.finish();
-    let mut g = c.benchmark_group("fv transient 16 rings, 10 s");
+    let rings = if full_run() { 16 } else { 6 };
+    let mut g = c.benchmark_group(format!("fv transient {rings} rings, 10 s"));
     g.sample_size(10);
-    let x = CrossSection::of_link(&p, if full_run() { 16 } else { 6 }).unwrap();
+    let x = CrossSection::of_link(&p, rings).unwrap();
     let limit = x.explicit_limit_s();
     let n_exp = (10.0 / (0.9 * limit)).ceil() as usize;
     g.bench_function(format!("explicit, {n_exp} steps at 0.9 x limit"), |b| {

@@ -113,16 +113,17 @@ fn run(cli: Cli) -> Result<(), String> {
             }
         }
         Cmd::Thermal => {
-            let m = |r: morphlink_model::thermal::ResistanceMatrix| {
-                serde_json::json!({"r_tt": r.r_tt, "r_pp": r.r_pp, "r_tp": r.r_tp})
-            };
-            let lumped = levels::thermal_matrix(&p, levels::Thermal::Lumped).map_err(|e| e.to_string())?;
-            let reference = levels::thermal_matrix(&p, levels::Thermal::FiniteVolume(REFERENCE_RINGS))
-                .map_err(|e| e.to_string())?;
-            let j = serde_json::json!({"lumped": m(lumped), "reference": m(reference)});
-            println!("{}", serde_json::to_string_pretty(&j).map_err(|e| e.to_string())?);
+            let j = thermal_json(&p, REFERENCE_RINGS)?;
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&j).map_err(|e| e.to_string())?
+            );
         }
-        Cmd::Charts { data, out, budget_s } => {
+        Cmd::Charts {
+            data,
+            out,
+            budget_s,
+        } => {
             let fig9 = charts::load_fig9(&data)?;
             let summary = charts::run(&p, &fig9, &out, budget_s)?;
             println!("{summary}");
@@ -133,7 +134,7 @@ fn run(cli: Cli) -> Result<(), String> {
             data,
             budget_s,
         } => {
-            if !(tolerance_mm > 0.0) {
+            if tolerance_mm.is_nan() || tolerance_mm <= 0.0 {
                 return Err(format!("tolerance must be positive, got {tolerance_mm}"));
             }
             let fig9 = charts::load_fig9(&data)?;
@@ -143,8 +144,14 @@ fn run(cli: Cli) -> Result<(), String> {
                 .filter(|s| !s.level.pla_stiffness && s.level.law == levels::Law::Linear)
                 .collect();
             candidates.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
-            println!("tolerance {tolerance_mm} mm against {} (same physics: linear TCA law, PLA soft)", Level::REFERENCE.name());
-            println!("  {:<22} {:>12} {:>12}  verdict", "level", "time", "error_mm");
+            println!(
+                "tolerance {tolerance_mm} mm against {} (same physics: linear TCA law, PLA soft)",
+                Level::REFERENCE.name()
+            );
+            println!(
+                "  {:<22} {:>12} {:>12}  verdict",
+                "level", "time", "error_mm"
+            );
             let picked = levels::pick(&scored, tolerance_mm);
             for s in &candidates {
                 let verdict = if Some(s.level) == picked.map(|x| x.level) {
@@ -173,12 +180,24 @@ fn run(cli: Cli) -> Result<(), String> {
                 if fw_ref <= tolerance_mm { "within tolerance" } else { "ABOVE tolerance" }
             );
             match picked {
-                Some(s) => println!(
-                    "pick: {} — error {:.4} mm ≤ {tolerance_mm} mm at {} per curve; every cheaper level errs more",
-                    s.level.name(),
-                    s.error_vs_reference_mm,
-                    charts::human_time(s.seconds)
-                ),
+                Some(s) => {
+                    let cheaper: Vec<String> = candidates
+                        .iter()
+                        .take_while(|c| c.level != s.level)
+                        .map(|c| format!("{} ({:.4} mm)", c.level.name(), c.error_vs_reference_mm))
+                        .collect();
+                    let why = if cheaper.is_empty() {
+                        "it is the cheapest level of all".to_string()
+                    } else {
+                        format!("every cheaper level errs more: {}", cheaper.join(", "))
+                    };
+                    println!(
+                        "pick: {} — error {:.4} mm <= {tolerance_mm} mm at {} per curve; {why}",
+                        s.level.name(),
+                        s.error_vs_reference_mm,
+                        charts::human_time(s.seconds)
+                    );
+                }
                 None => {
                     return Err(format!(
                         "no level is within {tolerance_mm} mm of the reference; use the reference itself"
@@ -190,6 +209,15 @@ fn run(cli: Cli) -> Result<(), String> {
     Ok(())
 }
 
+/// `{"lumped": {r_tt, r_pp, r_tp}, "reference": {...}}` in K/W, the reference on `rings` rings.
+fn thermal_json(p: &LinkParams, rings: usize) -> Result<serde_json::Value, String> {
+    let m = |r: morphlink_model::thermal::ResistanceMatrix| serde_json::json!({"r_tt": r.r_tt, "r_pp": r.r_pp, "r_tp": r.r_tp});
+    let lumped = levels::thermal_matrix(p, levels::Thermal::Lumped).map_err(|e| e.to_string())?;
+    let reference = levels::thermal_matrix(p, levels::Thermal::FiniteVolume(rings))
+        .map_err(|e| e.to_string())?;
+    Ok(serde_json::json!({"lumped": m(lumped), "reference": m(reference)}))
+}
+
 fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
@@ -197,5 +225,36 @@ fn main() -> ExitCode {
             eprintln!("morph-model: {e}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thermal_json_has_exactly_the_documented_shape() {
+        let p = LinkParams::DEFAULT;
+        let j = thermal_json(&p, 8).unwrap();
+        let obj = j.as_object().unwrap();
+        assert_eq!(obj.len(), 2);
+        let lumped = morphlink_model::thermal::resistance_matrix(&p);
+        for (key, want_tt) in [("lumped", Some(lumped.r_tt)), ("reference", None)] {
+            let m = obj[key].as_object().unwrap();
+            assert_eq!(m.len(), 3);
+            for k in ["r_tt", "r_pp", "r_tp"] {
+                let v = m[k].as_f64().unwrap();
+                assert!(v.is_finite() && v > 0.0, "{key}.{k} = {v}");
+            }
+            if let Some(w) = want_tt {
+                assert_eq!(m["r_tt"].as_f64().unwrap(), w);
+            }
+        }
+    }
+
+    #[test]
+    fn pick_rejects_a_tolerance_that_is_not_positive() {
+        let cli = Cli::parse_from(["morph-model", "pick", "--tolerance-mm", "0"]);
+        assert!(run(cli).unwrap_err().contains("positive"));
     }
 }

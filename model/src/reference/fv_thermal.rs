@@ -446,7 +446,7 @@ impl CrossSection {
         // Start on a checkerboard: the fastest mode alternates in sign cell to cell.
         let mut x: Vec<f64> = (0..n)
             .map(|c| {
-                if (c / self.nt + c % self.nt) % 2 == 0 {
+                if (c / self.nt + c % self.nt).is_multiple_of(2) {
                     1.0
                 } else {
                     -1.0
@@ -697,6 +697,73 @@ mod tests {
             worst = worst.max((f.rise_k[i * nt] - exact).abs() / exact);
         }
         assert!(worst < 1e-3, "worst relative error {worst}");
+    }
+
+    /// Exact mean rise of a uniformly heated disk (radius `a`, conductivity `k`, diffusivity
+    /// `alpha`, rim coefficient `h`, heat `q` W/m³) started at ambient: the steady profile minus
+    /// the Bessel series `Σ A_n J0(λ_n r) exp(−α λ_n² t)`, `λ J1(λa) = (h/k) J0(λa)`.
+    fn disk_mean_rise_exact(a: f64, k: f64, alpha: f64, h: f64, q: f64, t: f64) -> f64 {
+        let steady = |r: f64| q * (a * a - r * r) / (4.0 * k) + q * a / (2.0 * h);
+        let f = |l: f64| l * libm::j1(l * a) - h / k * libm::j0(l * a);
+        // Roots by bisection on a fine scan in λa.
+        let mut roots = Vec::new();
+        let (mut x0, step) = (1e-6, 0.01);
+        while roots.len() < 40 {
+            let x1 = x0 + step;
+            let (mut lo, mut hi) = (x0 / a, x1 / a);
+            if f(lo) * f(hi) < 0.0 {
+                for _ in 0..100 {
+                    let mid = 0.5 * (lo + hi);
+                    if f(lo) * f(mid) <= 0.0 {
+                        hi = mid;
+                    } else {
+                        lo = mid;
+                    }
+                }
+                roots.push(0.5 * (lo + hi));
+            }
+            x0 = x1;
+        }
+        // ∫ g(r) r dr on [0, a] by the midpoint rule on 4000 panels.
+        let integral = |g: &dyn Fn(f64) -> f64| {
+            let n = 4000;
+            let h = a / n as f64;
+            (0..n)
+                .map(|i| (i as f64 + 0.5) * h)
+                .map(|r| g(r) * r * h)
+                .sum::<f64>()
+        };
+        let mean_steady = 2.0 / (a * a) * integral(&|r| steady(r));
+        let mut u = 0.0;
+        for l in roots {
+            let num = integral(&|r| steady(r) * libm::j0(l * r));
+            let den = integral(&|r| libm::j0(l * r) * libm::j0(l * r));
+            let mean_mode = 2.0 / (a * a) * a * libm::j1(l * a) / l;
+            u += num / den * mean_mode * libm::exp(-alpha * l * l * t);
+        }
+        mean_steady - u
+    }
+
+    #[test]
+    fn uniform_disk_transient_matches_the_bessel_series() {
+        let mut lay = concentric(0.2, 4e-3);
+        lay.tca.radius_m = 4.1e-3;
+        let x = CrossSection::new(&lay, 16, 8).unwrap();
+        let (ta, pa): (f64, f64) = (x.tca_area.iter().sum(), x.pla_area.iter().sum());
+        let (pt, pp) = (ta / (ta + pa), pa / (ta + pa));
+        let dt = 0.05;
+        let run = x.transient(pt, pp, dt, 1200, Stepping::Implicit).unwrap();
+        let (a, k, h, l) = (4e-3, 0.2, 101.3, 0.05);
+        let q = 1.0 / l / (PI * a * a);
+        for t in [2.0, 10.0, 30.0, 60.0] {
+            let i = (t / dt).round() as usize - 1;
+            let fv = (ta * run.tca_rise_k[i] + pa * run.pla_rise_k[i]) / (ta + pa);
+            let exact = disk_mean_rise_exact(a, k, k / 1e6, h, q, t);
+            assert!(
+                (fv - exact).abs() < 0.01 * exact,
+                "t={t}: fv {fv} exact {exact}"
+            );
+        }
     }
 
     #[test]

@@ -250,7 +250,11 @@ pub fn calibrate_level(
     };
     let cost = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
     let m = &p.mechanics;
-    let mut th = Vector3::new(m.bending_stiffness_nm2.ln(), m.preload_n, m.force_coeff_n_per_k);
+    let mut th = Vector3::new(
+        m.bending_stiffness_nm2.ln(),
+        m.preload_n,
+        m.force_coeff_n_per_k,
+    );
     let mut lambda = 1e-3;
     for _ in 0..200 {
         let r0 = residuals(&th)?;
@@ -262,7 +266,11 @@ pub fn calibrate_level(
             let h = 1e-6 * th[k].abs().max(1e-6);
             let mut t2 = th;
             t2[k] += h;
-            *col = residuals(&t2)?.iter().zip(&r0).map(|(a, b)| (a - b) / h).collect();
+            *col = residuals(&t2)?
+                .iter()
+                .zip(&r0)
+                .map(|(a, b)| (a - b) / h)
+                .collect();
         }
         for i in 0..r0.len() {
             let j = Vector3::new(cols[0][i], cols[1][i], cols[2][i]);
@@ -500,6 +508,37 @@ mod tests {
         for (x, y) in a.iter().zip(&b) {
             assert!((x - y).abs() < 1e-6, "{x} vs {y}");
         }
+    }
+
+    #[test]
+    fn pick_takes_the_cheapest_level_within_tolerance_of_the_reference_physics() {
+        let mk = |level: Level, seconds: f64, err: f64| Scored {
+            level,
+            radius_mm: vec![],
+            seconds,
+            error_vs_reference_mm: err,
+            error_vs_measured_mm: 0.0,
+            uncalibrated_difference_mm: 0.0,
+            constants: (0.0, 0.0, 0.0),
+        };
+        let pla = Level {
+            pla_stiffness: true,
+            ..Level::LUMPED
+        };
+        let cos = Level {
+            mechanics: Mechanics::Cosserat(1),
+            ..Level::LUMPED
+        };
+        let s = vec![
+            mk(pla, 1e-7, 0.0),
+            mk(Level::LUMPED, 1e-6, 0.03),
+            mk(cos, 1e-5, 0.002),
+            mk(Level::REFERENCE, 1.0, 0.0),
+        ];
+        assert_eq!(pick(&s, 0.5).unwrap().level, Level::LUMPED);
+        assert_eq!(pick(&s, 0.01).unwrap().level, cos);
+        assert_eq!(pick(&s, 1e-4).unwrap().level, Level::REFERENCE);
+        assert!(pick(&s[..3], 1e-4).is_none());
     }
 
     #[test]
