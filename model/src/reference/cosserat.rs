@@ -136,8 +136,15 @@ impl Rod {
         r
     }
 
-    fn scale(&self) -> [f64; 6] {
-        core::array::from_fn(|j| self.stiffness[j][j])
+    /// Diagonal of `K`, the residual scale; a stiffness that is not positive is an error.
+    fn scale(&self) -> Result<[f64; 6], ReferenceError> {
+        for j in 0..6 {
+            let k = self.stiffness[j][j];
+            if !(k > 0.0 && k.is_finite()) {
+                return Err(ReferenceError::NotPositiveDefinite { row: j });
+            }
+        }
+        Ok(core::array::from_fn(|j| self.stiffness[j][j]))
     }
 
     /// Residual of one segment's balance with the actuator push `force` and an external
@@ -403,7 +410,7 @@ fn newton(
 
 /// The constant-strain rod from `guess` (plain Newton, analytic Jacobian).
 pub fn solve_constant(rod: &Rod, guess: &Strain, damped: bool) -> Result<Solution, ReferenceError> {
-    let scale = rod.scale();
+    let scale = rod.scale()?;
     let (x, iterations, residual) = newton(guess, &scale, damped, |x| {
         let xi: Strain = core::array::from_fn(|j| x[j]);
         let (f, j) = rod.constant_residual_jacobian(&xi)?;
@@ -427,7 +434,7 @@ pub fn solve_piecewise(
     guess: &[Strain],
     damped: bool,
 ) -> Result<Solution, ReferenceError> {
-    let scale = rod.scale();
+    let scale = rod.scale()?;
     let x0: Vec<f64> = guess.iter().flat_map(|s| s.iter().copied()).collect();
     let (x, iterations, residual) =
         newton(&x0, &scale, damped, |x| rod.piecewise_residual_jacobian(x))?;
@@ -451,7 +458,7 @@ pub fn solve_piecewise(
 /// large tip load can converge to a curled-back equilibrium that balances the load exactly but
 /// is unstable; this is how it is caught.
 pub fn check_stable(rod: &Rod, strains: &[Strain]) -> Result<(), ReferenceError> {
-    let scale = rod.scale();
+    let scale = rod.scale()?;
     let jac = if strains.len() == 1 && rod.tip_force_n == [0.0; 3] {
         let (_, j) = rod.constant_residual_jacobian(&strains[0])?;
         DMatrix::from_fn(6, 6, |r, c| j[r][c])
@@ -790,6 +797,65 @@ mod tests {
         );
         let direct = solve_constant(&rod, &REFERENCE_STRAIN, false).unwrap();
         assert!((s.strains[0][1] - direct.strains[0][1]).abs() < 1e-9);
+    }
+
+    #[test]
+    fn link_newton_from_straight_converges_fast_and_matches_continuation_in_power() {
+        // The link's own problem is nearly linear: plain Newton from the straight rod converges
+        // in a few iterations at every power, and continuation reaches the same answer.
+        let p = LinkParams::DEFAULT;
+        let law = super::super::tca_physics::TcaLaw::Linear(p.mechanics);
+        for temp_c in [30.0, 60.0, 90.0, 120.0] {
+            let rod = Rod::of_link(&p, law.at(temp_c), None);
+            let plain = solve_constant(&rod, &REFERENCE_STRAIN, false).unwrap();
+            assert!(
+                plain.iterations <= 6,
+                "{temp_c} °C: {} iterations",
+                plain.iterations
+            );
+            let mut current = REFERENCE_STRAIN;
+            for k in 1..=8 {
+                current = solve_constant(&rod.scaled(k as f64 / 8.0), &current, false)
+                    .unwrap()
+                    .strains[0];
+            }
+            for j in 0..6 {
+                assert!((current[j] - plain.strains[0][j]).abs() < 1e-9 * (1.0 + current[j].abs()));
+            }
+        }
+    }
+
+    #[test]
+    fn link_driven_beyond_two_pi_is_solved_and_its_radius_is_consistent() {
+        // A push far above the TCA's range curls the link past a full turn (κL ≈ 9 rad): the
+        // exponential map has no trouble, and the marker radius equals the strain radius.
+        let p = LinkParams::DEFAULT;
+        let f = ForceAtTemp {
+            push_n: 4.0,
+            stiffness_n_per_m: 19.4,
+        };
+        let rod = Rod::of_link(&p, f, None);
+        let s = solve_robust(&rod, 1, &REFERENCE_STRAIN).unwrap();
+        let kl = s.strains[0][1] * rod.length_m;
+        assert!(kl > 2.0 * core::f64::consts::PI, "κL = {kl}");
+        let by_markers = marker_radius_m(&s.strains, rod.length_m).unwrap();
+        let by_strain = strain_radius_m(&s.strains[0]).unwrap();
+        assert!(
+            (by_markers - by_strain).abs() < 1e-9 * by_strain,
+            "{by_markers} vs {by_strain}"
+        );
+    }
+
+    #[test]
+    fn zero_stiffness_is_an_error_not_a_nan() {
+        let mut rod = beam(1.5e-5, 0.05);
+        rod.stiffness[1][1] = 0.0;
+        rod.tip_moment_nm = [0.0, 1e-4, 0.0];
+        let r = solve_constant(&rod, &REFERENCE_STRAIN, false);
+        assert!(
+            matches!(r, Err(ReferenceError::NotPositiveDefinite { row: 1 })),
+            "{r:?}"
+        );
     }
 
     #[test]
