@@ -259,6 +259,7 @@ impl Controller {
             }
         };
         let mut seq_events: heapless::Vec<SeqEvent, 4> = heapless::Vec::new();
+        self.seq.set_supply_v(frame.supply_v);
         let result = self.seq.step(now_ms, &m, &mut |e| {
             let _ = seq_events.push(e);
         });
@@ -405,9 +406,11 @@ impl Controller {
             Ok(power_w) => {
                 out("ok");
                 let mut first: heapless::Vec<SeqEvent, 2> = heapless::Vec::new();
-                self.seq.start(now_ms, radius_mm, power_w, mode, &mut |e| {
-                    let _ = first.push(e);
-                });
+                let m = self.sup.measurements();
+                self.seq
+                    .start_from(now_ms, radius_mm, power_w, mode, &m, &mut |e| {
+                        let _ = first.push(e);
+                    });
                 for e in first {
                     self.push(Event::Seq(e));
                 }
@@ -542,7 +545,7 @@ fn write_fault_text(l: &mut OutLine, f: &Fault) {
 
 /// HELP text, one `data:` line each.
 const HELP: [&str; 10] = [
-    "MORPH <radius_mm> [auto|paper]  morph to a radius (RANGE shows the reachable ones)",
+    "MORPH <radius_mm> [auto|paper|gated|boost|closed]  morph to a radius (see RANGE)",
     "STATUS                          phase, temperatures, powers, supply, fault",
     "ABORT                           both heaters off at once, phase idle",
     "RESET                           clear a latched fault once its cause is gone",

@@ -11,10 +11,20 @@ pub const MAX_LINE: usize = 64;
 /// Morph strategy requested with `MORPH <radius_mm> [mode]`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Mode {
-    /// Thermistor-gated phases with the table's power (the default).
+    /// The default: whichever strategy the strategy chart picked
+    /// ([`crate::sequencer::AUTO_STRATEGY`]).
     Auto,
     /// The paper's fixed timing: PLA 4 W 0–20 s, 1.5 W 20–70 s; TCA 20–120 s.
     Paper,
+    /// Thermistor-gated phases with the table's power: soften until the PLA reads soft, bend
+    /// until the TCA thermistor settles, lock until the PLA reads rigid.
+    Gated,
+    /// Model-based feed-forward: the controller's thermal model is driven open loop to the
+    /// target temperatures with overdrive, then holds them at the steady power.
+    Boost,
+    /// Closed-loop temperature control of both heaters from the thermistors, with the model as
+    /// observer and the release spring-back compensated.
+    Closed,
 }
 
 /// One of the three thermistors.
@@ -82,7 +92,7 @@ pub enum SimCommand {
 /// A parsed command line.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Command {
-    /// `MORPH <radius_mm> [auto|paper]`.
+    /// `MORPH <radius_mm> [auto|paper|gated|boost|closed]`.
     Morph {
         /// Target bending radius in millimetres.
         radius_mm: f32,
@@ -156,11 +166,14 @@ impl ErrorCode {
 }
 
 impl Mode {
-    /// The lowercase wire word (`auto`, `paper`).
+    /// The lowercase wire word (`auto`, `paper`, `gated`, `boost`, `closed`).
     pub fn as_str(self) -> &'static str {
         match self {
             Mode::Auto => "auto",
             Mode::Paper => "paper",
+            Mode::Gated => "gated",
+            Mode::Boost => "boost",
+            Mode::Closed => "closed",
         }
     }
 }
@@ -210,7 +223,13 @@ impl SimFault {
 }
 
 /// Every [`Mode`], for matching wire words.
-const MODES: [Mode; 2] = [Mode::Auto, Mode::Paper];
+pub const MODES: [Mode; 5] = [
+    Mode::Auto,
+    Mode::Paper,
+    Mode::Gated,
+    Mode::Boost,
+    Mode::Closed,
+];
 /// Every [`Sensor`], for matching wire words.
 const SENSORS: [Sensor; 3] = [Sensor::Pla, Sensor::Tca, Sensor::Amb];
 /// Every [`Medium`], for matching wire words.
@@ -297,7 +316,7 @@ fn no_more<'a>(
     }
 }
 
-/// `MORPH <radius_mm> [auto|paper]` after the command word.
+/// `MORPH <radius_mm> [auto|paper|gated|boost|closed]` after the command word.
 fn parse_morph<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<Command, ProtoError> {
     let radius = args
         .next()
@@ -310,13 +329,13 @@ fn parse_morph<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<Command, P
     }
     let mode = match args.next() {
         None => Mode::Auto,
-        Some(word) => {
-            lookup(&MODES, word, Mode::as_str).ok_or(bad("MORPH mode must be auto or paper."))?
-        }
+        Some(word) => lookup(&MODES, word, Mode::as_str).ok_or(bad(
+            "MORPH mode must be auto, paper, gated, boost or closed.",
+        ))?,
     };
     no_more(
         args,
-        "MORPH takes a radius and an optional mode (auto or paper).",
+        "MORPH takes a radius and an optional mode (auto, paper, gated, boost, closed).",
     )?;
     Ok(Command::Morph { radius_mm, mode })
 }

@@ -2,9 +2,12 @@
 //! plus Fault. It turns measured temperatures into heater powers; it never touches hardware
 //! and never decides about safety (the supervisor does, every tick, before it).
 
+use crate::heater::HeaterConfig;
 use crate::link::{HOLD_POWER_W, R_TP_K_PER_W, R_TT_K_PER_W};
+use crate::observer::{HeatedNode, Observer};
 use crate::protocol::Mode;
 use crate::table;
+use crate::target;
 
 /// Phase of the morph sequence.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -94,6 +97,69 @@ pub const PAPER_HOLD_END_S: f32 = 70.0;
 /// See [`PAPER_SOFTEN_END_S`].
 pub const PAPER_TCA_END_S: f32 = 120.0;
 
+/// The strategy `auto` runs: the one the strategy chart (`cargo xtask strategies`,
+/// `docs/strategies.md`) puts on the Pareto front with a 95th-percentile radius error under 2 %
+/// and the shortest 95th-percentile morph time.
+pub const AUTO_STRATEGY: Mode = Mode::Closed;
+
+/// PLA temperature the `boost` and `closed` strategies hold while bending, °C: 5 K above the
+/// [`SOFT_THRESHOLD_C`] (so thermistor noise and the observer's error do not drop it below the
+/// threshold) and no hotter, because every kelvin above Tg must be cooled off again in lock.
+pub const PLA_SOFT_TARGET_C: f32 = 75.0;
+/// Largest PLA heater power of the model strategies, W: the heater's cap (5 W, above the
+/// paper's 4 W) is the overdrive.
+pub const PLA_BOOST_MAX_W: f32 = HeaterConfig::PLA.max_power_w;
+/// Largest TCA power of the model strategies, W: the TCA heater's cap (2 W, about 110 °C steady
+/// under water); the target temperature, not this cap, bounds the TCA.
+pub const TCA_BOOST_MAX_W: f32 = HeaterConfig::TCA.max_power_w;
+/// The model strategies count the TCA as at its target once within this band, K: 0.27 mm of
+/// radius per kelvin, so 0.3 K is under 0.1 mm.
+pub const MODEL_SETTLE_BAND_C: f32 = 0.3;
+/// ...for this long, s: a few ticks more than the observer's correction needs to move after a
+/// step, so a passing crossing of the band does not count.
+pub const MODEL_SETTLE_S: f32 = 1.5;
+/// `closed` ends lock when the observer's PLA estimate and the PLA thermistor corrected for its
+/// lag (reading + assumed lag × its rate, what a first-order sensor trails by) are both below
+/// [`RIGID_THRESHOLD_C`]. Under water this ends lock about 3 s before the bare thermistor would;
+/// a thermistor that stops falling (warm surroundings) holds the lock, whatever the model says.
+pub const CLOSED_RIGID_LEAD_S: f32 = crate::observer::SENSOR_TAU_S;
+/// The lag correction of [`CLOSED_RIGID_LEAD_S`] is used only while the surroundings read at
+/// least this far below [`RIGID_THRESHOLD_C`], K: then the rod keeps cooling after release and a
+/// lock ended a kelvin early freezes the same shape. In surroundings nearer the threshold the
+/// rod may stall just above it, so the bare thermistor decides, as in `gated`.
+pub const CLOSED_LEAD_AMBIENT_MARGIN_K: f32 = 10.0;
+/// Where `closed` counts the PLA as rigid in cool surroundings (see
+/// [`CLOSED_LEAD_AMBIENT_MARGIN_K`]), °C: 12 K below Tg the PLA's modulus is 98 % of the way to
+/// glassy on a log scale (about 1.5 GPa) and its flow time 27 s, growing e-fold with every 3 K it
+/// keeps cooling after release, so the shape is frozen. Waiting for [`RIGID_THRESHOLD_C`] costs
+/// 3–8 s under water with no measurable change of the final radius over the ensemble. In warm
+/// surroundings the rod may stall near these temperatures, so there `closed` waits for
+/// [`RIGID_THRESHOLD_C`] on the bare thermistor, as `gated` does.
+pub const CLOSED_RIGID_COOL_C: f32 = 50.0;
+
+/// Thermistor guard of the model strategies, K: a heater is switched off for the tick while its
+/// thermistor reads more than this above the heater's target temperature. The model assumes
+/// water; in still air the same power heats about five times as much, and the feed-forward
+/// alone would run into the supervisor's 130 °C limit. 10 K is far outside the observer's
+/// normal error (under 2 K) and keeps every target (at most 110 °C) 10 K under the limit.
+pub const MODEL_GUARD_K: f32 = 10.0;
+
+/// Least power the model strategies ask of a heater in a phase that has it on, W. The
+/// supervisor's heater watch starts afresh whenever a heater's command drops to 0 W; restarted
+/// on a hot heater that the controller is letting cool towards its target, it would read the
+/// fall as a dead heater. 0.05 W keeps the watch running and heats the TCA by under 2 K.
+pub const MODEL_KEEP_ALIVE_W: f32 = 0.05;
+
+/// A TCA at full power whose thermistor rises slower than this has reached as close to its
+/// target as the 2 W cap allows, K/s (strong convection in cold water, a low supply): the model
+/// strategies lock there instead of waiting for the bend timeout. The bulk's 17 s time constant
+/// makes 0.05 K/s about 1 K short of where it would end.
+pub const MODEL_STALL_RATE_K_PER_S: f32 = 0.05;
+/// A stall counts only this long after MORPH, s: after the supervisor's heater-not-heating check
+/// has judged the TCA (on from MORPH, judged after 10 s), so a dead TCA, which does not rise at
+/// all, trips instead of passing for a stalled one.
+pub const STALL_AFTER_S: f32 = crate::supervisor::HEATING_CHECK_S + MODEL_SETTLE_S;
+
 /// Something the sequencer reports to the user.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SeqEvent {
@@ -131,6 +197,12 @@ pub struct Sequencer {
     window_ms: u64,
     window_temp_c: f32,
     estimate_mm: f32,
+    observer: Observer,
+    tca_target_c: f32,
+    last_ms: u64,
+    applied: Powers,
+    supply_v: f32,
+    settled_since_ms: Option<u64>,
 }
 
 impl Default for Sequencer {
@@ -152,7 +224,45 @@ impl Sequencer {
             window_ms: 0,
             window_temp_c: f32::NAN,
             estimate_mm: f32::NAN,
+            observer: Observer::IDLE,
+            tca_target_c: f32::NAN,
+            last_ms: 0,
+            applied: Powers {
+                pla_w: 0.0,
+                tca_w: 0.0,
+            },
+            supply_v: f32::NAN,
+            settled_since_ms: None,
         }
+    }
+
+    /// The strategy a morph in `mode` runs (`auto` resolved to [`AUTO_STRATEGY`]).
+    pub fn strategy_of(mode: Mode) -> Mode {
+        match mode {
+            Mode::Auto => AUTO_STRATEGY,
+            m => m,
+        }
+    }
+
+    /// Strategy of the running or last morph (never `Auto`).
+    pub fn strategy(&self) -> Mode {
+        self.mode
+    }
+
+    /// TCA temperature the `boost` or `closed` morph aims at, °C (NaN for the others).
+    pub fn tca_target_c(&self) -> f32 {
+        self.tca_target_c
+    }
+
+    /// The controller's thermal model of the link (meaningful during `boost`/`closed` morphs).
+    pub fn observer(&self) -> &Observer {
+        &self.observer
+    }
+
+    /// Tells the sequencer the measured heater supply, V, so the model strategies know what
+    /// power the heaters can actually deliver. Call before [`Sequencer::step`].
+    pub fn set_supply_v(&mut self, supply_v: f32) {
+        self.supply_v = supply_v;
     }
 
     /// Current phase.
@@ -173,7 +283,9 @@ impl Sequencer {
         )
     }
 
-    /// Starts a morph to `radius_mm` with TCA power `tca_power_w` (from the table).
+    /// Starts a morph to `radius_mm` with TCA power `tca_power_w` (from the table) in `mode`
+    /// (`auto` runs [`AUTO_STRATEGY`]). Equivalent to [`Sequencer::start_from`] with the link at
+    /// the built-in ambient temperature.
     pub fn start(
         &mut self,
         now_ms: u64,
@@ -182,7 +294,38 @@ impl Sequencer {
         mode: Mode,
         emit: &mut impl FnMut(SeqEvent),
     ) {
+        let amb = crate::link::LINK.surroundings.ambient_c as f32;
+        let m = Measurements {
+            t_pla_c: amb,
+            t_tca_c: amb,
+            t_amb_c: amb,
+        };
+        self.start_from(now_ms, radius_mm, tca_power_w, mode, &m, emit);
+    }
+
+    /// Starts a morph to `radius_mm` with TCA power `tca_power_w` (from the table) in `mode`
+    /// (`auto` runs [`AUTO_STRATEGY`]) from the measured temperatures `m` (they start the
+    /// model strategies' observer and set the spring-back compensation's ambient).
+    pub fn start_from(
+        &mut self,
+        now_ms: u64,
+        radius_mm: f32,
+        tca_power_w: f32,
+        mode: Mode,
+        m: &Measurements,
+        emit: &mut impl FnMut(SeqEvent),
+    ) {
+        let mode = Self::strategy_of(mode);
         self.mode = mode;
+        self.observer = Observer::from_measured(m.t_pla_c, m.t_tca_c, m.t_amb_c);
+        self.tca_target_c = match mode {
+            Mode::Boost => target::tca_temp_for_radius_c(radius_mm),
+            Mode::Closed => target::lock_temp_for_final_radius_c(radius_mm, m.t_amb_c),
+            _ => f32::NAN,
+        };
+        self.last_ms = now_ms;
+        self.applied = Powers::default();
+        self.settled_since_ms = None;
         self.target_mm = radius_mm;
         self.tca_power_w = tca_power_w;
         self.start_ms = now_ms;
@@ -213,6 +356,7 @@ impl Sequencer {
 
     fn enter(&mut self, phase: Phase, now_ms: u64, emit: &mut impl FnMut(SeqEvent)) {
         self.phase = phase;
+        self.settled_since_ms = None;
         self.phase_ms = now_ms;
         self.window_ms = now_ms;
         self.window_temp_c = f32::NAN;
@@ -240,8 +384,9 @@ impl Sequencer {
         emit: &mut impl FnMut(SeqEvent),
     ) -> Result<Powers, PhaseTimeout> {
         match self.mode {
-            Mode::Auto => self.step_gated(now_ms, m, emit),
             Mode::Paper => self.step_paper(now_ms, m, emit),
+            Mode::Boost | Mode::Closed => self.step_model(now_ms, m, emit),
+            Mode::Auto | Mode::Gated => self.step_gated(now_ms, m, emit),
         }
     }
 
@@ -353,6 +498,161 @@ impl Sequencer {
         Ok(self.powers())
     }
 
+    /// Power a heater delivers when asked for `w` (W) at the measured supply: capped by the
+    /// heater and by full duty (`V²/R`); unknown supply assumes the request is met.
+    fn deliverable_w(heater: &HeaterConfig, w: f32, supply_v: f32) -> f32 {
+        let w = w.clamp(0.0, heater.max_power_w);
+        if supply_v.is_finite() && supply_v > 0.0 {
+            w.min(supply_v * supply_v / heater.resistance_ohm)
+        } else {
+            w
+        }
+    }
+
+    /// True once `ok` has held for [`MODEL_SETTLE_S`].
+    fn held(&mut self, now_ms: u64, ok: bool) -> bool {
+        if !ok {
+            self.settled_since_ms = None;
+            return false;
+        }
+        let since = *self.settled_since_ms.get_or_insert(now_ms);
+        self.since_s(now_ms, since) >= MODEL_SETTLE_S
+    }
+
+    /// `boost` and `closed`: both heaters driven through the thermal model to target
+    /// temperatures (PLA [`PLA_SOFT_TARGET_C`], TCA the radius's temperature), the TCA from the
+    /// start of soften on. `boost` drives the bare model (feed-forward) and gates soften and
+    /// lock on the thermistors; `closed` drives the observer's corrected estimate and gates
+    /// every phase on it.
+    fn step_model(
+        &mut self,
+        now_ms: u64,
+        m: &Measurements,
+        emit: &mut impl FnMut(SeqEvent),
+    ) -> Result<Powers, PhaseTimeout> {
+        self.check_timeout(now_ms)?;
+        if !self.busy() {
+            return Ok(Powers::default());
+        }
+        let closed = self.mode == Mode::Closed;
+        let dt_s = self.since_s(now_ms, self.last_ms);
+        self.last_ms = now_ms;
+        if dt_s > 0.0 {
+            let a = self.applied;
+            self.observer.predict(dt_s, a.pla_w, a.tca_w, m.t_amb_c);
+            self.observer.correct(dt_s, m.t_pla_c, m.t_tca_c);
+        }
+        let o = &self.observer;
+        let (pla_c, tca_c) = if closed {
+            (o.estimate_c(HeatedNode::Pla), o.estimate_c(HeatedNode::Tca))
+        } else {
+            (o.model_c(HeatedNode::Pla), o.model_c(HeatedNode::Tca))
+        };
+        let in_phase_s = self.since_s(now_ms, self.phase_ms);
+        match self.phase {
+            Phase::Soften => {
+                let soft = if closed { pla_c } else { m.t_pla_c };
+                if soft >= SOFT_THRESHOLD_C {
+                    self.enter(Phase::Bend, now_ms, emit);
+                }
+            }
+            Phase::Bend => {
+                // `closed` also waits for the TCA thermistor to slow down, so the observer has
+                // learnt the model's error before the PLA freezes the shape.
+                let learnt = !closed
+                    || self.observer.measured_rate_k_per_s(HeatedNode::Tca).abs()
+                        <= crate::observer::LEARN_MAX_RATE_K_PER_S;
+                // Above the target with the TCA off is as close as the link can get (warm
+                // surroundings and the PLA's heat keep it there): lock as it is.
+                let reached = (tca_c - self.tca_target_c).abs() <= MODEL_SETTLE_BAND_C
+                    || (tca_c > self.tca_target_c && self.applied.tca_w <= MODEL_KEEP_ALIVE_W)
+                    || (tca_c < self.tca_target_c
+                        && self.applied.tca_w
+                            >= Self::deliverable_w(
+                                &HeaterConfig::TCA,
+                                TCA_BOOST_MAX_W,
+                                self.supply_v,
+                            ) - 1e-3
+                        && self.observer.measured_rate_k_per_s(HeatedNode::Tca)
+                            < MODEL_STALL_RATE_K_PER_S
+                        && self.since_s(now_ms, self.start_ms) > STALL_AFTER_S);
+                let at_target = reached && pla_c >= SOFT_THRESHOLD_C && learnt;
+                if self.held(now_ms, at_target) && in_phase_s >= MODEL_SETTLE_S {
+                    self.estimate_mm = target::final_radius_mm(tca_c, m.t_amb_c);
+                    self.enter(Phase::Lock, now_ms, emit);
+                }
+            }
+            Phase::Lock => {
+                let rigid = if closed {
+                    let rate = self.observer.measured_rate_k_per_s(HeatedNode::Pla);
+                    let cool_surroundings =
+                        m.t_amb_c < RIGID_THRESHOLD_C - CLOSED_LEAD_AMBIENT_MARGIN_K;
+                    let (lead_c, rigid_c) = if cool_surroundings {
+                        (
+                            m.t_pla_c + CLOSED_RIGID_LEAD_S * rate.min(0.0),
+                            CLOSED_RIGID_COOL_C,
+                        )
+                    } else {
+                        (m.t_pla_c, RIGID_THRESHOLD_C)
+                    };
+                    pla_c < rigid_c && lead_c < rigid_c
+                } else {
+                    m.t_pla_c < RIGID_THRESHOLD_C
+                };
+                if rigid {
+                    self.enter(Phase::Release, now_ms, emit);
+                }
+            }
+            Phase::Release => {
+                if in_phase_s >= RELEASE_S {
+                    self.finish(now_ms, emit);
+                }
+            }
+            Phase::Idle | Phase::Fault => {}
+        }
+        let o = &self.observer;
+        // The model is driven to `target − disturbance`, so the estimate meets the target.
+        let (d_pla, d_tca) = if closed {
+            (
+                o.disturbance_k(HeatedNode::Pla),
+                o.disturbance_k(HeatedNode::Tca),
+            )
+        } else {
+            (0.0, 0.0)
+        };
+        let pla_on = matches!(self.phase, Phase::Soften | Phase::Bend);
+        let tca_on = matches!(self.phase, Phase::Soften | Phase::Bend | Phase::Lock);
+        let pla_w = if pla_on {
+            o.power_to_reach_w(HeatedNode::Pla, PLA_SOFT_TARGET_C - d_pla, PLA_BOOST_MAX_W)
+        } else {
+            0.0
+        };
+        let tca_w = if tca_on {
+            o.power_to_reach_w(HeatedNode::Tca, self.tca_target_c - d_tca, TCA_BOOST_MAX_W)
+        } else {
+            0.0
+        };
+        // The guard: whatever the model says, a thermistor well above target turns its heater
+        // down to the keep-alive power.
+        let keep = |on: bool, w: f32, too_hot: bool| {
+            if !on {
+                0.0
+            } else if too_hot {
+                MODEL_KEEP_ALIVE_W
+            } else {
+                w.max(MODEL_KEEP_ALIVE_W)
+            }
+        };
+        let pla_w = keep(pla_on, pla_w, m.t_pla_c > PLA_SOFT_TARGET_C + MODEL_GUARD_K);
+        let tca_w = keep(tca_on, tca_w, m.t_tca_c > self.tca_target_c + MODEL_GUARD_K);
+        let p = Powers { pla_w, tca_w };
+        self.applied = Powers {
+            pla_w: Self::deliverable_w(&HeaterConfig::PLA, p.pla_w, self.supply_v),
+            tca_w: Self::deliverable_w(&HeaterConfig::TCA, p.tca_w, self.supply_v),
+        };
+        Ok(p)
+    }
+
     /// Powers of the current phase, W.
     fn powers(&self) -> Powers {
         let paper = self.mode == Mode::Paper;
@@ -400,7 +700,7 @@ mod tests {
     fn gated_sequence_walks_every_phase_in_order() {
         let mut s = Sequencer::new();
         let mut ev = Vec::new();
-        s.start(0, 38.0, 0.6, Mode::Auto, &mut |e| ev.push(e));
+        s.start(0, 38.0, 0.6, Mode::Gated, &mut |e| ev.push(e));
         assert_eq!(
             run(&mut s, 100, meas(30.0, 22.0), &mut ev),
             Powers {
@@ -468,7 +768,7 @@ mod tests {
         ] {
             let mut s = Sequencer::new();
             let mut ev = Vec::new();
-            s.start(0, 38.0, 0.6, Mode::Auto, &mut |e| ev.push(e));
+            s.start(0, 38.0, 0.6, Mode::Gated, &mut |e| ev.push(e));
             let mut now = 0;
             if phase_at >= 1 {
                 now += 100;
@@ -570,7 +870,7 @@ mod tests {
         for steps in 0..4 {
             let mut s = Sequencer::new();
             let mut ev = Vec::new();
-            s.start(0, 38.0, 0.6, Mode::Auto, &mut |e| ev.push(e));
+            s.start(0, 38.0, 0.6, Mode::Gated, &mut |e| ev.push(e));
             let ms = [meas(75.0, 30.0), meas(75.0, 50.0), meas(40.0, 50.0)];
             let mut t = 0;
             for m in ms.iter().take(steps) {
@@ -584,6 +884,85 @@ mod tests {
             assert_eq!(
                 run(&mut s, t + 100, meas(75.0, 50.0), &mut ev),
                 Powers::default()
+            );
+        }
+    }
+
+    #[test]
+    fn auto_runs_the_charted_strategy() {
+        let mut s = Sequencer::new();
+        s.start(0, 38.0, 0.6, Mode::Auto, &mut |_| {});
+        assert_eq!(s.strategy(), AUTO_STRATEGY);
+        assert_ne!(AUTO_STRATEGY, Mode::Auto);
+        for m in [Mode::Paper, Mode::Gated, Mode::Boost, Mode::Closed] {
+            assert_eq!(Sequencer::strategy_of(m), m);
+        }
+    }
+
+    #[test]
+    fn model_strategies_overdrive_both_heaters_from_the_start() {
+        for mode in [Mode::Boost, Mode::Closed] {
+            let mut s = Sequencer::new();
+            s.set_supply_v(12.0);
+            s.start(0, 35.0, 1.0, mode, &mut |_| {});
+            let p = s.step(100, &meas(22.0, 22.0), &mut |_| {}).unwrap();
+            assert_eq!(p.pla_w, PLA_BOOST_MAX_W, "{mode:?}");
+            assert_eq!(p.tca_w, TCA_BOOST_MAX_W, "{mode:?}");
+            assert!(s.tca_target_c() > 60.0 && s.tca_target_c() < 90.0);
+        }
+    }
+
+    #[test]
+    fn the_guard_turns_a_hot_heater_down_but_never_to_zero_while_its_phase_has_it_on() {
+        for mode in [Mode::Boost, Mode::Closed] {
+            let mut s = Sequencer::new();
+            s.set_supply_v(12.0);
+            s.start(0, 35.0, 1.0, mode, &mut |_| {});
+            let hot = meas(PLA_SOFT_TARGET_C + MODEL_GUARD_K + 1.0, 22.0);
+            let p = s.step(100, &hot, &mut |_| {}).unwrap();
+            assert_eq!(p.pla_w, MODEL_KEEP_ALIVE_W, "{mode:?}");
+            let t = s.tca_target_c();
+            let p = s
+                .step(200, &meas(30.0, t + MODEL_GUARD_K + 1.0), &mut |_| {})
+                .unwrap();
+            assert_eq!(p.tca_w, MODEL_KEEP_ALIVE_W, "{mode:?}");
+            // Far above target on the model too: still the keep-alive, not zero.
+            let mut now = 200;
+            for _ in 0..50 {
+                now += 100;
+                let p = s.step(now, &meas(30.0, t + 5.0), &mut |_| {}).unwrap();
+                assert!(p.tca_w >= MODEL_KEEP_ALIVE_W, "{mode:?} {p:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn model_strategies_end_in_idle_with_both_heaters_off() {
+        for mode in [Mode::Boost, Mode::Closed] {
+            let mut s = Sequencer::new();
+            let mut ev = Vec::new();
+            s.set_supply_v(12.0);
+            s.start(0, 38.0, 0.7, mode, &mut |e| ev.push(e));
+            // A plant that follows the request exactly: read the observer's own estimates.
+            let mut now = 0;
+            let mut p = Powers::default();
+            while s.busy() && now < 300_000 {
+                now += 100;
+                let o = s.observer();
+                let m = Measurements {
+                    t_pla_c: o.estimate_c(HeatedNode::Pla),
+                    t_tca_c: o.estimate_c(HeatedNode::Tca),
+                    t_amb_c: 22.0,
+                };
+                p = s.step(now, &m, &mut |e| ev.push(e)).unwrap();
+            }
+            assert_eq!(s.phase(), Phase::Idle, "{mode:?}");
+            assert_eq!(p, Powers::default());
+            assert!(now < 60_000, "{mode:?} took {now} ms");
+            assert!(
+                matches!(ev.last(), Some(SeqEvent::Done { radius_mm, .. }) if (radius_mm - 38.0).abs() < 0.5),
+                "{mode:?}: {:?}",
+                ev.last()
             );
         }
     }

@@ -4,7 +4,9 @@
 //! simulated link and host tools: [`thermal`] (steady resistance matrix and transient network),
 //! [`mechanics`] (TCA force law and constant-curvature balance) and [`table`]. With the `std`
 //! feature, [`file`] reads and writes `link.toml`; with `fit`, [`calibrate`] fits the unknown
-//! mechanical constants to measured radii.
+//! mechanical constants to measured radii. With `reference`, [`reference`] holds the paper's full
+//! model (2-D finite-volume thermal, Cosserat rod, physics-based TCA law) and the study of what
+//! each level of model costs and buys.
 #![cfg_attr(not(any(feature = "std", test)), no_std)]
 #![deny(missing_docs)]
 // `!(x >= limit)` is deliberate: a NaN reading must fail a check, not pass it.
@@ -20,5 +22,7 @@ pub mod thermal;
 pub mod calibrate;
 #[cfg(feature = "std")]
 pub mod file;
+#[cfg(feature = "reference")]
+pub mod reference;
 
 pub use params::LinkParams;

@@ -8,6 +8,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 #![allow(clippy::needless_range_loop)]
 
+pub mod ensemble;
 pub mod link;
 pub mod rig;
 

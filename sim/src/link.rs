@@ -105,6 +105,11 @@ impl SimLink {
         (self.net.temp_c[node::PLA], self.net.temp_c[node::TCA])
     }
 
+    /// Temperatures the PLA, TCA and ambient thermistor beads are at (lagged, before noise), °C.
+    pub fn sensed_c(&self) -> [f64; 3] {
+        self.sensed_c
+    }
+
     /// Heater powers actually dissipated in the last step, W (PLA, TCA).
     pub fn powers_w(&self) -> [f64; 2] {
         self.powers_w

@@ -2,6 +2,7 @@
 use clap::{Parser, Subcommand};
 
 mod boards;
+mod strategies;
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -17,6 +18,8 @@ enum Task {
     Root,
     /// Build the firmware for every board in release, print flash/RAM use, check budgets.
     Boards,
+    /// Compare the morph strategies over a mismatch ensemble: docs/strategies.csv and charts.
+    Strategies(strategies::Args),
 }
 
 fn main() -> ExitCode {
@@ -26,6 +29,7 @@ fn main() -> ExitCode {
             Ok(())
         }
         Task::Boards => boards::run(&workspace_root()),
+        Task::Strategies(a) => strategies::run(&a, &workspace_root()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,351 @@
+//! The line link to a board (serial port) or to `morph-sim` (a child process over pipes), and
+//! a protocol session on it: the VERSION handshake, commands with their final reply, and the
+//! unsolicited `event:`/`alarm:` lines.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::time::{Duration, Instant};
+
+/// Protocol version this tool speaks (`VERSION` replies `ok version=<v> protocol=1`).
+pub const PROTOCOL: &str = "1";
+/// Time a device has to answer VERSION, s: a board answers within a tick (100 ms); 3 s leaves
+/// room for a board that was just reset by the port opening (USB CDC on some boards).
+pub const HANDSHAKE_TIMEOUT_S: f64 = 3.0;
+/// Time any other command's final reply may take, s.
+pub const REPLY_TIMEOUT_S: f64 = 2.0;
+/// Read timeout of the serial port, ms: short, so the reader thread notices a closed tool.
+const SERIAL_READ_TIMEOUT_MS: u64 = 100;
+
+/// Where the lines come from.
+pub enum Target {
+    /// A serial port at a path, with a baud rate.
+    Serial {
+        /// Device path (`/dev/ttyACM0`, `COM3`).
+        path: String,
+        /// Baud rate (the firmware's USB CDC ignores it; a UART bridge needs it).
+        baud: u32,
+    },
+    /// `morph-sim` started as a child at a speed factor.
+    Sim {
+        /// The `morph-sim` executable.
+        program: PathBuf,
+        /// Simulation speed, a factor of real time.
+        speed: f64,
+    },
+}
+
+/// A line received from the device.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Incoming {
+    /// A line of text (without its line ending).
+    Line(String),
+    /// The device closed the link (the child exited, the port vanished).
+    Closed(String),
+}
+
+/// An open link: lines out, lines in through a reader thread.
+pub struct Link {
+    writer: Box<dyn Write + Send>,
+    lines: Receiver<Incoming>,
+    child: Option<Child>,
+    /// True for `morph-sim` (it answers `SIM` commands).
+    pub simulated: bool,
+    /// What the link is, for messages.
+    pub name: String,
+}
+
+/// Error text for a serial port that could not be opened.
+fn serial_error(path: &str, e: &serialport::Error) -> String {
+    use serialport::ErrorKind as K;
+    let known = || match serialport::available_ports() {
+        Ok(p) if !p.is_empty() => {
+            let names: Vec<String> = p.into_iter().map(|p| p.port_name).collect();
+            format!("ports found: {}", names.join(", "))
+        }
+        _ => "no serial ports found; is the board plugged in?".to_string(),
+    };
+    match e.kind() {
+        K::Io(std::io::ErrorKind::NotFound) => {
+            format!("no serial port at {path} ({})", known())
+        }
+        K::NoDevice => format!(
+            "{path} is busy: another program (a terminal, another morphctl) has it open; close it and retry"
+        ),
+        K::Io(std::io::ErrorKind::PermissionDenied) => format!(
+            "permission denied opening {path}: add your user to the group that owns it (often `dialout`)"
+        ),
+        _ => format!("cannot open {path} as a serial port: {e}"),
+    }
+}
+
+fn spawn_reader(mut source: impl Read + Send + 'static, what: String) -> Receiver<Incoming> {
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let mut pending = Vec::new();
+        let mut buf = [0u8; 256];
+        loop {
+            match source.read(&mut buf) {
+                Ok(0) => {
+                    let _ = tx.send(Incoming::Closed(format!("{what} closed the link")));
+                    return;
+                }
+                Ok(n) => {
+                    for &b in &buf[..n] {
+                        if b == b'\n' {
+                            let line = String::from_utf8_lossy(&pending)
+                                .trim_end_matches('\r')
+                                .to_string();
+                            pending.clear();
+                            if tx.send(Incoming::Line(line)).is_err() {
+                                return;
+                            }
+                        } else {
+                            pending.push(b);
+                        }
+                    }
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted
+                    ) => {}
+                Err(e) => {
+                    let _ = tx.send(Incoming::Closed(format!("{what}: {e}")));
+                    return;
+                }
+            }
+        }
+    });
+    rx
+}
+
+/// `morph-sim` next to this executable (the same build), else on the PATH.
+pub fn default_sim_program() -> PathBuf {
+    let name = format!("morph-sim{}", std::env::consts::EXE_SUFFIX);
+    if let Ok(me) = std::env::current_exe() {
+        if let Some(dir) = me.parent() {
+            let p = dir.join(&name);
+            if p.exists() {
+                return p;
+            }
+        }
+    }
+    PathBuf::from(name)
+}
+
+impl Link {
+    /// Opens the link (no handshake yet).
+    pub fn open(target: &Target) -> Result<Link, String> {
+        match target {
+            Target::Serial { path, baud } => {
+                if !Path::new(path).exists() && !path.to_ascii_uppercase().starts_with("COM") {
+                    let e = serialport::Error::new(
+                        serialport::ErrorKind::Io(std::io::ErrorKind::NotFound),
+                        "not found",
+                    );
+                    return Err(serial_error(path, &e));
+                }
+                let port = serialport::new(path, *baud)
+                    .timeout(Duration::from_millis(SERIAL_READ_TIMEOUT_MS))
+                    .open()
+                    .map_err(|e| serial_error(path, &e))?;
+                let reader = port
+                    .try_clone()
+                    .map_err(|e| format!("cannot read from {path}: {e}"))?;
+                Ok(Link {
+                    writer: Box::new(port),
+                    lines: spawn_reader(reader, path.clone()),
+                    child: None,
+                    simulated: false,
+                    name: path.clone(),
+                })
+            }
+            Target::Sim { program, speed } => {
+                let mut child = Command::new(program)
+                    .arg("--speed")
+                    .arg(format!("{speed}"))
+                    .stdin(Stdio::piped())
+                    .stdout(Stdio::piped())
+                    .stderr(Stdio::null())
+                    .spawn()
+                    .map_err(|e| {
+                        format!(
+                            "cannot start {}: {e} (build it with `cargo build -p morphlink-host --bin morph-sim`, or pass --sim-program)",
+                            program.display()
+                        )
+                    })?;
+                let stdin = child.stdin.take().expect("piped stdin");
+                let stdout = child.stdout.take().expect("piped stdout");
+                Ok(Link {
+                    writer: Box::new(stdin),
+                    lines: spawn_reader(stdout, "morph-sim".into()),
+                    child: Some(child),
+                    simulated: true,
+                    name: "morph-sim".into(),
+                })
+            }
+        }
+    }
+
+    /// Sends one line.
+    pub fn send(&mut self, line: &str) -> Result<(), String> {
+        self.writer
+            .write_all(format!("{line}\n").as_bytes())
+            .and_then(|_| self.writer.flush())
+            .map_err(|e| format!("cannot write to {}: {e}", self.name))
+    }
+
+    /// Next received line within `timeout`; `Ok(None)` if none arrived.
+    pub fn recv(&mut self, timeout: Duration) -> Result<Option<String>, String> {
+        match self.lines.recv_timeout(timeout) {
+            Ok(Incoming::Line(l)) => Ok(Some(l)),
+            Ok(Incoming::Closed(why)) => Err(why),
+            Err(RecvTimeoutError::Timeout) => Ok(None),
+            Err(RecvTimeoutError::Disconnected) => Err(format!("{} closed the link", self.name)),
+        }
+    }
+
+    /// Sends a command and waits for its final reply (`ok ...` or `error: ...`), returning
+    /// the `data:` lines and the final line; unsolicited lines go to `on_event`.
+    pub fn command(
+        &mut self,
+        line: &str,
+        timeout_s: f64,
+        on_event: &mut dyn FnMut(&str),
+    ) -> Result<(Vec<String>, String), String> {
+        self.send(line)?;
+        let deadline = Instant::now() + Duration::from_secs_f64(timeout_s);
+        let mut data = Vec::new();
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(format!(
+                    "{} did not answer `{line}` within {timeout_s} s",
+                    self.name
+                ));
+            }
+            let Some(l) = self.recv(left)? else { continue };
+            if l.starts_with("event:") || l.starts_with("alarm:") {
+                on_event(&l);
+            } else if let Some(d) = l.strip_prefix("data:") {
+                data.push(d.trim_start().to_string());
+            } else if l == "ok" || l.starts_with("ok ") || l.starts_with("error:") {
+                return Ok((data, l));
+            } else if !l.is_empty() {
+                return Err(not_morphlink(&self.name, &l));
+            }
+        }
+    }
+
+    /// Checks the device speaks protocol 1: `VERSION` must reply `ok version=.. protocol=1`.
+    /// Returns the firmware version.
+    pub fn handshake(&mut self) -> Result<String, String> {
+        let (_, reply) = self
+            .command("VERSION", HANDSHAKE_TIMEOUT_S, &mut |_| {})
+            .map_err(|e| {
+                format!("{e}; is this a morphlink board? (it must answer VERSION with `ok version=.. protocol={PROTOCOL}`)")
+            })?;
+        let version = field(&reply, "version");
+        match (reply.starts_with("ok "), version, field(&reply, "protocol")) {
+            (true, Some(v), Some(p)) if p == PROTOCOL => Ok(v),
+            (true, Some(_), Some(p)) => Err(format!(
+                "{} speaks morphlink protocol {p}; this morphctl speaks protocol {PROTOCOL}",
+                self.name
+            )),
+            _ => Err(not_morphlink(&self.name, &reply)),
+        }
+    }
+}
+
+fn not_morphlink(name: &str, line: &str) -> String {
+    let shown: String = line.chars().take(60).collect();
+    format!(
+        "{name} does not speak the morphlink protocol (it sent `{shown}`); check the port and baud rate"
+    )
+}
+
+impl Drop for Link {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// Value of `key=` in a reply line.
+pub fn field(line: &str, key: &str) -> Option<String> {
+    line.split(' ')
+        .find_map(|w| w.strip_prefix(key)?.strip_prefix('=').map(str::to_string))
+}
+
+/// A reader over a fixed text, for tests: lines as a device would send them.
+#[cfg(test)]
+pub fn link_from_text(text: &str) -> Link {
+    Link {
+        writer: Box::new(std::io::sink()),
+        lines: spawn_reader(
+            std::io::Cursor::new(text.as_bytes().to_vec()),
+            "test".into(),
+        ),
+        child: None,
+        simulated: false,
+        name: "test device".into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn handshake_accepts_protocol_one_and_names_other_speakers() {
+        let mut l = link_from_text("ok version=0.1.0 protocol=1\n");
+        assert_eq!(l.handshake().unwrap(), "0.1.0");
+        let mut l = link_from_text("event: phase bend t=1.0\nok version=2.0 protocol=2\n");
+        let e = l.handshake().unwrap_err();
+        assert!(e.contains("protocol 2"), "{e}");
+        let mut l = link_from_text("AT+OK\r\n");
+        let e = l.handshake().unwrap_err();
+        assert!(e.contains("does not speak the morphlink protocol"), "{e}");
+        let mut l = link_from_text("");
+        let e = l.handshake().unwrap_err();
+        assert!(e.contains("closed"), "{e}");
+    }
+
+    #[test]
+    fn command_collects_data_and_passes_events_on() {
+        let mut l = link_from_text("data: 0.000 46.46\nevent: done t=3.0 radius_mm=38.00\nok\n");
+        let mut ev = Vec::new();
+        let (data, fin) = l
+            .command("TABLE", 1.0, &mut |e| ev.push(e.to_string()))
+            .unwrap();
+        assert_eq!(data, ["0.000 46.46"]);
+        assert_eq!(fin, "ok");
+        assert_eq!(ev, ["event: done t=3.0 radius_mm=38.00"]);
+    }
+
+    #[test]
+    fn a_missing_port_is_named_with_the_ports_there_are() {
+        let e = Link::open(&Target::Serial {
+            path: "/dev/morphlink-no-such-port".into(),
+            baud: 115_200,
+        })
+        .err()
+        .unwrap();
+        assert!(
+            e.starts_with("no serial port at /dev/morphlink-no-such-port"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn fields_are_found_by_key() {
+        let l = "ok phase=bend target_mm=38.00 t_pla_c=75.1";
+        assert_eq!(field(l, "phase").as_deref(), Some("bend"));
+        assert_eq!(field(l, "t_pla_c").as_deref(), Some("75.1"));
+        assert_eq!(field(l, "t_pla"), None);
+    }
+}

@@ -1,0 +1,663 @@
+//! The reference-model study of `morph-model charts`: accuracy versus cost of every model level,
+//! radius versus power, firmware table size, thermal grid convergence. Writes SVG charts and a
+//! CSV of the numbers, and prints a summary.
+
+use indicatif::{ProgressBar, ProgressStyle};
+use morphlink_model::reference::fv_thermal::{CrossSection, Inclusion, Layout};
+use morphlink_model::reference::levels::{self, Level, Scored, POWERS_W, REFERENCE_RINGS};
+use morphlink_model::LinkParams;
+use plotters::prelude::*;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// Measured and paper-predicted points of Fig. 9, `(power_w, radius_mm)`.
+pub struct Fig9 {
+    /// The paper's measurements.
+    pub measured: Vec<(f64, f64)>,
+    /// The paper's own model.
+    pub paper_model: Vec<(f64, f64)>,
+}
+
+/// Reads both sources from the calibration CSV.
+pub fn load_fig9(path: &Path) -> Result<Fig9, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let rows = |src: &str| -> Result<Vec<(f64, f64)>, String> {
+        Ok(morphlink_model::calibrate::parse_points(&text, src)?
+            .iter()
+            .map(|p| (p.p_tca_w, p.radius_mm))
+            .collect())
+    };
+    Ok(Fig9 {
+        measured: rows("measured")?,
+        paper_model: rows("paper_model")?,
+    })
+}
+
+fn err<E: std::fmt::Display>(e: E) -> String {
+    e.to_string()
+}
+
+/// Scores every level of the study with a progress bar.
+pub fn score_all(p: &LinkParams, fig9: &Fig9, budget_s: f64) -> Result<Vec<Scored>, String> {
+    let study = Level::study();
+    let bar = ProgressBar::new(study.len() as u64);
+    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} levels, {msg}").map_err(err)?);
+    let out = levels::score(p, &study, &fig9.measured, budget_s, |l| {
+        bar.set_message(l.name());
+        bar.inc(1);
+    })
+    .map_err(err)?;
+    bar.finish_and_clear();
+    Ok(out)
+}
+
+/// One grid-convergence row: rings, cells, value, error against the exact or finest value.
+pub struct GridRow {
+    /// Rings.
+    pub rings: usize,
+    /// Cells.
+    pub cells: usize,
+    /// Relative error of the concentric heater's resistance against Eq. 11's exact form.
+    pub concentric_error: f64,
+    /// The link's R_tt, K/W.
+    pub r_tt: f64,
+    /// Relative difference of R_tt from the finest grid.
+    pub link_error: f64,
+    /// Explicit-Euler stability limit of the link's grid, s.
+    pub explicit_limit_s: f64,
+}
+
+/// Grid convergence of the concentric heater (exact) and the link (against the finest grid).
+pub fn grid_study(p: &LinkParams) -> Result<Vec<GridRow>, String> {
+    let finest = CrossSection::of_link(p, REFERENCE_RINGS)
+        .and_then(|x| x.resistance_matrix())
+        .map_err(err)?
+        .r_tt;
+    let (a, k, h, l, r0, k_rod) = (4e-3, 0.2, 101.3, 0.05, 1e-3, 4.6);
+    let inc = |x: f64, r: f64, kk: f64| Inclusion {
+        x_m: x,
+        y_m: 0.0,
+        radius_m: r,
+        core_radius_m: 0.0,
+        k_w_mk: kk,
+        rho_cp_j_m3k: 1e6,
+        core_k_w_mk: kk,
+        core_rho_cp_j_m3k: 1e6,
+    };
+    let lay = Layout {
+        radius_m: a,
+        k_w_mk: k,
+        rho_cp_j_m3k: 1.1e6,
+        h_w_m2k: h,
+        tca: inc(0.0, r0, k_rod),
+        pla: inc(3e-3, 0.6e-3, k),
+        length_m: l,
+    };
+    let pi = core::f64::consts::PI;
+    let exact =
+        ((a / r0).ln() / (2.0 * pi * k) + 1.0 / (2.0 * pi * a * h) + 1.0 / (8.0 * pi * k_rod)) / l;
+    let mut rows = Vec::new();
+    for n in [8usize, 12, 16, 24, 32, 48, 64] {
+        let c = CrossSection::new(&lay, n, 8)
+            .and_then(|x| x.resistance_matrix())
+            .map_err(err)?
+            .r_tt;
+        let x = CrossSection::of_link(p, n).map_err(err)?;
+        let r = x.resistance_matrix().map_err(err)?.r_tt;
+        rows.push(GridRow {
+            rings: n,
+            cells: x.cells(),
+            concentric_error: (c - exact).abs() / exact,
+            r_tt: r,
+            link_error: (r - finest).abs() / finest,
+            explicit_limit_s: x.explicit_limit_s(),
+        });
+    }
+    Ok(rows)
+}
+
+/// Observed order between successive rows: `log(e₁/e₂) / log(n₂/n₁)` in rings.
+pub fn orders(rows: &[(usize, f64)]) -> Vec<f64> {
+    rows.windows(2)
+        .map(|w| (w[0].1 / w[1].1).ln() / (w[1].0 as f64 / w[0].0 as f64).ln())
+        .collect()
+}
+
+fn color(i: usize) -> RGBColor {
+    const C: [RGBColor; 8] = [
+        RGBColor(31, 119, 180),
+        RGBColor(255, 127, 14),
+        RGBColor(44, 160, 44),
+        RGBColor(214, 39, 40),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+        RGBColor(227, 119, 194),
+        RGBColor(23, 190, 207),
+    ];
+    C[i % C.len()]
+}
+
+/// Error-versus-time scatter with labels and the Pareto front.
+fn pareto_chart(
+    path: &Path,
+    title: &str,
+    scored: &[Scored],
+    error: impl Fn(&Scored) -> f64,
+) -> Result<(), String> {
+    let pts: Vec<(f64, f64)> = scored
+        .iter()
+        .map(|s| (s.seconds, error(s).max(1e-6)))
+        .collect();
+    let front = levels::pareto_front(&pts);
+    let (xmin, xmax) = pts
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let (ymin, ymax) = pts
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    let root = SVGBackend::new(path, (1000, 700)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(
+            (xmin / 2.0..xmax * 3.0).log_scale(),
+            (ymin / 2.0..ymax * 3.0).log_scale(),
+        )
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("run time of one 15-power curve, s")
+        .y_desc("max |radius error|, mm (zero drawn at 1e-6)")
+        .x_label_formatter(&|v| format!("{v:.0e}"))
+        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .draw()
+        .map_err(err)?;
+    let line: Vec<(f64, f64)> = front.iter().map(|&i| pts[i]).collect();
+    chart
+        .draw_series(LineSeries::new(line, RED.stroke_width(2)))
+        .map_err(err)?
+        .label("Pareto front")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
+    for (i, (s, p)) in scored.iter().zip(&pts).enumerate() {
+        let on = front.contains(&i);
+        let c = if on { RED } else { color(i) };
+        chart
+            .draw_series(std::iter::once(Circle::new(*p, 5, c.filled())))
+            .map_err(err)?;
+        chart
+            .draw_series(std::iter::once(Text::new(
+                s.level.name(),
+                *p,
+                ("sans-serif", 12).into_font().color(&BLACK),
+            )))
+            .map_err(err)?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)
+}
+
+fn radius_chart(path: &Path, scored: &[Scored], fig9: &Fig9, shown: &[&str]) -> Result<(), String> {
+    let root = SVGBackend::new(path, (1000, 700)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "Radius versus TCA power (PLA held at 1.5 W, under water)",
+            ("sans-serif", 20),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..1.6, 30.0..50.0)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("TCA power, W")
+        .y_desc("radius, mm")
+        .draw()
+        .map_err(err)?;
+    for (i, s) in scored
+        .iter()
+        .filter(|s| shown.contains(&s.level.name().as_str()))
+        .enumerate()
+    {
+        let c = color(i);
+        let data: Vec<(f64, f64)> = POWERS_W
+            .iter()
+            .copied()
+            .zip(s.radius_mm.iter().copied())
+            .collect();
+        chart
+            .draw_series(LineSeries::new(data, c.stroke_width(2)))
+            .map_err(err)?
+            .label(s.level.name())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+    }
+    chart
+        .draw_series(
+            fig9.paper_model
+                .iter()
+                .map(|p| Cross::new(*p, 5, BLACK.stroke_width(1))),
+        )
+        .map_err(err)?
+        .label("paper's model (Fig. 9)")
+        .legend(|(x, y)| Cross::new((x + 10, y), 5, BLACK.stroke_width(1)));
+    chart
+        .draw_series(
+            fig9.measured
+                .iter()
+                .map(|p| Circle::new(*p, 6, BLACK.filled())),
+        )
+        .map_err(err)?
+        .label("measured (Fig. 9)")
+        .legend(|(x, y)| Circle::new((x + 10, y), 5, BLACK.filled()));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)
+}
+
+fn table_chart(path: &Path, rows: &[(usize, f64, usize)]) -> Result<(), String> {
+    let root = SVGBackend::new(path, (1000, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let ymax = rows.iter().map(|r| r.1).fold(0.0, f64::max) * 2.0;
+    let ymin = rows.iter().map(|r| r.1).fold(f64::MAX, f64::min) / 2.0;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "Firmware table: entries vs worst radius error (labels: flash bytes)",
+            ("sans-serif", 20),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d((2.0..80.0).log_scale(), (ymin..ymax).log_scale())
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("entries")
+        .y_desc("worst |radius error| of interpolation, mm")
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .draw()
+        .map_err(err)?;
+    let data: Vec<(f64, f64)> = rows.iter().map(|r| (r.0 as f64, r.1)).collect();
+    chart
+        .draw_series(LineSeries::new(data.clone(), BLUE.stroke_width(2)))
+        .map_err(err)?;
+    for (r, d) in rows.iter().zip(&data) {
+        chart
+            .draw_series(std::iter::once(Circle::new(*d, 4, BLUE.filled())))
+            .map_err(err)?;
+        chart
+            .draw_series(std::iter::once(Text::new(
+                format!("{} B", r.2),
+                *d,
+                ("sans-serif", 12).into_font(),
+            )))
+            .map_err(err)?;
+    }
+    root.present().map_err(err)
+}
+
+fn grid_chart(path: &Path, rows: &[GridRow]) -> Result<(), String> {
+    let root = SVGBackend::new(path, (1000, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let all: Vec<f64> = rows
+        .iter()
+        .flat_map(|r| [r.concentric_error, r.link_error])
+        .filter(|v| *v > 0.0)
+        .collect();
+    let ymin = all.iter().copied().fold(f64::MAX, f64::min) / 2.0;
+    let ymax = all.iter().copied().fold(0.0, f64::max) * 2.0;
+    let mut chart = ChartBuilder::on(&root)
+        .caption("Finite-volume grid convergence", ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d((6.0..80.0).log_scale(), (ymin..ymax).log_scale())
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("rings (sectors ≈ π × rings for the link, 8 for the concentric case)")
+        .y_desc("relative error of R")
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .draw()
+        .map_err(err)?;
+    let c: Vec<(f64, f64)> = rows
+        .iter()
+        .map(|r| (r.rings as f64, r.concentric_error))
+        .collect();
+    let l: Vec<(f64, f64)> = rows
+        .iter()
+        .map(|r| (r.rings as f64, r.link_error))
+        .collect();
+    chart
+        .draw_series(LineSeries::new(c, BLUE.stroke_width(2)))
+        .map_err(err)?
+        .label("concentric heater vs exact (Eq. 11 form)")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(2)));
+    chart
+        .draw_series(LineSeries::new(l, RED.stroke_width(2)))
+        .map_err(err)?
+        .label(format!("link R_tt vs {REFERENCE_RINGS} rings"))
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)
+}
+
+/// One transient sample: `(t_s, fv_tca_k, fv_pla_k, net_tca_k, net_pla_k)`.
+pub type TransientRow = (f64, f64, f64, f64, f64);
+
+/// TCA and PLA rises over the paper's bend phase (TCA 1 W, PLA 1.5 W from ambient, 60 s):
+/// the reference grid stepped implicitly (0.1 s) against the lumped five-node network.
+/// Returns `(t_s, fv_tca, fv_pla, net_tca, net_pla)` rows.
+pub fn transient_study(p: &LinkParams, rings: usize) -> Result<Vec<TransientRow>, String> {
+    use morphlink_model::reference::fv_thermal::Stepping;
+    use morphlink_model::thermal::{node, Network};
+    let dt = 0.1;
+    let steps = 600;
+    let x = CrossSection::of_link(p, rings).map_err(err)?;
+    let fv = x
+        .transient(1.0, 1.5, dt, steps, Stepping::Implicit)
+        .map_err(err)?;
+    let mut net = Network::new(p);
+    let amb = p.surroundings.ambient_c;
+    let mut rows = Vec::with_capacity(steps);
+    for k in 0..steps {
+        net.advance(dt, 1.0, 1.5, amb);
+        rows.push((
+            (k + 1) as f64 * dt,
+            fv.tca_rise_k[k],
+            fv.pla_rise_k[k],
+            net.temp_c[node::TCA] - amb,
+            net.temp_c[node::PLA] - amb,
+        ));
+    }
+    Ok(rows)
+}
+
+fn transient_chart(path: &Path, rows: &[TransientRow], rings: usize) -> Result<(), String> {
+    let root = SVGBackend::new(path, (1000, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let ymax = rows
+        .iter()
+        .map(|r| r.1.max(r.2).max(r.3).max(r.4))
+        .fold(0.0, f64::max)
+        * 1.1;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "Heater rises, TCA 1 W + PLA 1.5 W from ambient: reference grid vs lumped network",
+            ("sans-serif", 20),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..60.0, 0.0..ymax)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("time, s")
+        .y_desc("rise above ambient, K")
+        .draw()
+        .map_err(err)?;
+    let pick = |r: &TransientRow, i: usize| [r.1, r.2, r.3, r.4][i];
+    let series = [
+        ("TCA, finite volumes", 0usize),
+        ("PLA, finite volumes", 1),
+        ("TCA, lumped network", 2),
+        ("PLA, lumped network", 3),
+    ];
+    for (name, i) in series {
+        let c = color(i);
+        chart
+            .draw_series(LineSeries::new(
+                rows.iter().map(|r| (r.0, pick(r, i))),
+                c.stroke_width(2),
+            ))
+            .map_err(err)?
+            .label(format!(
+                "{name}{}",
+                if name.contains("finite") {
+                    format!(" ({rings} rings)")
+                } else {
+                    String::new()
+                }
+            ))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)
+}
+
+/// Worst error of the firmware's 16-entry table (f32, linear in curvature) against a curve at
+/// [`POWERS_W`] and against points, mm.
+pub fn firmware_table_errors(p: &LinkParams, curve: &[f64], points: &[(f64, f64)]) -> (f64, f64) {
+    let rows: Vec<(f32, f32)> = (0..p.table_entries)
+        .map(|i| {
+            let e = morphlink_model::table::entry(p, i);
+            (e.power_w as f32, e.radius_mm as f32)
+        })
+        .collect();
+    let radius = |pw: f64| -> f64 {
+        let x = pw as f32;
+        for w in rows.windows(2) {
+            if x <= w[1].0 {
+                let f = (x - w[0].0) / (w[1].0 - w[0].0);
+                let k = 1.0 / w[0].1 + f * (1.0 / w[1].1 - 1.0 / w[0].1);
+                return (1.0 / k) as f64;
+            }
+        }
+        rows[rows.len() - 1].1 as f64
+    };
+    let vs_curve = POWERS_W
+        .iter()
+        .zip(curve)
+        .map(|(&pw, r)| (radius(pw) - r).abs())
+        .fold(0.0, f64::max);
+    let vs_points = points
+        .iter()
+        .map(|&(pw, r)| (radius(pw) - r).abs())
+        .fold(0.0, f64::max);
+    (vs_curve, vs_points)
+}
+
+/// Runs the whole study, writes the charts and `study.csv` into `out`, returns the summary text.
+pub fn run(p: &LinkParams, fig9: &Fig9, out: &Path, budget_s: f64) -> Result<String, String> {
+    std::fs::create_dir_all(out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
+    let scored = score_all(p, fig9, budget_s)?;
+    let grid = grid_study(p)?;
+    let table: Vec<(usize, f64, usize)> = [2usize, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64]
+        .iter()
+        .map(|&n| {
+            let (e, b) = levels::table_error_mm(p, n);
+            (n, e, b)
+        })
+        .collect();
+    pareto_chart(
+        &out.join("accuracy-vs-cost-reference.svg"),
+        "Error against the finest reference vs run time",
+        &scored,
+        |s| s.error_vs_reference_mm,
+    )?;
+    pareto_chart(
+        &out.join("accuracy-vs-cost-measured.svg"),
+        "Error against the measured radii (Fig. 9) vs run time",
+        &scored,
+        |s| s.error_vs_measured_mm,
+    )?;
+    radius_chart(
+        &out.join("radius-vs-power.svg"),
+        &scored,
+        fig9,
+        &[
+            "lumped",
+            "fv8+closed",
+            "fv96+closed",
+            "lumped+cosserat",
+            "fv96+cosserat",
+            "fv96+cosserat+pla",
+            "fv96+cosserat+tcaphys",
+        ],
+    )?;
+    table_chart(&out.join("table-size.svg"), &table)?;
+    let transient_rings = 32;
+    let transient = transient_study(p, transient_rings)?;
+    transient_chart(&out.join("transient.svg"), &transient, transient_rings)?;
+    grid_chart(&out.join("grid-convergence.svg"), &grid)?;
+
+    let mut csv = String::from("level,seconds,error_vs_reference_mm,error_vs_measured_mm");
+    for pw in POWERS_W {
+        let _ = write!(csv, ",r_{pw:.1}w_mm");
+    }
+    csv.push('\n');
+    for s in &scored {
+        let _ = write!(
+            csv,
+            "{},{:.6e},{:.4},{:.4}",
+            s.level.name(),
+            s.seconds,
+            s.error_vs_reference_mm,
+            s.error_vs_measured_mm
+        );
+        for r in &s.radius_mm {
+            let _ = write!(csv, ",{r:.3}");
+        }
+        csv.push('\n');
+    }
+    std::fs::write(out.join("study.csv"), csv).map_err(err)?;
+
+    let mut t = String::new();
+    let _ = writeln!(t, "| level | time per curve | error vs reference, mm | error vs measured, mm | not refitted: diff vs reference, mm | fitted EI, N m² | F0, N | c, mN/K |");
+    let _ = writeln!(t, "| --- | --- | --- | --- | --- | --- | --- | --- |");
+    let pts_ref: Vec<(f64, f64)> = scored
+        .iter()
+        .map(|s| (s.seconds, s.error_vs_reference_mm))
+        .collect();
+    let pts_meas: Vec<(f64, f64)> = scored
+        .iter()
+        .map(|s| (s.seconds, s.error_vs_measured_mm))
+        .collect();
+    let fr = levels::pareto_front(&pts_ref);
+    let fm = levels::pareto_front(&pts_meas);
+    for (i, s) in scored.iter().enumerate() {
+        let _ = writeln!(
+            t,
+            "| {} | {} | {:.4}{} | {:.3}{} | {:.2} | {:.4e} | {:.4} | {:.3} |",
+            s.level.name(),
+            human_time(s.seconds),
+            s.error_vs_reference_mm,
+            if fr.contains(&i) { " ◆" } else { "" },
+            s.error_vs_measured_mm,
+            if fm.contains(&i) { " ◆" } else { "" },
+            s.uncalibrated_difference_mm,
+            s.constants.0,
+            s.constants.1,
+            s.constants.2 * 1e3,
+        );
+    }
+    let _ = writeln!(t, "\n◆ = on the Pareto front of that error.\n");
+    let _ = writeln!(t, "| rings | cells | concentric rel. error | link R_tt, K/W | link rel. diff vs {REFERENCE_RINGS} rings | explicit step limit |");
+    let _ = writeln!(t, "| --- | --- | --- | --- | --- | --- |");
+    for r in &grid {
+        let _ = writeln!(
+            t,
+            "| {} | {} | {:.2e} | {:.3} | {:.2e} | {} |",
+            r.rings,
+            r.cells,
+            r.concentric_error,
+            r.r_tt,
+            r.link_error,
+            human_time(r.explicit_limit_s)
+        );
+    }
+    let oc = orders(
+        &grid
+            .iter()
+            .map(|r| (r.rings, r.concentric_error))
+            .collect::<Vec<_>>(),
+    );
+    let ol = orders(
+        &grid
+            .iter()
+            .map(|r| (r.rings, r.link_error))
+            .collect::<Vec<_>>(),
+    );
+    let _ = writeln!(t, "\nobserved orders, concentric: {}", fmt_list(&oc));
+    let _ = writeln!(t, "observed orders, link R_tt:  {}\n", fmt_list(&ol));
+    let _ = writeln!(
+        t,
+        "| table entries | flash bytes | worst interpolation error, mm |"
+    );
+    let _ = writeln!(t, "| --- | --- | --- |");
+    for (n, e, b) in &table {
+        let _ = writeln!(t, "| {n} | {b} | {e:.4} |");
+    }
+    let _ = writeln!(
+        t,
+        "\n| t, s | TCA rise FV, K | TCA rise network, K | PLA rise FV, K | PLA rise network, K |"
+    );
+    let _ = writeln!(t, "| --- | --- | --- | --- | --- |");
+    for r in transient.iter().filter(|r| {
+        [1.0, 2.0, 5.0, 10.0, 20.0, 40.0, 60.0]
+            .iter()
+            .any(|t| (r.0 - t).abs() < 1e-9)
+    }) {
+        let _ = writeln!(
+            t,
+            "| {:.0} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            r.0, r.1, r.3, r.2, r.4
+        );
+    }
+    let reference = scored
+        .iter()
+        .find(|s| s.level == Level::REFERENCE)
+        .ok_or("reference level missing from the study")?;
+    let (fw_ref, fw_meas) = firmware_table_errors(p, &reference.radius_mm, &fig9.measured);
+    let _ = writeln!(
+        t,
+        "\nfirmware table ({} entries, f32): worst error vs reference {:.3} mm, vs measured {:.3} mm",
+        p.table_entries, fw_ref, fw_meas
+    );
+    Ok(t)
+}
+
+fn fmt_list(v: &[f64]) -> String {
+    v.iter()
+        .map(|x| format!("{x:.2}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Seconds in a readable unit.
+pub fn human_time(s: f64) -> String {
+    if s < 1e-3 {
+        format!("{:.1} µs", s * 1e6)
+    } else if s < 1.0 {
+        format!("{:.2} ms", s * 1e3)
+    } else {
+        format!("{s:.2} s")
+    }
+}
