@@ -178,6 +178,29 @@ impl Emulator {
         Ok(emu)
     }
 
+    /// Waits until the controller has its first sensor frame (STATUS reports temperatures), so
+    /// a MORPH right after boot is not refused as too early.
+    pub fn wait_ready(&mut self, timeout: Duration) -> Result<(), String> {
+        let end = Instant::now() + timeout;
+        loop {
+            let r = self.command("STATUS", timeout)?;
+            let ready = r
+                .last()
+                .and_then(|l| l.split(' ').find_map(|w| w.strip_prefix("t_pla_c=")))
+                .is_some_and(|t| t.parse::<f64>().is_ok_and(f64::is_finite));
+            if ready {
+                return Ok(());
+            }
+            if Instant::now() > end {
+                return Err(format!(
+                    "the controller reported no temperatures within {timeout:?}\n{}",
+                    self.report()
+                ));
+            }
+            thread::sleep(Duration::from_millis(20));
+        }
+    }
+
     /// Next line from the firmware, or an error after `timeout` (with QEMU's log attached).
     pub fn next_line(&mut self, timeout: Duration) -> Result<String, String> {
         match self.lines.recv_timeout(timeout) {

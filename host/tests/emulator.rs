@@ -4,7 +4,7 @@
 //! it, unless `MORPHLINK_SKIP_EMULATOR=1` is set, which skips them with a loud warning.
 use morphlink_host::emulator::{build_image, find_qemu, Emulator};
 use std::path::PathBuf;
-use std::sync::OnceLock;
+use std::sync::{Mutex, MutexGuard, OnceLock};
 use std::time::Duration;
 
 /// Longest wall time for one emulated morph (about 80 s of firmware time at 20×: 4 s).
@@ -37,10 +37,17 @@ fn setup() -> Option<(PathBuf, PathBuf)> {
         .clone()
 }
 
-fn boot() -> Option<Emulator> {
+/// One emulator at a time: the tests share two cores with everything else, and each QEMU
+/// should get a whole one.
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// Boots the image and waits for the first control tick; the guard keeps other tests waiting.
+fn boot() -> Option<(MutexGuard<'static, ()>, Emulator)> {
     let (qemu, image) = setup()?;
-    let emu = Emulator::boot(&qemu, &image).unwrap_or_else(|e| panic!("{e}"));
-    Some(emu)
+    let guard = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
+    let mut emu = Emulator::boot(&qemu, &image).unwrap_or_else(|e| panic!("{e}"));
+    emu.wait_ready(REPLY).unwrap_or_else(|e| panic!("{e}"));
+    Some((guard, emu))
 }
 
 fn field(line: &str, key: &str) -> Option<String> {
@@ -60,7 +67,9 @@ macro_rules! check {
 
 #[test]
 fn boots_and_answers_version_status_and_range() {
-    let Some(mut emu) = boot() else { return };
+    let Some((_one, mut emu)) = boot() else {
+        return;
+    };
     let boot_line = emu.transcript[0].clone();
     check!(
         emu,
@@ -82,7 +91,9 @@ fn boots_and_answers_version_status_and_range() {
 
 #[test]
 fn full_morphs_reach_their_targets_with_phases_in_order() {
-    let Some(mut emu) = boot() else { return };
+    let Some((_one, mut emu)) = boot() else {
+        return;
+    };
     for target in [34.0, 38.0, 44.0] {
         let started = std::time::Instant::now();
         let r = emu.command(&format!("MORPH {target}"), REPLY).unwrap();
@@ -120,7 +131,9 @@ fn full_morphs_reach_their_targets_with_phases_in_order() {
 
 #[test]
 fn abort_mid_phase_turns_heaters_off() {
-    let Some(mut emu) = boot() else { return };
+    let Some((_one, mut emu)) = boot() else {
+        return;
+    };
     for phase in ["soften", "bend", "lock"] {
         emu.command("MORPH 36", REPLY).unwrap();
         emu.wait_for(&format!("event: phase {phase}"), MORPH_WALL)
@@ -141,7 +154,9 @@ fn abort_mid_phase_turns_heaters_off() {
 
 #[test]
 fn injected_faults_raise_their_alarm_with_heaters_off() {
-    let Some(mut emu) = boot() else { return };
+    let Some((_one, mut emu)) = boot() else {
+        return;
+    };
     for (inject, alarm, clear) in [
         (
             "SIM FAULT thermistor-open tca",
@@ -200,7 +215,9 @@ fn injected_faults_raise_their_alarm_with_heaters_off() {
 
 #[test]
 fn overlong_and_garbage_lines_get_errors() {
-    let Some(mut emu) = boot() else { return };
+    let Some((_one, mut emu)) = boot() else {
+        return;
+    };
     let mut long = vec![b'X'; 300];
     long.push(b'\n');
     emu.write_raw(&long).unwrap();
@@ -221,7 +238,9 @@ fn overlong_and_garbage_lines_get_errors() {
 
 #[test]
 fn a_panic_turns_heaters_off_and_ends_qemu_with_failure() {
-    let Some(mut emu) = boot() else { return };
+    let Some((_one, mut emu)) = boot() else {
+        return;
+    };
     emu.command("MORPH 38", REPLY).unwrap();
     emu.wait_for("event: phase bend", MORPH_WALL).unwrap();
     emu.write_raw(b"SIM PANIC\n").unwrap();

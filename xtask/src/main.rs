@@ -2,6 +2,7 @@
 use clap::{Parser, Subcommand};
 
 mod boards;
+mod emulate;
 mod strategies;
 use std::process::ExitCode;
 
@@ -20,6 +21,8 @@ enum Task {
     Boards,
     /// Compare the morph strategies over a mismatch ensemble: docs/strategies.csv and charts.
     Strategies(strategies::Args),
+    /// Build the emulated firmware and boot it under QEMU (b-l475e-iot01a).
+    Emulate(emulate::Args),
 }
 
 fn main() -> ExitCode {
@@ -30,6 +33,7 @@ fn main() -> ExitCode {
         }
         Task::Boards => boards::run(&workspace_root()),
         Task::Strategies(a) => strategies::run(&a, &workspace_root()),
+        Task::Emulate(a) => emulate::run(&a, &workspace_root()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

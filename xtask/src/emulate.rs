@@ -1,0 +1,83 @@
+//! `cargo xtask emulate`: build the emulated firmware image and boot it under QEMU's
+//! b-l475e-iot01a machine, either serving USART1 on a loopback TCP port for any client, or
+//! running one morph and printing what the firmware says.
+use morphlink_host::emulator::{build_image, find_qemu, qemu_command, Emulator};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// Options of `cargo xtask emulate`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Serve USART1 on 127.0.0.1:<PORT>; QEMU waits for a client (nc, socat, a test) to connect.
+    #[arg(long)]
+    port: Option<u16>,
+    /// Instead: boot, morph the simulated link to this radius (mm), print the phases and stop.
+    #[arg(long, conflicts_with = "port")]
+    morph: Option<f32>,
+}
+
+/// Longest wall time allowed for the demo morph.
+const DEMO_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// Runs the task.
+pub fn run(args: &Args, root: &Path) -> Result<(), String> {
+    let qemu = find_qemu()?;
+    let image = build_image(root, &root.join("target").join("emulated"))?;
+    match (args.port, args.morph) {
+        (Some(port), _) => serve(&qemu, &image, port),
+        (None, Some(radius_mm)) => demo(&qemu, &image, radius_mm),
+        (None, None) => Err(
+            "give --port <PORT> to serve USART1, or --morph <radius_mm> for a demo morph".into(),
+        ),
+    }
+}
+
+fn serve(qemu: &Path, image: &Path, port: u16) -> Result<(), String> {
+    eprintln!("booting {} under QEMU; USART1 on 127.0.0.1:{port} (QEMU starts when a client connects, e.g. `nc 127.0.0.1 {port}`)", image.display());
+    let status = qemu_command(qemu, image, port)
+        .status()
+        .map_err(|e| format!("cannot start {}: {e}", qemu.display()))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "QEMU ended with {status} (the firmware panicked or faulted: see its message above)"
+        ))
+    }
+}
+
+fn demo(qemu: &Path, image: &Path, radius_mm: f32) -> Result<(), String> {
+    let started = Instant::now();
+    let mut emu = Emulator::boot(qemu, image)?;
+    println!("{}", emu.transcript[0]);
+    eprintln!("booted in {:.0} ms", emu.boot_time.as_secs_f64() * 1000.0);
+    emu.wait_ready(Duration::from_secs(5))?;
+    let morph_start = Instant::now();
+    for l in emu.command(&format!("MORPH {radius_mm}"), Duration::from_secs(5))? {
+        println!("{l}");
+        if l.starts_with("error: ") {
+            return Err(format!("the firmware refused MORPH {radius_mm}"));
+        }
+    }
+    loop {
+        let l = emu.next_line(DEMO_TIMEOUT)?;
+        println!("{l}");
+        if l.starts_with("alarm: ") {
+            return Err("the morph ended in a fault".into());
+        }
+        if l.starts_with("event: done") {
+            break;
+        }
+    }
+    let morph_wall = morph_start.elapsed();
+    for l in emu.command("SIM STATE", Duration::from_secs(5))? {
+        println!("{l}");
+    }
+    eprintln!(
+        "morph took {:.1} s of wall time ({} s of firmware time at the emulated build's speed-up); {:.1} s in all",
+        morph_wall.as_secs_f64(),
+        emu.transcript.iter().rev().find_map(|l| l.strip_prefix("event: done t=").and_then(|r| r.split(' ').next())).unwrap_or("?"),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
