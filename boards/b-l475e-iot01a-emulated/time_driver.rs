@@ -17,11 +17,14 @@ const SYST_CSR_CLKSOURCE_CORE: u32 = 1 << 2;
 /// embassy ticks per firmware millisecond (embassy-time's default 1 MHz tick).
 const TICKS_PER_MS: u64 = embassy_time_driver::TICK_HZ / 1000;
 
+/// Called every firmware millisecond with the time in ms.
+type MsHook = fn(u64);
+
 struct SysTickDriver {
     ms: Mutex<Cell<u64>>,
     reload: Mutex<Cell<u32>>,
     queue: Mutex<RefCell<Queue>>,
-    on_ms: Mutex<Cell<Option<fn(u64)>>>,
+    on_ms: Mutex<Cell<Option<MsHook>>>,
 }
 
 impl Driver for SysTickDriver {

@@ -58,7 +58,8 @@ fn field(line: &str, key: &str) -> Option<String> {
 /// Asserts with QEMU's log and the serial transcript attached.
 macro_rules! check {
     ($emu:expr, $cond:expr, $($msg:tt)+) => {
-        if !$cond {
+        let holds: bool = $cond;
+        if !holds {
             let report = $emu.report();
             panic!("{}\n{}", format!($($msg)+), report);
         }

@@ -152,9 +152,13 @@ impl SimLink {
         let keep = lag_remaining(dt_s, pla_flow_time_s(&params.pla_stiffness, t_pla));
         self.kappa_ref_per_m = self.kappa_per_m + (self.kappa_ref_per_m - self.kappa_per_m) * keep;
         let nodes = [t_pla, t_tca, amb];
-        for i in 0..3 {
-            let keep = lag_remaining(dt_s, self.plant.sensor_tau_s[i]);
-            self.sensed_c[i] = nodes[i] + (self.sensed_c[i] - nodes[i]) * keep;
+        for ((sensed, node), tau_s) in self
+            .sensed_c
+            .iter_mut()
+            .zip(nodes)
+            .zip(self.plant.sensor_tau_s)
+        {
+            *sensed = node + (*sensed - node) * lag_remaining(dt_s, tau_s);
         }
         self.time_s += dt_s;
     }
