@@ -110,12 +110,15 @@ pub const STALE_AFTER_MS: u64 = 1000;
 /// Consecutive out-of-limit readings before a temperature trip (Klipper: 4 samples).
 pub const LIMIT_CONSECUTIVE: u8 = 4;
 /// Heater-not-heating: the heater must have been on this long before it is judged, s.
-/// Klipper's check_gain_time is 20 s for hot ends; the TCA reaches 70 % of its steady rise in
-/// 10 s under water, so 10 s.
+/// Klipper's check_gain_time is 20 s for hot ends; the TCA's thermal time constants are a few
+/// seconds (its steady rise is half reached in about 6–10 s under water), so 10 s.
 pub const HEATING_CHECK_S: f32 = 10.0;
 /// Heater-not-heating: smallest share of the model's steady self-rise that must be seen
-/// after [`HEATING_CHECK_S`]. Under water the TCA has reached about 55 % (with thermistor lag);
-/// 30 % leaves room for 30 % more convection and a slow sensor.
+/// after [`HEATING_CHECK_S`]. After 10 s under water the lumped network has the TCA at 72 % of
+/// its steady rise but the 2-D reference model (docs/reference-model.md) only at about 40–48 %,
+/// less with thermistor lag: 30 % is a thin margin on real hardware. It errs on the safe side —
+/// a false trip only turns the heaters off — while a lower share would let a heater that dies in
+/// bend, or a thermistor that has come loose, go unnoticed for the rest of the phase.
 pub const HEATING_MIN_FRACTION: f32 = 0.3;
 /// Heater-not-heating: a heater whose expected rise is below this is not judged, K: the other
 /// heater can warm its sensor by a few kelvin within one check window, which would hide a dead

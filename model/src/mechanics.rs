@@ -72,11 +72,21 @@ pub fn pla_modulus_pa(s: &PlaStiffness, temp_c: f64) -> f64 {
     exp(lr + (lg - lr) * glassy_share)
 }
 
+/// Second moment of area of the PLA rod about the link's axis, m⁴: its own `π d⁴/64` plus the
+/// parallel-axis term `A ρ²` of its offset ρ from the axis (about 30× the own term here), which
+/// is what the rod resists bending with once it is glassy.
+pub fn pla_second_moment_about_axis_m4(p: &LinkParams) -> f64 {
+    let d = p.geometry.pla_diameter_m;
+    let area = core::f64::consts::PI * d * d / 4.0;
+    let rho = p.geometry.pla_offset_m;
+    pla_second_moment_m4(p) + area * rho * rho
+}
+
 /// PLA bending stiffness above its rubbery value at `temp_c`, N m² (what the fitted soft-link
-/// stiffness does not already contain).
+/// stiffness does not already contain), about the link's axis.
 pub fn pla_extra_stiffness_nm2(p: &LinkParams, temp_c: f64) -> f64 {
     let s = &p.pla_stiffness;
-    (pla_modulus_pa(s, temp_c) - s.e_rubbery_pa).max(0.0) * pla_second_moment_m4(p)
+    (pla_modulus_pa(s, temp_c) - s.e_rubbery_pa).max(0.0) * pla_second_moment_about_axis_m4(p)
 }
 
 /// Relaxation time of the PLA's stress-free curvature at `temp_c`, s (bounded so the
@@ -129,6 +139,15 @@ mod tests {
             (held - 20.0).abs() < 0.5,
             "rigid PLA moves only a little: {held}"
         );
+    }
+
+    #[test]
+    fn the_offset_rod_resists_bending_mostly_through_its_distance_from_the_axis() {
+        let p = LinkParams::DEFAULT;
+        let ratio = pla_second_moment_about_axis_m4(&p) / pla_second_moment_m4(&p);
+        // 1 + 16 ρ²/d² for a solid rod: ρ = 2.5 mm, d = 1.75 mm.
+        let expected = 1.0 + 16.0 * (2.5f64 / 1.75).powi(2);
+        assert!((ratio - expected).abs() < 1e-9, "{ratio} vs {expected}");
     }
 
     #[test]
