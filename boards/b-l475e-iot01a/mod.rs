@@ -22,14 +22,16 @@
 //! Clocks: HSI 16 MHz → PLL (/1 ×10 /2) → 80 MHz core, APB1 = APB2 = 80 MHz; ADC kernel
 //! clock SYSCLK. TIM2 is the embassy time driver.
 
-use embassy_stm32::adc::{Adc, AdcChannel, AnyAdcChannel, SampleTime};
+#[path = "../common.rs"]
+mod common;
+pub use common::{heater_pins_low, Board, HeaterTimer, Sensors, PLA_CHANNEL, TCA_CHANNEL};
+use embassy_stm32::adc::{Adc, AdcChannel, SampleTime};
 use embassy_stm32::gpio::OutputType;
-use embassy_stm32::peripherals::{ADC1, IWDG, TIM3, USART1};
+use embassy_stm32::peripherals::USART1;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
-use embassy_stm32::timer::Channel;
 use embassy_stm32::usart::{self, BufferedUart};
-use embassy_stm32::{bind_interrupts, pac, Peri};
+use embassy_stm32::{bind_interrupts, pac};
 use morphlink::stats::ResetFlags;
 
 /// Board name, as in the `board-b-l475e-iot01a` feature and the boot line.
@@ -40,12 +42,6 @@ pub const CPU_HZ: u32 = 80_000_000;
 /// emulated ADC stays simple), so the control task sums
 /// 16 reads spread over the burst.
 pub const HW_OVERSAMPLE: u32 = 1;
-/// Timer driving both heaters.
-pub type HeaterTimer = TIM3;
-/// Timer channel of the PLA heater.
-pub const PLA_CHANNEL: Channel = Channel::Ch1;
-/// Timer channel of the TCA heater.
-pub const TCA_CHANNEL: Channel = Channel::Ch2;
 
 /// ADC sample time: the longest, because the thermistor dividers are 5–10 kΩ sources and the
 /// supply divider 8.2 kΩ; 640.5 cycles at 80 MHz is 8 µs per conversion.
@@ -54,44 +50,6 @@ const SAMPLE_TIME: SampleTime = SampleTime::CYCLES640_5;
 bind_interrupts!(struct Irqs {
     USART1 => usart::BufferedInterruptHandler<USART1>;
 });
-
-/// Drives both heater gates low by raw register writes (output mode, level low), whatever
-/// state the timer and the rest of the firmware are in. For the panic and HardFault handlers.
-pub fn heater_pins_low() {
-    crate::force_low(pac::GPIOA, 6);
-    crate::force_low(pac::GPIOA, 7);
-}
-
-/// The thermistor and supply inputs on ADC1.
-pub struct Sensors {
-    adc: Adc<'static, ADC1>,
-    channels: [AnyAdcChannel<'static, ADC1>; 4],
-}
-
-impl Sensors {
-    /// One conversion each of the PLA, TCA and ambient thermistors and the supply divider,
-    /// counts (12-bit).
-    pub fn read(&mut self) -> [u16; 4] {
-        let adc = &mut self.adc;
-        self.channels
-            .each_mut()
-            .map(|ch| adc.blocking_read(ch, SAMPLE_TIME))
-    }
-}
-
-/// The board's peripherals, configured: heaters at 0 % duty, UART running.
-pub struct Board {
-    /// Thermistor and supply inputs.
-    pub sensors: Sensors,
-    /// Heater PWM timer (both channels at 0 % duty, outputs not yet enabled).
-    pub pwm: SimplePwm<'static, HeaterTimer>,
-    /// The ST-LINK virtual COM port.
-    pub serial: BufferedUart<'static>,
-    /// The independent watchdog, not started yet.
-    pub iwdg: Peri<'static, IWDG>,
-    /// Reset flags read (and cleared) at boot.
-    pub reset_flags: ResetFlags,
-}
 
 /// Reads and clears the reset flags in RCC_CSR.
 fn take_reset_flags() -> ResetFlags {
@@ -139,15 +97,16 @@ pub fn init() -> Board {
         CountingMode::EdgeAlignedUp,
     );
 
-    let sensors = Sensors {
-        adc: Adc::new(p.ADC1),
-        channels: [
+    let sensors = Sensors::new(
+        Adc::new(p.ADC1),
+        [
             p.PC5.degrade_adc(),
             p.PC4.degrade_adc(),
             p.PC2.degrade_adc(),
             p.PC1.degrade_adc(),
         ],
-    };
+        SAMPLE_TIME,
+    );
 
     let (tx_buf, rx_buf) = crate::uart_buffers();
     let serial = BufferedUart::new(

@@ -21,15 +21,17 @@
 //! ADC12 kernel clock SYSCLK/4 = 42.5 MHz. TIM2 is the embassy time driver. (A2 is PA4, which
 //! only ADC2 reads, so the ambient thermistor sits on A3 on every board.)
 
+#[path = "../common.rs"]
+mod common;
+pub use common::{heater_pins_low, Board, HeaterTimer, Sensors, PLA_CHANNEL, TCA_CHANNEL};
 use embassy_stm32::adc::vals::{Rovsm, Trovs};
-use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, AnyAdcChannel, SampleTime};
+use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, SampleTime};
 use embassy_stm32::gpio::OutputType;
-use embassy_stm32::peripherals::{ADC1, IWDG, LPUART1, TIM3};
+use embassy_stm32::peripherals::LPUART1;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
-use embassy_stm32::timer::Channel;
 use embassy_stm32::usart::{self, BufferedUart};
-use embassy_stm32::{bind_interrupts, pac, Peri};
+use embassy_stm32::{bind_interrupts, pac};
 use morphlink::stats::ResetFlags;
 
 /// Board name, as in the `board-nucleo-g431rb` feature and the boot line.
@@ -41,12 +43,6 @@ pub const CPU_HZ: u32 = 170_000_000;
 pub const HW_OVERSAMPLE: u32 = 16;
 /// Oversampling ratio register value for ×16 (OVSR = 3).
 const OVERSAMPLING_RATIO_X16: u8 = 3;
-/// Timer driving both heaters.
-pub type HeaterTimer = TIM3;
-/// Timer channel of the PLA heater.
-pub const PLA_CHANNEL: Channel = Channel::Ch1;
-/// Timer channel of the TCA heater.
-pub const TCA_CHANNEL: Channel = Channel::Ch2;
 
 /// ADC sample time: the longest, because the thermistor dividers are 5–10 kΩ sources and the
 /// supply divider 8.2 kΩ; 640.5 cycles at 42.5 MHz is 15 µs, 0.25 ms per 16-fold read.
@@ -55,44 +51,6 @@ const SAMPLE_TIME: SampleTime = SampleTime::CYCLES640_5;
 bind_interrupts!(struct Irqs {
     LPUART1 => usart::BufferedInterruptHandler<LPUART1>;
 });
-
-/// Drives both heater gates low by raw register writes (output mode, level low), whatever
-/// state the timer and the rest of the firmware are in. For the panic and HardFault handlers.
-pub fn heater_pins_low() {
-    crate::force_low(pac::GPIOA, 6);
-    crate::force_low(pac::GPIOA, 7);
-}
-
-/// The thermistor and supply inputs on ADC1.
-pub struct Sensors {
-    adc: Adc<'static, ADC1>,
-    channels: [AnyAdcChannel<'static, ADC1>; 4],
-}
-
-impl Sensors {
-    /// One hardware-oversampled read each of the PLA, TCA and ambient thermistors and the
-    /// supply divider: sums of 16 conversions, counts.
-    pub fn read(&mut self) -> [u16; 4] {
-        let adc = &mut self.adc;
-        self.channels
-            .each_mut()
-            .map(|ch| adc.blocking_read(ch, SAMPLE_TIME))
-    }
-}
-
-/// The board's peripherals, configured: heaters at 0 % duty, UART running.
-pub struct Board {
-    /// Thermistor and supply inputs.
-    pub sensors: Sensors,
-    /// Heater PWM timer (both channels at 0 % duty, outputs not yet enabled).
-    pub pwm: SimplePwm<'static, HeaterTimer>,
-    /// The ST-LINK virtual COM port.
-    pub serial: BufferedUart<'static>,
-    /// The independent watchdog, not started yet.
-    pub iwdg: Peri<'static, IWDG>,
-    /// Reset flags read (and cleared) at boot.
-    pub reset_flags: ResetFlags,
-}
 
 /// Reads and clears the reset flags in RCC_CSR.
 fn take_reset_flags() -> ResetFlags {
@@ -141,8 +99,8 @@ pub fn init() -> Board {
         CountingMode::EdgeAlignedUp,
     );
 
-    let sensors = Sensors {
-        adc: Adc::new(
+    let sensors = Sensors::new(
+        Adc::new(
             p.ADC1,
             AdcConfig {
                 oversampling_ratio: Some(OVERSAMPLING_RATIO_X16),
@@ -151,13 +109,14 @@ pub fn init() -> Board {
                 ..AdcConfig::default()
             },
         ),
-        channels: [
+        [
             p.PA0.degrade_adc(),
             p.PA1.degrade_adc(),
             p.PB0.degrade_adc(),
             p.PC1.degrade_adc(),
         ],
-    };
+        SAMPLE_TIME,
+    );
 
     let (tx_buf, rx_buf) = crate::uart_buffers();
     let serial = BufferedUart::new(
