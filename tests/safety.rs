@@ -319,3 +319,32 @@ fn abort_in_every_phase_turns_both_heaters_off_at_once() {
         }
     }
 }
+
+#[test]
+fn a_stalled_controller_cannot_leave_a_heater_on() {
+    for phase in [Phase::Soften, Phase::Bend, Phase::Lock] {
+        let mut b = bench_in(phase, 35.0, "auto");
+        let before = b.rig.applied();
+        assert!(
+            before.pla_duty > 0.0 || before.tca_duty > 0.0,
+            "{phase:?}: a heater is on"
+        );
+        // The control loop stops: the output stage holds the duties for the watchdog's 1 s
+        // (counted from the last step, one tick ago)...
+        let held_ticks =
+            morphlink::heater::CommandWatchdog::DEFAULT_MAX_AGE_MS / morphlink::controller::TICK_MS;
+        for _ in 0..held_ticks - 1 {
+            b.rig.stalled_tick();
+        }
+        assert_eq!(
+            b.rig.applied(),
+            before,
+            "{phase:?}: held within the watchdog's age"
+        );
+        // ...and then drops both to zero, and the link gets no more heat.
+        b.rig.stalled_tick();
+        assert_eq!(b.rig.applied(), ZERO, "{phase:?}");
+        b.rig.stalled_tick();
+        assert_eq!(b.rig.link.powers_w(), [0.0, 0.0], "{phase:?}");
+    }
+}

@@ -3,6 +3,7 @@
 
 use crate::link::{Plant, SimLink};
 use morphlink::controller::{Config, Controller, Outputs, TICK_MS};
+use morphlink::heater::CommandWatchdog;
 use morphlink::protocol::SimCommand;
 
 /// Controller plus simulated link plus a clock.
@@ -11,6 +12,9 @@ pub struct Rig {
     pub ctrl: Controller,
     /// The simulated link.
     pub link: SimLink,
+    /// The heater output stage: PLA and TCA duties hold only while the controller refreshes
+    /// them (the core's command watchdog, as a board's PWM stage would apply it).
+    pwm: [CommandWatchdog; 2],
     now_ms: u64,
 }
 
@@ -22,6 +26,7 @@ impl Rig {
         let mut rig = Rig {
             ctrl: Controller::new(board),
             link: SimLink::new(plant, board),
+            pwm: [CommandWatchdog::default(); 2],
             now_ms: 0,
         };
         rig.tick();
@@ -38,9 +43,34 @@ impl Rig {
     pub fn tick(&mut self) -> Outputs {
         let inputs = self.link.inputs(self.now_ms);
         let out = self.ctrl.step(self.now_ms, &inputs);
-        self.link.advance(TICK_MS as f64 / 1000.0, out);
-        self.now_ms += TICK_MS;
+        self.apply(out);
+        self.run_link();
         out
+    }
+
+    /// One control period in which the controller does not run (a stalled control loop): the
+    /// output stage keeps the last duties only until the command watchdog expires them.
+    pub fn stalled_tick(&mut self) {
+        self.run_link();
+    }
+
+    /// Duties the heaters actually get now.
+    pub fn applied(&self) -> Outputs {
+        Outputs {
+            pla_duty: self.pwm[0].duty(self.now_ms),
+            tca_duty: self.pwm[1].duty(self.now_ms),
+        }
+    }
+
+    fn apply(&mut self, out: Outputs) {
+        self.pwm[0].refresh(self.now_ms, out.pla_duty);
+        self.pwm[1].refresh(self.now_ms, out.tca_duty);
+    }
+
+    fn run_link(&mut self) {
+        let applied = self.applied();
+        self.link.advance(TICK_MS as f64 / 1000.0, applied);
+        self.now_ms += TICK_MS;
     }
 
     /// Writes every queued event or alarm line through `out`.
@@ -55,6 +85,9 @@ impl Rig {
         if let Some(sim) = self.ctrl.handle_line(self.now_ms, line, out) {
             self.sim_command(sim, out);
         }
+        // A command may change the duties (ABORT): applied at once, as the firmware does.
+        let now = self.ctrl.outputs();
+        self.apply(now);
     }
 
     fn sim_command(&mut self, cmd: SimCommand, out: &mut impl FnMut(&str)) {
