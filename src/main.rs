@@ -50,6 +50,7 @@ mod firmware {
     use crate::board;
     use core::cell::RefCell;
     use core::sync::atomic::{AtomicBool, Ordering};
+    #[cfg(not(emulated))]
     use cortex_m::peripheral::DWT;
     use defmt_rtt as _;
     use embassy_executor::Spawner;
@@ -144,6 +145,20 @@ mod firmware {
         pub type SerialRx = crate::board::usart::Rx;
     }
     use parts::{HeaterDriver, SerialRx, SerialTx, Watchdog};
+
+    /// CPU cycle count for the loop timing of `STATS`: the DWT cycle counter on hardware.
+    #[cfg(not(emulated))]
+    fn cycles() -> u32 {
+        DWT::cycle_count()
+    }
+
+    /// QEMU does not model the DWT cycle counter (it reads 0), so the emulated build counts
+    /// [`board::CPU_HZ`] cycles per second of firmware time from the SysTick clock instead:
+    /// `STATS` then reports firmware-time durations (20× compressed), in 5 µs steps.
+    #[cfg(emulated)]
+    fn cycles() -> u32 {
+        (Instant::now().as_micros() * u64::from(board::CPU_HZ / 1_000_000)) as u32
+    }
 
     /// Runs `f` on the controller, briefly holding the lock.
     fn with_controller<R>(f: impl FnOnce(&mut Controller) -> R) -> R {
@@ -281,9 +296,9 @@ mod firmware {
                 heaters.apply(with_controller(|c| c.outputs()));
                 continue;
             }
-            let start = DWT::cycle_count();
+            let start = cycles();
             let sums = read_burst(&mut sensors).await;
-            let adc_done = DWT::cycle_count();
+            let adc_done = cycles();
             let now_ms = Instant::now().as_millis();
             let inputs = Inputs {
                 thermistor_counts: [sums[0], sums[1], sums[2]],
@@ -292,7 +307,7 @@ mod firmware {
             };
             let outputs = with_controller(|c| c.step(now_ms, &inputs));
             heaters.apply(outputs);
-            let applied = DWT::cycle_count();
+            let applied = cycles();
             wdg.pet();
             with_controller(|c| c.record_timing(start, adc_done, applied));
             EVENTS.signal(());
