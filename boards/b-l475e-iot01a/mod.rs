@@ -1,8 +1,8 @@
 //! B-L475E-IOT01A (Discovery kit IoT node): STM32L475VG, Cortex-M4F, 1 MiB flash, 128 KiB RAM
-//! (96 KiB SRAM1 used, see `memory.x` here). The board the emulation issue runs under QEMU:
+//! (96 KiB SRAM1 used, see `memory.x` here). The board that also runs under QEMU:
 //! [`init`] builds the peripheral drivers one by one ([`Sensors`], the heater timer, the
-//! UART), so an emulated variant can swap each for a simulated link without touching the
-//! tasks.
+//! UART); the emulated build (`boards/b-l475e-iot01a-emulated/`) swaps each for a simulated
+//! link or a register-level driver without touching the tasks.
 //!
 //! | signal | pin (Arduino) | peripheral |
 //! | --- | --- | --- |
