@@ -14,8 +14,8 @@ use std::time::{Duration, Instant};
 
 /// QEMU machine that models the STM32L475 of the B-L475E-IOT01A board.
 pub const MACHINE: &str = "b-l475e-iot01a";
-/// Cargo features of the emulated build.
-pub const FEATURES: &str = "board-b-l475e-iot01a-emulated";
+/// Board folder (and `board-*` feature) of the emulated build.
+pub const BOARD: &str = "b-l475e-iot01a-emulated";
 /// Firmware target triple.
 pub const TARGET: &str = "thumbv7em-none-eabihf";
 /// Oldest QEMU major version with a working `b-l475e-iot01a` machine (Debian bookworm has 7.2).
@@ -45,8 +45,10 @@ pub fn find_qemu() -> Result<PathBuf, String> {
     Ok(PathBuf::from(name))
 }
 
-/// Builds the emulated image in release into `target_dir`; returns the ELF path.
-pub fn build_image(workspace: &Path, target_dir: &Path) -> Result<PathBuf, String> {
+/// Builds the firmware for `board` (the `board-<board>` feature) in release into `target_dir`;
+/// returns the ELF path. Used for the emulated image here and for every board by
+/// `cargo xtask boards`.
+pub fn build_firmware(workspace: &Path, board: &str, target_dir: &Path) -> Result<PathBuf, String> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo)
         .current_dir(workspace)
@@ -59,14 +61,21 @@ pub fn build_image(workspace: &Path, target_dir: &Path) -> Result<PathBuf, Strin
             "morphlink",
             "--no-default-features",
         ])
-        .args(["--features", FEATURES])
+        .args(["--features", &format!("board-{board}")])
         .env("CARGO_TARGET_DIR", target_dir)
         .status()
         .map_err(|e| format!("cannot run cargo: {e}"))?;
     if !status.success() {
-        return Err(format!("building the emulated image failed ({status})"));
+        return Err(format!(
+            "building the firmware for {board} failed ({status})"
+        ));
     }
     Ok(target_dir.join(TARGET).join("release").join("morphlink"))
+}
+
+/// Builds the emulated image in release into `target_dir`; returns the ELF path.
+pub fn build_image(workspace: &Path, target_dir: &Path) -> Result<PathBuf, String> {
+    build_firmware(workspace, BOARD, target_dir)
 }
 
 /// A free loopback TCP port (bound and released; a race with another process is possible but

@@ -83,7 +83,8 @@ pub fn prior_stiffness_nm2(p: &LinkParams) -> f64 {
         + p.pla_stiffness.e_rubbery_pa * crate::mechanics::pla_second_moment_m4(p)
 }
 
-fn with_theta(p: &LinkParams, th: &Vector3<f64>) -> LinkParams {
+/// `p` with the fit's parameters `(ln EI, F0, c)` filled in.
+pub fn with_theta(p: &LinkParams, th: &Vector3<f64>) -> LinkParams {
     let mut q = *p;
     q.mechanics.bending_stiffness_nm2 = th[0].exp();
     q.mechanics.preload_n = th[1];
@@ -114,59 +115,10 @@ pub fn calibrate(p: &LinkParams, pts: &[Point]) -> Result<Fit, String> {
     // Start from the prior stiffness with the force scaled to the mean measured curvature.
     let mean_k = pts.iter().map(|pt| 1e3 / pt.radius_mm).sum::<f64>() / pts.len() as f64;
     let f0 = mean_k * prior / p.geometry.tca_offset_m;
-    let mut th = Vector3::new(ln_prior, f0, 0.01 * f0);
-    let cost = |th: &Vector3<f64>| {
-        residuals(p, pts, th, ln_prior)
-            .iter()
-            .map(|r| r * r)
-            .sum::<f64>()
-    };
-    let mut lambda = 1e-3;
-    let mut iterations = 0;
-    for it in 0..200 {
-        iterations = it + 1;
-        let r0 = residuals(p, pts, &th, ln_prior);
-        let m = r0.len();
-        let mut jac = vec![Vector3::zeros(); m];
-        for k in 0..3 {
-            let h = 1e-6 * th[k].abs().max(1e-6);
-            let mut t2 = th;
-            t2[k] += h;
-            let r1 = residuals(p, pts, &t2, ln_prior);
-            for i in 0..m {
-                jac[i][k] = (r1[i] - r0[i]) / h;
-            }
-        }
-        let mut jtj = Matrix3::zeros();
-        let mut jtr = Vector3::zeros();
-        for i in 0..m {
-            jtj += jac[i] * jac[i].transpose();
-            jtr += jac[i] * r0[i];
-        }
-        let c0 = cost(&th);
-        let mut improved = false;
-        for _ in 0..20 {
-            let mut a = jtj;
-            for k in 0..3 {
-                a[(k, k)] *= 1.0 + lambda;
-                a[(k, k)] += 1e-30;
-            }
-            let Some(step) = a.lu().solve(&(-jtr)) else {
-                break;
-            };
-            let cand = th + step;
-            if cost(&cand) < c0 {
-                th = cand;
-                lambda = (lambda * 0.3).max(1e-12);
-                improved = true;
-                break;
-            }
-            lambda *= 10.0;
-        }
-        if !improved || c0 - cost(&th) < 1e-12 * c0.max(1e-30) {
-            break;
-        }
-    }
+    let start = Vector3::new(ln_prior, f0, 0.01 * f0);
+    let Ok((th, iterations)) = levenberg_marquardt3(start, |th| {
+        Ok::<_, core::convert::Infallible>(residuals(p, pts, th, ln_prior))
+    });
     let params = with_theta(p, &th);
     let residuals_mm = pts
         .iter()
@@ -181,6 +133,71 @@ pub fn calibrate(p: &LinkParams, pts: &[Point]) -> Result<Fit, String> {
         prior_stiffness_nm2: prior,
         iterations,
     })
+}
+
+/// Levenberg–Marquardt on three parameters, from `start`, minimising the sum of squares of
+/// `residuals` (forward-difference Jacobian). A trial step whose residuals cannot be computed is
+/// a step too far, not a failure; an error at an accepted point is returned. Returns the
+/// parameters and the iterations used (at most 200; stops when a step gains less than 1e-12
+/// of the cost).
+pub fn levenberg_marquardt3<E>(
+    start: Vector3<f64>,
+    residuals: impl Fn(&Vector3<f64>) -> Result<Vec<f64>, E>,
+) -> Result<(Vector3<f64>, usize), E> {
+    let cost = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
+    let mut th = start;
+    let mut lambda = 1e-3;
+    let mut iterations = 0;
+    for it in 0..200 {
+        iterations = it + 1;
+        let r0 = residuals(&th)?;
+        let c0 = cost(&r0);
+        let mut jtj = Matrix3::zeros();
+        let mut jtr = Vector3::zeros();
+        let mut cols = [Vec::new(), Vec::new(), Vec::new()];
+        for (k, col) in cols.iter_mut().enumerate() {
+            let h = 1e-6 * th[k].abs().max(1e-6);
+            let mut t2 = th;
+            t2[k] += h;
+            *col = residuals(&t2)?
+                .iter()
+                .zip(&r0)
+                .map(|(a, b)| (a - b) / h)
+                .collect();
+        }
+        for i in 0..r0.len() {
+            let j = Vector3::new(cols[0][i], cols[1][i], cols[2][i]);
+            jtj += j * j.transpose();
+            jtr += j * r0[i];
+        }
+        let mut improved = None;
+        for _ in 0..20 {
+            let mut a = jtj;
+            for k in 0..3 {
+                a[(k, k)] *= 1.0 + lambda;
+                a[(k, k)] += 1e-30;
+            }
+            let Some(step) = a.lu().solve(&(-jtr)) else {
+                break;
+            };
+            let cand = th + step;
+            if let Ok(rc) = residuals(&cand) {
+                let c = cost(&rc);
+                if c < c0 {
+                    th = cand;
+                    lambda = (lambda * 0.3).max(1e-12);
+                    improved = Some(c);
+                    break;
+                }
+            }
+            lambda *= 10.0;
+        }
+        match improved {
+            Some(c) if c0 - c >= 1e-12 * c0.max(1e-30) => {}
+            _ => break,
+        }
+    }
+    Ok((th, iterations))
 }
 
 #[cfg(test)]

@@ -10,10 +10,7 @@
 use object::elf::{SHF_ALLOC, SHF_WRITE, SHT_NOBITS};
 use object::{Object, ObjectSection, ObjectSymbol, SectionFlags};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-/// The firmware target.
-pub const TARGET: &str = "thumbv7em-none-eabihf";
 /// The default board (the `default` feature), which must also fit the small part.
 pub const DEFAULT_BOARD: &str = "nucleo-f401re";
 /// Flash of the small part the default image must fit, bytes: 64 KiB, the smallest STM32F4
@@ -125,33 +122,8 @@ pub fn stack_start(elf: &[u8]) -> Option<u64> {
 }
 
 fn build(root: &Path, board: &str) -> Result<PathBuf, String> {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
-        .current_dir(root)
-        .args([
-            "build",
-            "--release",
-            "--target",
-            TARGET,
-            "--bin",
-            "morphlink",
-        ])
-        .args([
-            "--no-default-features",
-            "--features",
-            &format!("board-{board}"),
-        ])
-        .status()
-        .map_err(|e| format!("cannot run cargo: {e}"))?;
-    if !status.success() {
-        return Err(format!("building {board} failed"));
-    }
+    let elf = morphlink_host::emulator::build_firmware(root, board, &root.join("target"))?;
     // Each build overwrites the same ELF; keep a copy per board (e.g. to flash with probe-rs).
-    let elf = root
-        .join("target")
-        .join(TARGET)
-        .join("release")
-        .join("morphlink");
     let dir = root.join("target").join("boards");
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let copy = dir.join(format!("morphlink-{board}.elf"));

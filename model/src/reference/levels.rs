@@ -232,78 +232,23 @@ pub fn calibrate_level(
     r: &ResistanceMatrix,
     points: &[(f64, f64)],
 ) -> Result<LinkParams, ReferenceError> {
-    use nalgebra::{Matrix3, Vector3};
+    use crate::calibrate::{levenberg_marquardt3, with_theta, PRIOR_WEIGHT_MM};
     let ln_prior = crate::calibrate::prior_stiffness_nm2(p).ln();
-    let with = |th: &Vector3<f64>| {
-        let mut q = *p;
-        q.mechanics.bending_stiffness_nm2 = th[0].exp();
-        q.mechanics.preload_n = th[1];
-        q.mechanics.force_coeff_n_per_k = th[2];
-        q
-    };
     let powers: Vec<f64> = points.iter().map(|x| x.0).collect();
-    let residuals = |th: &Vector3<f64>| -> Result<Vec<f64>, ReferenceError> {
-        let c = radius_curve_with_matrix_mm(&with(th), level, r, &powers)?;
+    let residuals = |th: &nalgebra::Vector3<f64>| -> Result<Vec<f64>, ReferenceError> {
+        let c = radius_curve_with_matrix_mm(&with_theta(p, th), level, r, &powers)?;
         let mut v: Vec<f64> = c.iter().zip(points).map(|(m, x)| m - x.1).collect();
-        v.push(crate::calibrate::PRIOR_WEIGHT_MM * (th[0] - ln_prior));
+        v.push(PRIOR_WEIGHT_MM * (th[0] - ln_prior));
         Ok(v)
     };
-    let cost = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
     let m = &p.mechanics;
-    let mut th = Vector3::new(
+    let start = nalgebra::Vector3::new(
         m.bending_stiffness_nm2.ln(),
         m.preload_n,
         m.force_coeff_n_per_k,
     );
-    let mut lambda = 1e-3;
-    for _ in 0..200 {
-        let r0 = residuals(&th)?;
-        let c0 = cost(&r0);
-        let mut jtj = Matrix3::zeros();
-        let mut jtr = Vector3::zeros();
-        let mut cols = [Vec::new(), Vec::new(), Vec::new()];
-        for (k, col) in cols.iter_mut().enumerate() {
-            let h = 1e-6 * th[k].abs().max(1e-6);
-            let mut t2 = th;
-            t2[k] += h;
-            *col = residuals(&t2)?
-                .iter()
-                .zip(&r0)
-                .map(|(a, b)| (a - b) / h)
-                .collect();
-        }
-        for i in 0..r0.len() {
-            let j = Vector3::new(cols[0][i], cols[1][i], cols[2][i]);
-            jtj += j * j.transpose();
-            jtr += j * r0[i];
-        }
-        let mut improved = false;
-        for _ in 0..20 {
-            let mut a = jtj;
-            for k in 0..3 {
-                a[(k, k)] *= 1.0 + lambda;
-                a[(k, k)] += 1e-30;
-            }
-            let Some(step) = a.lu().solve(&(-jtr)) else {
-                break;
-            };
-            let cand = th + step;
-            // A trial the model cannot solve is a step too far, not a failure.
-            if let Ok(rc) = residuals(&cand) {
-                if cost(&rc) < c0 {
-                    th = cand;
-                    lambda = (lambda * 0.3).max(1e-12);
-                    improved = true;
-                    break;
-                }
-            }
-            lambda *= 10.0;
-        }
-        if !improved || c0 - cost(&residuals(&th)?) < 1e-12 * c0.max(1e-30) {
-            break;
-        }
-    }
-    let q = with(&th);
+    let (th, _) = levenberg_marquardt3(start, residuals)?;
+    let q = with_theta(p, &th);
     if !(q.mechanics.bending_stiffness_nm2.is_finite() && q.mechanics.bending_stiffness_nm2 > 0.0) {
         return Err(ReferenceError::NonFinite("calibrated bending stiffness"));
     }
