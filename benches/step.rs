@@ -4,11 +4,11 @@
 //! date and the machine.
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use morphlink::controller::TICK_MS;
-use morphlink_sim::{Plant, Rig};
+use morphlink_sim::{LinkSetup, Rig};
 
 /// A rig in the bend phase of a morph to 38 mm.
 fn rig_in_bend() -> Rig {
-    let mut rig = Rig::new(Plant::NOMINAL);
+    let mut rig = Rig::new(LinkSetup::NOMINAL);
     rig.handle_line("MORPH 38", &mut |_| {});
     while rig.ctrl.phase() != morphlink::sequencer::Phase::Bend {
         rig.tick();
@@ -18,7 +18,7 @@ fn rig_in_bend() -> Rig {
 
 fn controller_step(c: &mut Criterion) {
     let mut rig = rig_in_bend();
-    let inputs = rig.link.inputs(rig.now_ms());
+    let inputs = rig.inputs(rig.now_ms());
     let mut now = rig.now_ms();
     c.bench_function("controller step (bend phase)", |b| {
         b.iter(|| {
@@ -40,12 +40,12 @@ fn sim_tick(c: &mut Criterion) {
 fn whole_morph(c: &mut Criterion) {
     c.bench_function("whole simulated morph to 38 mm", |b| {
         b.iter(|| {
-            let mut rig = Rig::new(Plant::NOMINAL);
+            let mut rig = Rig::new(LinkSetup::NOMINAL);
             rig.handle_line("MORPH 38", &mut |_| {});
             while rig.ctrl.busy() {
                 rig.tick();
             }
-            black_box(rig.link.radius_mm())
+            black_box(rig.radius_mm())
         })
     });
 }

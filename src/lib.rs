@@ -10,6 +10,8 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 #![allow(clippy::needless_range_loop)]
 
+#[cfg(feature = "sim")]
+pub mod bench;
 pub mod controller;
 pub mod fixed;
 pub mod heater;

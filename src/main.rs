@@ -1,14 +1,15 @@
-//! Firmware entry point: the thin shell that moves data between the STM32 peripherals and the
+//! Firmware entry point: the thin shell that moves data between the board and the
 //! hardware-free core. Builds only for the target (`thumbv7em-none-eabihf`); on the host it
 //! prints how to build it.
 //!
 //! Two embassy tasks share one [`morphlink::controller::Controller`]:
 //! - `control`, every [`TICK_MS`] (10 Hz): ADC burst (16 samples per input) → `Controller::step`
-//!   → PWM duties; feeds the independent watchdog; records its timing for `STATS`.
-//! - `serial`: bytes from the interrupt-driven buffered UART → `LineAssembler` →
+//!   → PWM duties; feeds the watchdog; records its timing for `STATS`.
+//! - `serial`: bytes from the board's serial port → `LineAssembler` →
 //!   `Controller::handle_line` → replies; also writes queued events and alarms.
 //!
-//! The board (pins, clocks, memory) comes from `boards/<name>/`, picked by a `board-*` feature.
+//! Both are written once against the board traits of `morphlink-boards`; the board (pins,
+//! clocks, memory) is the one its `board-*` feature selects.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
@@ -23,87 +24,37 @@
 ))]
 compile_error!("no board: build with exactly one `board-*` feature (see boards/README.md)");
 
-#[cfg(target_os = "none")]
-#[cfg_attr(
-    feature = "board-nucleo-f401re",
-    path = "../boards/nucleo-f401re/mod.rs"
-)]
-#[cfg_attr(
-    feature = "board-nucleo-g431rb",
-    path = "../boards/nucleo-g431rb/mod.rs"
-)]
-#[cfg_attr(
-    feature = "board-b-l475e-iot01a",
-    path = "../boards/b-l475e-iot01a/mod.rs"
-)]
-#[cfg_attr(
-    feature = "board-b-l475e-iot01a-emulated",
-    path = "../boards/b-l475e-iot01a-emulated/mod.rs"
-)]
-mod board;
-
-#[cfg(target_os = "none")]
-pub use firmware::*;
+#[cfg(all(target_os = "none", emulated))]
+mod emulated;
 
 #[cfg(target_os = "none")]
 mod firmware {
-    use crate::board;
     use core::cell::RefCell;
     use core::sync::atomic::{AtomicBool, Ordering};
-    #[cfg(not(emulated))]
-    use cortex_m::peripheral::DWT;
     use defmt_rtt as _;
     use embassy_executor::Spawner;
     use embassy_futures::select::{select, Either};
     use embassy_futures::yield_now;
-    use embassy_stm32::pac;
-    #[cfg(not(emulated))]
-    use embassy_stm32::time::Hertz;
-    #[cfg(not(emulated))]
-    use embassy_stm32::timer::simple_pwm::{SimplePwm, SimplePwmChannel, SimplePwmChannels};
-    #[cfg(not(emulated))]
-    use embassy_stm32::timer::{Channel, GeneralInstance4Channel};
-    #[cfg(not(emulated))]
-    use embassy_stm32::usart;
     use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
     use embassy_sync::blocking_mutex::Mutex;
     use embassy_sync::signal::Signal;
     use embassy_time::{Duration, Instant, Ticker, Timer};
     use embedded_io_async::{Read, Write};
-    #[cfg(not(emulated))]
-    use morphlink::controller::Outputs;
     use morphlink::controller::{Config, Controller, Inputs, MAX_REPLY_BYTES, OVERSAMPLE, TICK_MS};
     use morphlink::protocol::{
-        format_error, Assembled, LineAssembler, OutLine, ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
+        format_error, Assembled, LineAssembler, OutLine, SimCommand, ERR_INVALID_LINE,
+        ERR_LINE_TOO_LONG,
     };
     use morphlink::stats::{write_boot_line, LoopTiming, ResetCause};
+    use morphlink_boards::selected as board;
+    use morphlink_boards::{AnalogInputs, HeaterOutputs, Input, Watchdog, INPUTS};
 
-    #[cfg(not(emulated))]
-    /// Heater PWM frequency: 1 kHz. The heaters' thermal time constants are ≥ 1 s, so any
-    /// frequency above ~10 Hz gives a ripple-free temperature; 1 kHz keeps switching losses of
-    /// a GPIO-driven logic-level MOSFET negligible (edges of ~1 µs are 0.2 % of the period)
-    /// and still gives a 16-bit timer tens of thousands of duty steps.
-    pub const PWM_FREQUENCY: Hertz = Hertz(1_000);
-
-    /// Independent-watchdog timeout, µs: 5 control ticks. The control task feeds it every
-    /// 100 ms; the LSI that clocks it may run up to ~47 % fast, which still leaves > 3 ticks.
-    /// A stalled control task resets the chip, and the reset leaves both heaters off.
-    pub const WATCHDOG_TIMEOUT_US: u32 = 500_000;
-
-    /// Serial line speed, baud: the ST-LINK virtual COM port's usual default.
-    pub const BAUD: u32 = 115_200;
-
-    /// UART receive buffer, bytes: four maximal lines; more is a flood, and the assembler
-    /// reports an over-long line once rather than per byte.
-    pub const UART_RX_BYTES: usize = 256;
-    /// UART transmit buffer, bytes: holds a whole HELP reply, so replies rarely wait.
-    pub const UART_TX_BYTES: usize = 1024;
     /// Largest reply the serial task collects under the controller lock, bytes: the core's bound.
-    pub const REPLY_BYTES: usize = MAX_REPLY_BYTES;
+    const REPLY_BYTES: usize = MAX_REPLY_BYTES;
 
     /// Spacing of the ADC samples in a tick's burst: 16 samples 1 ms apart span 16 ms, about
     /// one mains period, so 50/60 Hz pickup averages out (the G4 sums in hardware instead).
-    pub const SAMPLE_SPACING: Duration = Duration::from_millis(1);
+    const SAMPLE_SPACING: Duration = Duration::from_millis(1);
 
     /// Reads per input per tick: the core's oversampling over what the ADC sums in hardware.
     const READS_PER_TICK: u32 = OVERSAMPLE / board::HW_OVERSAMPLE;
@@ -121,127 +72,32 @@ mod firmware {
     /// Serial → control: a command changed the duties (ABORT); apply them now, not next tick.
     static APPLY_NOW: Signal<ThreadModeRawMutex, ()> = Signal::new();
 
-    /// Heater driver, serial halves and watchdog of a hardware board.
-    #[cfg(not(emulated))]
-    mod parts {
-        /// Both heaters on the board's PWM timer.
-        pub type HeaterDriver = super::Heaters<crate::board::HeaterTimer>;
-        /// The buffered UART's transmit half.
-        pub type SerialTx = embassy_stm32::usart::BufferedUartTx<'static>;
-        /// The buffered UART's receive half.
-        pub type SerialRx = embassy_stm32::usart::BufferedUartRx<'static>;
-        /// The independent watchdog.
-        pub type Watchdog =
-            embassy_stm32::wdg::IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>;
-    }
-
-    /// The emulated board's replacements (see `boards/b-l475e-iot01a-emulated`).
-    #[cfg(emulated)]
-    mod parts {
-        pub use crate::board::{HeaterDriver, Watchdog};
-        /// Register-level USART1, transmit half.
-        pub type SerialTx = crate::board::usart::Tx;
-        /// Register-level USART1, receive half.
-        pub type SerialRx = crate::board::usart::Rx;
-    }
-    use parts::{HeaterDriver, SerialRx, SerialTx, Watchdog};
-
-    /// CPU cycle count for the loop timing of `STATS`: the DWT cycle counter on hardware.
-    #[cfg(not(emulated))]
-    fn cycles() -> u32 {
-        DWT::cycle_count()
-    }
-
-    /// QEMU does not model the DWT cycle counter (it reads 0), so the emulated build counts
-    /// [`board::CPU_HZ`] cycles per second of firmware time from the SysTick clock instead:
-    /// `STATS` then reports firmware-time durations (20× compressed), in 5 µs steps.
-    #[cfg(emulated)]
-    fn cycles() -> u32 {
-        (Instant::now().as_micros() * u64::from(board::CPU_HZ / 1_000_000)) as u32
-    }
-
     /// Runs `f` on the controller, briefly holding the lock.
     fn with_controller<R>(f: impl FnOnce(&mut Controller) -> R) -> R {
         CONTROLLER.lock(|c| f(c.borrow_mut().as_mut().expect("set up in main")))
     }
 
-    /// Drives one GPIO low as a plain output: sets the output latch low, then switches the
-    /// pin from its timer function to output mode. Raw register writes only, so it works from
-    /// a panic or HardFault whatever the drivers were doing (if the port's clock is still off,
-    /// the pin is in its reset state and the gate pull-down holds it low anyway).
-    pub fn force_low(port: pac::gpio::Gpio, pin: usize) {
-        port.bsrr().write(|w| w.set_br(pin, true));
-        port.moder()
-            .modify(|w| w.set_moder(pin, pac::gpio::vals::Moder::OUTPUT));
+    /// The board's parts; the emulated board gets the firmware's simulated link.
+    fn board_parts() -> board::Parts {
+        #[cfg(emulated)]
+        return board::init(crate::emulated::init());
+        #[cfg(not(emulated))]
+        board::init()
     }
 
-    #[cfg(not(emulated))]
-    /// UART buffers, allocated once.
-    pub fn uart_buffers() -> (&'static mut [u8], &'static mut [u8]) {
-        let tx =
-            cortex_m::singleton!(: [u8; UART_TX_BYTES] = [0; UART_TX_BYTES]).expect("called once");
-        let rx =
-            cortex_m::singleton!(: [u8; UART_RX_BYTES] = [0; UART_RX_BYTES]).expect("called once");
-        (tx, rx)
-    }
-
-    #[cfg(not(emulated))]
-    /// 115 200 8N1.
-    pub fn uart_config() -> usart::Config {
-        let mut c = usart::Config::default();
-        c.baudrate = BAUD;
-        c
-    }
-
-    #[cfg(not(emulated))]
-    /// Both heater channels of one PWM timer.
-    pub struct Heaters<T: GeneralInstance4Channel> {
-        pla: SimplePwmChannel<'static, T>,
-        tca: SimplePwmChannel<'static, T>,
-    }
-
-    #[cfg(not(emulated))]
-    impl<T: GeneralInstance4Channel> Heaters<T> {
-        /// Takes the board's timer and its two heater channels (which must differ); both
-        /// outputs are enabled at 0 % duty, so the timer drives both gates low.
-        pub fn new(pwm: SimplePwm<'static, T>, pla: Channel, tca: Channel) -> Self {
-            let SimplePwmChannels { ch1, ch2, ch3, ch4 } = pwm.split();
-            let mut slots = [Some(ch1), Some(ch2), Some(ch3), Some(ch4)];
-            let mut take = |c: Channel| {
-                let mut ch = slots[c.index()]
-                    .take()
-                    .expect("two different heater channels");
-                ch.set_duty_cycle_fully_off();
-                ch.enable();
-                ch
-            };
-            let pla = take(pla);
-            let tca = take(tca);
-            Heaters { pla, tca }
-        }
-
-        /// Sets both duties (fractions in [0, 1]; anything else, NaN included, is off).
-        pub fn apply(&mut self, o: Outputs) {
-            set_duty(&mut self.pla, o.pla_duty);
-            set_duty(&mut self.tca, o.tca_duty);
-        }
-    }
-
-    #[cfg(not(emulated))]
-    /// Sets one channel's duty from a fraction: 0 (or not a number) is fully off.
-    fn set_duty<T: GeneralInstance4Channel>(ch: &mut SimplePwmChannel<'static, T>, duty: f32) {
-        if duty > 0.0 {
-            let max = ch.max_duty_cycle();
-            ch.set_duty_cycle((duty.min(1.0) * max as f32) as u32);
-        } else {
-            ch.set_duty_cycle_fully_off();
-        }
+    /// Where `SIM` commands go: the simulated link on the emulated board; on hardware the
+    /// core's `error: unsupported` reply.
+    fn sim_command(c: &mut Controller, now_ms: u64, sim: SimCommand, out: &mut impl FnMut(&str)) {
+        #[cfg(emulated)]
+        crate::emulated::sim_command(c, now_ms, sim, out);
+        #[cfg(not(emulated))]
+        c.handle(now_ms, morphlink::protocol::Command::Sim(sim), out);
     }
 
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
-        let b = board::init();
-        let cause = ResetCause::from_flags(b.reset_flags);
+        let parts = board_parts();
+        let cause = ResetCause::from_flags(parts.reset_flags);
         defmt::info!(
             "morphlink {} on {}: reset cause {}",
             morphlink::controller::VERSION,
@@ -249,32 +105,30 @@ mod firmware {
             cause.as_str()
         );
 
-        let mut cp = cortex_m::Peripherals::take().expect("taken once");
-        cp.DCB.enable_trace();
-        cp.DWT.enable_cycle_counter();
-
         let mut ctrl = Controller::new(Config::DEFAULT);
         ctrl.enable_timing(LoopTiming::new(board::CPU_HZ, TICK_MS as u32 * 1000, cause));
         CONTROLLER.lock(|c| *c.borrow_mut() = Some(ctrl));
 
-        #[cfg(not(emulated))]
-        let (heaters, (tx, rx), wdg) = (
-            Heaters::new(b.pwm, board::PLA_CHANNEL, board::TCA_CHANNEL),
-            b.serial.split(),
-            Watchdog::new(b.iwdg, WATCHDOG_TIMEOUT_US),
-        );
-        #[cfg(emulated)]
-        let (heaters, (tx, rx), wdg) = (b.heaters, (b.tx, b.rx), b.watchdog);
         let mut boot = OutLine::new();
         write_boot_line(&mut boot, cause, board::NAME);
 
-        spawner.spawn(control(b.sensors, heaters, wdg).expect("spawned once"));
-        spawner.spawn(serial(tx, rx, boot).expect("spawned once"));
+        spawner.spawn(control(parts.sensors, parts.heaters, parts.watchdog).expect("spawned once"));
+        spawner.spawn(serial(parts.tx, parts.rx, boot).expect("spawned once"));
+    }
+
+    #[embassy_executor::task]
+    async fn control(sensors: board::Sensors, heaters: board::Heaters, wdg: board::Iwdg) {
+        control_loop(sensors, heaters, wdg).await
+    }
+
+    #[embassy_executor::task]
+    async fn serial(tx: board::SerialTx, rx: board::SerialRx, boot: OutLine) {
+        serial_loop(tx, rx, boot).await
     }
 
     /// Sums [`READS_PER_TICK`] reads of every input, [`SAMPLE_SPACING`] apart.
-    async fn read_burst(sensors: &mut board::Sensors) -> [u32; 4] {
-        let mut sums = [0u32; 4];
+    async fn read_burst(sensors: &mut impl AnalogInputs) -> [u32; INPUTS] {
+        let mut sums = [0u32; INPUTS];
         for i in 0..READS_PER_TICK {
             if i > 0 {
                 Timer::after(SAMPLE_SPACING).await;
@@ -287,28 +141,36 @@ mod firmware {
     }
 
     /// The control loop at [`TICK_MS`]; the only feeder of the watchdog.
-    #[embassy_executor::task]
-    async fn control(mut sensors: board::Sensors, mut heaters: HeaterDriver, mut wdg: Watchdog) {
-        wdg.unleash();
+    async fn control_loop(
+        mut sensors: impl AnalogInputs,
+        mut heaters: impl HeaterOutputs,
+        mut wdg: impl Watchdog,
+    ) {
+        wdg.start();
         let mut ticker = Ticker::every(Duration::from_millis(TICK_MS));
         loop {
             if let Either::Second(()) = select(ticker.next(), APPLY_NOW.wait()).await {
-                heaters.apply(with_controller(|c| c.outputs()));
+                let o = with_controller(|c| c.outputs());
+                heaters.apply(o.pla_duty, o.tca_duty);
                 continue;
             }
-            let start = cycles();
+            let start = board::cycles();
             let sums = read_burst(&mut sensors).await;
-            let adc_done = cycles();
+            let adc_done = board::cycles();
             let now_ms = Instant::now().as_millis();
             let inputs = Inputs {
-                thermistor_counts: [sums[0], sums[1], sums[2]],
-                supply_counts: sums[3],
+                thermistor_counts: [
+                    sums[Input::PlaThermistor as usize],
+                    sums[Input::TcaThermistor as usize],
+                    sums[Input::AmbThermistor as usize],
+                ],
+                supply_counts: sums[Input::Supply as usize],
                 sample_ms: now_ms,
             };
-            let outputs = with_controller(|c| c.step(now_ms, &inputs));
-            heaters.apply(outputs);
-            let applied = cycles();
-            wdg.pet();
+            let o = with_controller(|c| c.step(now_ms, &inputs));
+            heaters.apply(o.pla_duty, o.tca_duty);
+            let applied = board::cycles();
+            wdg.feed();
             with_controller(|c| c.record_timing(start, adc_done, applied));
             EVENTS.signal(());
         }
@@ -325,8 +187,7 @@ mod firmware {
         }
     }
 
-    /// Answers one assembled line into `reply`. `SIM` commands get the core's
-    /// `error: unsupported` reply: there is no simulated link on hardware.
+    /// Answers one assembled line into `reply`.
     fn answer(
         c: &mut Controller,
         now_ms: u64,
@@ -337,10 +198,7 @@ mod firmware {
         match line {
             Assembled::Line(l) => {
                 if let Some(sim) = c.handle_line(now_ms, l, &mut out) {
-                    #[cfg(not(emulated))]
-                    c.handle(now_ms, morphlink::protocol::Command::Sim(sim), &mut out);
-                    #[cfg(emulated)]
-                    board::sim_command(sim, &mut out);
+                    sim_command(c, now_ms, sim, &mut out);
                 }
             }
             Assembled::TooLong => out(&format_error(&ERR_LINE_TOO_LONG)),
@@ -349,7 +207,7 @@ mod firmware {
     }
 
     /// Writes every queued event and alarm line, oldest first, taking the lock once per line.
-    async fn send_events(tx: &mut SerialTx) {
+    async fn send_events(tx: &mut impl Write) {
         while let Some(line) = with_controller(|c| c.pop_event_line()) {
             send(tx, &line).await;
             send(tx, "\n").await;
@@ -357,8 +215,7 @@ mod firmware {
     }
 
     /// The serial line: commands in, replies, events and alarms out.
-    #[embassy_executor::task]
-    async fn serial(mut tx: SerialTx, mut rx: SerialRx, boot: OutLine) {
+    async fn serial_loop(mut tx: impl Write, mut rx: impl Read, boot: OutLine) {
         let mut reply: heapless::String<REPLY_BYTES> = heapless::String::new();
         push_line(&mut reply, &boot);
         send(&mut tx, &reply).await;
@@ -382,28 +239,28 @@ mod firmware {
                     // A flood arrives faster than lines end: let the control task run.
                     yield_now().await;
                 }
-                Either::First(Err(e)) => defmt::warn!("uart receive error: {}", e),
+                Either::First(Err(_)) => defmt::warn!("serial receive error"),
                 Either::Second(()) => send_events(&mut tx).await,
             }
         }
     }
 
-    /// Writes `s` to the UART (waiting for room in its transmit buffer); errors are logged.
-    async fn send(tx: &mut SerialTx, s: &str) {
+    /// Writes `s` to the serial port (waiting for room in its transmit buffer); errors are logged.
+    async fn send(tx: &mut impl Write, s: &str) {
         if s.is_empty() {
             return;
         }
-        if let Err(e) = tx.write_all(s.as_bytes()).await {
-            defmt::warn!("uart send error: {}", e);
+        if tx.write_all(s.as_bytes()).await.is_err() {
+            defmt::warn!("serial send error");
         }
     }
 
     /// Set by the first panic or HardFault, so a fault while logging it skips straight to the
-    /// reset instead of recursing.
+    /// end instead of recursing.
     static FAULTED: AtomicBool = AtomicBool::new(false);
 
-    /// Heaters off first (raw writes), then one log line over RTT, then a system reset (reported
-    /// at the next boot as `reset=software`).
+    /// Heaters off first (raw writes), then one log line over RTT, then the board's fatal end
+    /// (a system reset on hardware, reported at the next boot as `reset=software`).
     #[panic_handler]
     fn panic(info: &core::panic::PanicInfo) -> ! {
         board::heater_pins_low();
@@ -417,10 +274,7 @@ mod firmware {
                 None => defmt::error!("panic; heaters off, resetting"),
             }
         }
-        #[cfg(emulated)]
-        board::fatal_panic(info);
-        #[cfg(not(emulated))]
-        cortex_m::peripheral::SCB::sys_reset()
+        board::fatal(format_args!("panic: {}; heaters off", info))
     }
 
     /// As [`panic`], for faults the CPU raises (bus, memory, usage faults escalate here).
@@ -430,10 +284,7 @@ mod firmware {
         if !FAULTED.swap(true, Ordering::Relaxed) {
             defmt::error!("HardFault at pc={=u32:#x}; heaters off, resetting", ef.pc());
         }
-        #[cfg(emulated)]
-        board::fatal("HardFault; heaters off");
-        #[cfg(not(emulated))]
-        cortex_m::peripheral::SCB::sys_reset()
+        board::fatal(format_args!("HardFault at pc={:#x}; heaters off", ef.pc()))
     }
 }
 

@@ -28,22 +28,8 @@ pub enum ResetCause {
     Unknown,
 }
 
-/// The reset flags a chip reports (STM32 `RCC_CSR`); each is true if set.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct ResetFlags {
-    /// Independent watchdog (`IWDGRSTF`).
-    pub watchdog: bool,
-    /// Window watchdog (`WWDGRSTF`).
-    pub window_watchdog: bool,
-    /// Software (`SFTRSTF`).
-    pub software: bool,
-    /// Low-power management (`LPWRRSTF`).
-    pub low_power: bool,
-    /// Power-on or brown-out (`PORRSTF`, `BORRSTF`).
-    pub power_on: bool,
-    /// Reset pin (`PINRSTF`/`PADRSTF`).
-    pub pin: bool,
-}
+/// The reset flags a chip reports (STM32 `RCC_CSR`): the board boundary's type.
+pub use morphlink_boards::ResetFlags;
 
 impl ResetCause {
     /// The cause behind a set of flags. Every internal reset also pulses the reset pin and a

@@ -29,7 +29,7 @@ fn auto_morphs_reach_every_target_within_two_percent_with_phases_in_order() {
         let estimate: f32 = Bench::field(done, "radius_mm").unwrap().parse().unwrap();
         // Let the TCA cool fully: spring-back included.
         b.run_for(60.0);
-        let r = b.rig.link.radius_mm() as f32;
+        let r = b.rig.radius_mm() as f32;
         let err = (r - target) / target * 100.0;
         println!("target {target:.2} mm: final {r:.2} mm ({err:+.2} %), estimate {estimate:.2} mm, {t:.1} s");
         assert!(
@@ -51,7 +51,7 @@ fn paper_mode_takes_the_papers_time_and_reaches_the_target() {
     assert!((t - 122.0).abs() < 0.5, "paper morph took {t} s");
     assert_eq!(b.phases(), ["soften", "bend", "lock", "release"]);
     b.run_for(60.0);
-    let r = b.rig.link.radius_mm() as f32;
+    let r = b.rig.radius_mm() as f32;
     println!("paper mode: {r:.2} mm for {target} mm");
     // The paper's protocol drops the PLA heat without compensating the TCA: it lands farther.
     assert!(
@@ -67,7 +67,7 @@ fn a_second_morph_starts_from_the_first_ones_shape() {
     for target in [min + 1.0, max - 1.0, (min + max) / 2.0] {
         b.morph(target, "auto");
         b.run_for(60.0);
-        let r = b.rig.link.radius_mm() as f32;
+        let r = b.rig.radius_mm() as f32;
         assert!((r - target).abs() / target < 0.02, "target {target}: {r}");
     }
 }

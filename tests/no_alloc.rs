@@ -1,6 +1,6 @@
 //! The controller and the simulated link allocate nothing: a whole morph runs under a counting
 //! allocator with zero allocations.
-use morphlink_sim::{Plant, Rig};
+use morphlink_sim::{LinkSetup, Rig};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -22,7 +22,7 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn a_whole_morph_allocates_nothing() {
-    let mut rig = Rig::new(Plant::NOMINAL);
+    let mut rig = Rig::new(LinkSetup::NOMINAL);
     let mut replies = 0usize;
     let mut events = 0usize;
     let before = ALLOCS.load(Ordering::SeqCst);

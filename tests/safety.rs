@@ -146,7 +146,7 @@ fn stale_sensor_frames_trip_in_every_phase() {
             assert_eq!(b.phase(), phase);
             let now = b.rig.now_ms();
             // A frame sampled 1.5 s ago (the ADC task stalled): the controller must refuse it.
-            let old = b.rig.link.inputs(now - 1500);
+            let old = b.rig.inputs(now - 1500);
             let out = b.rig.ctrl.step(now, &old);
             assert_eq!(out, ZERO);
             assert_eq!(
@@ -345,6 +345,6 @@ fn a_stalled_controller_cannot_leave_a_heater_on() {
         b.rig.stalled_tick();
         assert_eq!(b.rig.applied(), ZERO, "{phase:?}");
         b.rig.stalled_tick();
-        assert_eq!(b.rig.link.powers_w(), [0.0, 0.0], "{phase:?}");
+        assert_eq!(b.rig.powers_w(), [0.0, 0.0], "{phase:?}");
     }
 }

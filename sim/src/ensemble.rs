@@ -4,8 +4,8 @@
 //!
 //! Every range is a named default with the reason for it.
 
-use crate::link::Plant;
-use crate::rig::Rig;
+use crate::rig::{LinkSetup, Rig};
+use morphlink_plant::Plant as _;
 use morphlink::controller::{Outputs, TICK_MS};
 use morphlink::protocol::{Command, Mode};
 use morphlink::supervisor::FaultCode;
@@ -118,8 +118,8 @@ impl Mismatch {
     }
 
     /// The simulated link this mismatch describes.
-    pub fn plant(&self) -> Plant {
-        let mut p = Plant::NOMINAL;
+    pub fn plant(&self) -> LinkSetup {
+        let mut p = LinkSetup::NOMINAL;
         let s = &mut p.params.surroundings;
         s.h_w_m2k = self.h_scale * if self.air { H_AIR_W_M2K } else { H_WATER_W_M2K };
         s.ambient_c = self.ambient_c;
@@ -185,7 +185,7 @@ pub struct RunResult {
 /// Runs one morph to `target_mm` in `mode` on `plant`, calling `trace` every tick from MORPH to
 /// the radius measurement, and measures it.
 pub fn run_morph_traced(
-    plant: Plant,
+    plant: LinkSetup,
     target_mm: f32,
     mode: Mode,
     trace: &mut impl FnMut(&TracePoint),
@@ -214,15 +214,16 @@ pub fn run_morph_traced(
             break;
         }
         let _: Outputs = rig.tick();
-        let (pla, tca) = rig.link.temps_c();
+        let truth = rig.plant().truth();
+        let (pla, tca) = (truth.pla_c, truth.tca_c);
         max_c = [max_c[0].max(pla), max_c[1].max(tca)];
-        let sensed = rig.link.sensed_c();
+        let sensed = rig.plant().sample();
         trace(&TracePoint {
             t_s: (rig.now_ms() - t0) as f64 / 1000.0,
             true_c: [pla, tca],
-            sensed_c: [sensed[0], sensed[1]],
-            power_w: rig.link.powers_w(),
-            radius_mm: rig.link.radius_mm(),
+            sensed_c: [sensed.t_pla_c, sensed.t_tca_c],
+            power_w: rig.powers_w(),
+            radius_mm: rig.radius_mm(),
             phase: rig.ctrl.phase().as_str(),
         });
         if done_ms.is_none() {
@@ -238,7 +239,7 @@ pub fn run_morph_traced(
         while rig.ctrl.pop_event().is_some() {}
     }
     let (time_s, final_mm) = match (outcome, done_ms) {
-        (Outcome::Done, Some(d)) => ((d - t0) as f64 / 1000.0, rig.link.radius_mm()),
+        (Outcome::Done, Some(d)) => ((d - t0) as f64 / 1000.0, rig.radius_mm()),
         _ => (f64::NAN, f64::NAN),
     };
     RunResult {
@@ -251,7 +252,7 @@ pub fn run_morph_traced(
 }
 
 /// Runs one morph and measures it (see [`run_morph_traced`]).
-pub fn run_morph(plant: Plant, target_mm: f32, mode: Mode) -> RunResult {
+pub fn run_morph(plant: LinkSetup, target_mm: f32, mode: Mode) -> RunResult {
     run_morph_traced(plant, target_mm, mode, &mut |_| {})
 }
 
@@ -282,12 +283,12 @@ mod tests {
 
     #[test]
     fn the_nominal_mismatch_is_the_nominal_plant() {
-        assert_eq!(Mismatch::NONE.plant(), Plant::NOMINAL);
+        assert_eq!(Mismatch::NONE.plant(), LinkSetup::NOMINAL);
     }
 
     #[test]
     fn a_measured_run_reports_time_error_and_peak_temperatures() {
-        let r = run_morph(Plant::NOMINAL, 38.0, Mode::Gated);
+        let r = run_morph(LinkSetup::NOMINAL, 38.0, Mode::Gated);
         assert_eq!(r.outcome, Outcome::Done);
         assert!(r.time_s > 30.0 && r.time_s < 200.0, "{r:?}");
         assert!(r.error_pct.abs() < 2.0, "{r:?}");

@@ -1,7 +1,7 @@
-//! The simulated morphing link and a rig that drives it with the controller core.
+//! The rig: the controller core driving a plant (`morphlink-plant`) on the simulated board
+//! (`morphlink::bench`) at the control rate, and the mismatch ensembles measured with it.
 //!
-//! `no_std` and allocation-free, so the emulated firmware image runs the very same code as
-//! `morph-sim` and the host tests.
+//! `no_std` and allocation-free.
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 // `!(x >= limit)` is deliberate: a NaN reading must fail a check, not pass it.
@@ -9,8 +9,6 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod ensemble;
-pub mod link;
 pub mod rig;
 
-pub use link::{Plant, SimLink};
-pub use rig::Rig;
+pub use rig::{LinkSetup, Rig};

@@ -1,31 +1,87 @@
-//! A rig: the controller core driving the simulated link at the real control rate, with the
-//! simulator-only `SIM` commands. `morph-sim`, the tests and the emulated image all use it.
+//! A rig: the controller core driving a plant on the simulated board at the real control rate,
+//! with the simulator-only `SIM` commands. `morph-sim`, the tests and the ensemble use it; the
+//! emulated image runs the same [`Bench`] with the firmware's own tasks instead.
 
-use crate::link::{Plant, SimLink};
-use morphlink::controller::{Config, Controller, Outputs, TICK_MS};
+use morphlink::bench::{Bench, Noise, NOMINAL_LINK};
+use morphlink::controller::{Config, Controller, Inputs, Outputs, TICK_MS};
 use morphlink::heater::CommandWatchdog;
 use morphlink::protocol::SimCommand;
+use morphlink_plant::{Lumped, LumpedSpec, Plant};
 
-/// Controller plus simulated link plus a clock.
-pub struct Rig {
+/// A lumped link as the rig builds it: the plant's true values and the board's thermistor noise.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinkSetup {
+    /// The link's true physical parameters (h, ambient, fitted constants...).
+    pub params: morphlink_model::LinkParams,
+    /// True heater resistances, Ω: PLA wrap, TCA.
+    pub heater_ohm: [f64; 2],
+    /// True heater supply, V.
+    pub supply_v: f64,
+    /// Thermistor time constants (PLA, TCA, ambient), s (see [`LumpedSpec::sensor_tau_s`]).
+    pub sensor_tau_s: [f64; 3],
+    /// Standard deviation of thermistor noise, °C.
+    pub sensor_noise_c: f64,
+    /// Seed of the noise generator.
+    pub seed: u64,
+}
+
+impl LinkSetup {
+    /// The nominal link ([`NOMINAL_LINK`]) with the nominal noise ([`Noise::NOMINAL`]).
+    pub const NOMINAL: LinkSetup = LinkSetup {
+        params: NOMINAL_LINK.params,
+        heater_ohm: NOMINAL_LINK.heater_ohm,
+        supply_v: NOMINAL_LINK.supply_v,
+        sensor_tau_s: NOMINAL_LINK.sensor_tau_s,
+        sensor_noise_c: Noise::NOMINAL.sensor_noise_c,
+        seed: Noise::NOMINAL.seed,
+    };
+
+    /// The lumped plant this setup describes.
+    pub fn lumped(&self) -> Lumped {
+        Lumped::new(LumpedSpec {
+            params: self.params,
+            heater_ohm: self.heater_ohm,
+            supply_v: self.supply_v,
+            sensor_tau_s: self.sensor_tau_s,
+        })
+    }
+
+    /// The board's thermistor noise.
+    pub fn noise(&self) -> Noise {
+        Noise {
+            sensor_noise_c: self.sensor_noise_c,
+            seed: self.seed,
+        }
+    }
+}
+
+/// Controller plus a plant on the simulated board plus a clock.
+pub struct Rig<P = Lumped> {
     /// The controller under test.
     pub ctrl: Controller,
-    /// The simulated link.
-    pub link: SimLink,
+    /// The plant on its simulated board.
+    pub bench: Bench<P>,
     /// The heater output stage: PLA and TCA duties hold only while the controller refreshes
     /// them (the core's command watchdog, as a board's PWM stage would apply it).
     pwm: [CommandWatchdog; 2],
     now_ms: u64,
 }
 
-impl Rig {
-    /// A rig with the default board and the given plant, after one control tick (so the
-    /// controller has a sensor frame).
-    pub fn new(plant: Plant) -> Self {
+impl Rig<Lumped> {
+    /// A rig with the default board and the lumped link `setup`, after one control tick (so
+    /// the controller has a sensor frame).
+    pub fn new(setup: LinkSetup) -> Self {
+        Rig::with_plant(setup.lumped(), setup.noise())
+    }
+}
+
+impl<P: Plant> Rig<P> {
+    /// A rig with the default board around `plant`, after one control tick.
+    pub fn with_plant(plant: P, noise: Noise) -> Self {
         let board = Config::DEFAULT;
         let mut rig = Rig {
             ctrl: Controller::new(board),
-            link: SimLink::new(plant, board),
+            bench: Bench::new(plant, board, noise),
             pwm: [CommandWatchdog::default(); 2],
             now_ms: 0,
         };
@@ -38,10 +94,30 @@ impl Rig {
         self.now_ms
     }
 
+    /// The plant.
+    pub fn plant(&self) -> &P {
+        self.bench.plant()
+    }
+
+    /// True bending radius, mm.
+    pub fn radius_mm(&self) -> f64 {
+        self.bench.radius_mm()
+    }
+
+    /// Heater powers actually dissipated in the last period, W (PLA, TCA).
+    pub fn powers_w(&self) -> [f64; 2] {
+        self.bench.powers_w()
+    }
+
+    /// The ADC frame the board would read now, stamped `sample_ms`.
+    pub fn inputs(&mut self, sample_ms: u64) -> Inputs {
+        self.bench.inputs(sample_ms)
+    }
+
     /// One control period: sample, step the controller, then let the link run one period
     /// with the resulting duties.
     pub fn tick(&mut self) -> Outputs {
-        let inputs = self.link.inputs(self.now_ms);
+        let inputs = self.bench.inputs(self.now_ms);
         let out = self.ctrl.step(self.now_ms, &inputs);
         self.apply(out);
         self.run_link();
@@ -69,7 +145,7 @@ impl Rig {
 
     fn run_link(&mut self) {
         let applied = self.applied();
-        self.link.advance(TICK_MS as f64 / 1000.0, applied);
+        self.bench.advance(TICK_MS as f64 / 1000.0, applied);
         self.now_ms += TICK_MS;
     }
 
@@ -91,6 +167,6 @@ impl Rig {
     }
 
     fn sim_command(&mut self, cmd: SimCommand, out: &mut impl FnMut(&str)) {
-        self.link.command(cmd, out);
+        self.bench.command(cmd, out);
     }
 }

@@ -3,7 +3,7 @@
 
 use morphlink::controller::Outputs;
 use morphlink::sequencer::Phase;
-use morphlink_sim::{Plant, Rig};
+use morphlink_sim::{LinkSetup, Rig};
 
 /// A rig plus the lines it has written.
 pub struct Bench {
@@ -13,10 +13,10 @@ pub struct Bench {
 
 impl Bench {
     pub fn new() -> Self {
-        Self::with_plant(Plant::NOMINAL)
+        Self::with_plant(LinkSetup::NOMINAL)
     }
 
-    pub fn with_plant(plant: Plant) -> Self {
+    pub fn with_plant(plant: LinkSetup) -> Self {
         Bench {
             rig: Rig::new(plant),
             lines: Vec::new(),

@@ -34,13 +34,13 @@ struct Image {
     ram_size: u64,
 }
 
-/// Boards: every folder in `boards/` with a `mod.rs` and a `memory.x`, the default first.
+/// Boards: every folder in `boards/` with a `memory.x`, the default first.
 fn boards(root: &Path) -> Result<Vec<String>, String> {
     let dir = root.join("boards");
     let mut names: Vec<String> = std::fs::read_dir(&dir)
         .map_err(|e| format!("{}: {e}", dir.display()))?
         .filter_map(|e| e.ok())
-        .filter(|e| e.path().join("mod.rs").is_file() && e.path().join("memory.x").is_file())
+        .filter(|e| e.path().join("memory.x").is_file())
         .filter_map(|e| e.file_name().into_string().ok())
         .collect();
     names.sort_by_key(|n| (n != DEFAULT_BOARD, n.clone()));

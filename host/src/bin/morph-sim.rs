@@ -4,7 +4,7 @@ use clap::Parser;
 use morphlink::protocol::{
     format_error, Assembled, LineAssembler, ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
 };
-use morphlink_sim::{Plant, Rig};
+use morphlink_sim::{LinkSetup, Rig};
 use std::io::{Read, Write};
 use std::sync::mpsc::{self, TryRecvError};
 use std::time::{Duration, Instant};
@@ -20,7 +20,7 @@ struct Cli {
     #[arg(long, default_value = "1", value_parser = parse_speed)]
     speed: Speed,
     /// Seed of the simulated sensor noise.
-    #[arg(long, default_value_t = Plant::NOMINAL.seed)]
+    #[arg(long, default_value_t = LinkSetup::NOMINAL.seed)]
     seed: u64,
     /// Stop after this much simulated time even if the controller is still busy, s.
     #[arg(long, default_value_t = 3600.0)]
@@ -59,9 +59,9 @@ fn feed(rig: &mut Rig, asm: &mut LineAssembler, bytes: &[u8], emit: &mut impl Fn
 
 fn main() {
     let cli = Cli::parse();
-    let plant = Plant {
+    let plant = LinkSetup {
         seed: cli.seed,
-        ..Plant::NOMINAL
+        ..LinkSetup::NOMINAL
     };
     let mut rig = Rig::new(plant);
     let (tx, rx) = mpsc::channel::<Vec<u8>>();
@@ -130,6 +130,6 @@ fn main() {
         "morph-sim: {} after {:.1} s simulated; link radius {:.2} mm",
         rig.ctrl.phase().as_str(),
         rig.now_ms() as f64 / 1000.0,
-        rig.link.radius_mm()
+        rig.radius_mm()
     );
 }

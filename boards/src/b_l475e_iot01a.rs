@@ -1,7 +1,7 @@
 //! B-L475E-IOT01A (Discovery kit IoT node): STM32L475VG, Cortex-M4F, 1 MiB flash, 128 KiB RAM
 //! (96 KiB SRAM1 used, see `memory.x` here). The board that also runs under QEMU:
 //! [`init`] builds the peripheral drivers one by one ([`Sensors`], the heater timer, the
-//! UART); the emulated build (`boards/b-l475e-iot01a-emulated/`) swaps each for a simulated
+//! UART); the emulated build (`emulated`) swaps each for a simulated
 //! link or a register-level driver without touching the tasks.
 //!
 //! | signal | pin (Arduino) | peripheral |
@@ -22,9 +22,12 @@
 //! Clocks: HSI 16 MHz → PLL (/1 ×10 /2) → 80 MHz core, APB1 = APB2 = 80 MHz; ADC kernel
 //! clock SYSCLK. TIM2 is the embassy time driver.
 
-#[path = "../common.rs"]
-mod common;
-pub use common::{heater_pins_low, Board, HeaterTimer, Sensors, PLA_CHANNEL, TCA_CHANNEL};
+pub use crate::stm32::{
+    cycles, fatal, heater_pins_low, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx,
+    SerialTx,
+};
+use crate::stm32 as common;
+use crate::ResetFlags;
 use embassy_stm32::adc::{Adc, AdcChannel, SampleTime};
 use embassy_stm32::gpio::OutputType;
 use embassy_stm32::peripherals::USART1;
@@ -32,7 +35,6 @@ use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::{bind_interrupts, pac};
-use morphlink::stats::ResetFlags;
 
 /// Board name, as in the `board-b-l475e-iot01a` feature and the boot line.
 pub const NAME: &str = "b-l475e-iot01a";
@@ -66,7 +68,7 @@ fn take_reset_flags() -> ResetFlags {
 }
 
 /// Sets up clocks and peripherals.
-pub fn init() -> Board {
+pub fn init() -> Parts {
     let reset_flags = take_reset_flags();
     let mut config = embassy_stm32::Config::default();
     {
@@ -93,7 +95,7 @@ pub fn init() -> Board {
         Some(PwmPin::new(p.PA7, OutputType::PushPull)),
         None,
         None,
-        crate::PWM_FREQUENCY,
+        common::PWM_FREQUENCY,
         CountingMode::EdgeAlignedUp,
     );
 
@@ -108,7 +110,7 @@ pub fn init() -> Board {
         SAMPLE_TIME,
     );
 
-    let (tx_buf, rx_buf) = crate::uart_buffers();
+    let (tx_buf, rx_buf) = common::uart_buffers();
     let serial = BufferedUart::new(
         p.USART1,
         p.PB7,
@@ -116,15 +118,9 @@ pub fn init() -> Board {
         tx_buf,
         rx_buf,
         Irqs,
-        crate::uart_config(),
+        common::uart_config(),
     )
     .expect("USART1 accepts 115200 8N1");
 
-    Board {
-        sensors,
-        pwm,
-        serial,
-        iwdg: p.IWDG,
-        reset_flags,
-    }
+    common::parts(sensors, pwm, serial, p.IWDG, reset_flags)
 }

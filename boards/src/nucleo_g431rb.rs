@@ -21,9 +21,12 @@
 //! ADC12 kernel clock SYSCLK/4 = 42.5 MHz. TIM2 is the embassy time driver. (A2 is PA4, which
 //! only ADC2 reads, so the ambient thermistor sits on A3 on every board.)
 
-#[path = "../common.rs"]
-mod common;
-pub use common::{heater_pins_low, Board, HeaterTimer, Sensors, PLA_CHANNEL, TCA_CHANNEL};
+pub use crate::stm32::{
+    cycles, fatal, heater_pins_low, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx,
+    SerialTx,
+};
+use crate::stm32 as common;
+use crate::ResetFlags;
 use embassy_stm32::adc::vals::{Rovsm, Trovs};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, SampleTime};
 use embassy_stm32::gpio::OutputType;
@@ -32,7 +35,6 @@ use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::{bind_interrupts, pac};
-use morphlink::stats::ResetFlags;
 
 /// Board name, as in the `board-nucleo-g431rb` feature and the boot line.
 pub const NAME: &str = "nucleo-g431rb";
@@ -67,7 +69,7 @@ fn take_reset_flags() -> ResetFlags {
 }
 
 /// Sets up clocks and peripherals.
-pub fn init() -> Board {
+pub fn init() -> Parts {
     let reset_flags = take_reset_flags();
     let mut config = embassy_stm32::Config::default();
     {
@@ -95,7 +97,7 @@ pub fn init() -> Board {
         Some(PwmPin::new(p.PA7, OutputType::PushPull)),
         None,
         None,
-        crate::PWM_FREQUENCY,
+        common::PWM_FREQUENCY,
         CountingMode::EdgeAlignedUp,
     );
 
@@ -118,7 +120,7 @@ pub fn init() -> Board {
         SAMPLE_TIME,
     );
 
-    let (tx_buf, rx_buf) = crate::uart_buffers();
+    let (tx_buf, rx_buf) = common::uart_buffers();
     let serial = BufferedUart::new(
         p.LPUART1,
         p.PA3,
@@ -126,15 +128,9 @@ pub fn init() -> Board {
         tx_buf,
         rx_buf,
         Irqs,
-        crate::uart_config(),
+        common::uart_config(),
     )
     .expect("LPUART1 accepts 115200 8N1");
 
-    Board {
-        sensors,
-        pwm,
-        serial,
-        iwdg: p.IWDG,
-        reset_flags,
-    }
+    common::parts(sensors, pwm, serial, p.IWDG, reset_flags)
 }

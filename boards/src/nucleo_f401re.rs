@@ -19,9 +19,12 @@
 //! Clocks: HSI 16 MHz → PLL (/8 ×168 /4) → 84 MHz core, APB1 42 MHz, APB2 84 MHz; ADC clock
 //! PCLK2/4 = 21 MHz. TIM2 is the embassy time driver.
 
-#[path = "../common.rs"]
-mod common;
-pub use common::{heater_pins_low, Board, HeaterTimer, Sensors, PLA_CHANNEL, TCA_CHANNEL};
+pub use crate::stm32::{
+    cycles, fatal, heater_pins_low, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx,
+    SerialTx,
+};
+use crate::stm32 as common;
+use crate::ResetFlags;
 use embassy_stm32::adc::{Adc, AdcChannel, SampleTime};
 use embassy_stm32::gpio::OutputType;
 use embassy_stm32::peripherals::USART2;
@@ -29,7 +32,6 @@ use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::{bind_interrupts, pac};
-use morphlink::stats::ResetFlags;
 
 /// Board name, as in the `board-nucleo-f401re` feature and the boot line.
 pub const NAME: &str = "nucleo-f401re";
@@ -62,7 +64,7 @@ fn take_reset_flags() -> ResetFlags {
 }
 
 /// Sets up clocks and peripherals.
-pub fn init() -> Board {
+pub fn init() -> Parts {
     let reset_flags = take_reset_flags();
     let mut config = embassy_stm32::Config::default();
     {
@@ -91,7 +93,7 @@ pub fn init() -> Board {
         Some(PwmPin::new(p.PA7, OutputType::PushPull)),
         None,
         None,
-        crate::PWM_FREQUENCY,
+        common::PWM_FREQUENCY,
         CountingMode::EdgeAlignedUp,
     );
 
@@ -106,7 +108,7 @@ pub fn init() -> Board {
         SAMPLE_TIME,
     );
 
-    let (tx_buf, rx_buf) = crate::uart_buffers();
+    let (tx_buf, rx_buf) = common::uart_buffers();
     let serial = BufferedUart::new(
         p.USART2,
         p.PA3,
@@ -114,15 +116,9 @@ pub fn init() -> Board {
         tx_buf,
         rx_buf,
         Irqs,
-        crate::uart_config(),
+        common::uart_config(),
     )
     .expect("USART2 accepts 115200 8N1");
 
-    Board {
-        sensors,
-        pwm,
-        serial,
-        iwdg: p.IWDG,
-        reset_flags,
-    }
+    common::parts(sensors, pwm, serial, p.IWDG, reset_flags)
 }

@@ -1,169 +1,118 @@
-//! The simulated link: the transient thermal network, quasi-static mechanics with a PLA that is
-//! soft above Tg and freezes the curvature it cools at, spring-back on release, thermistors
-//! with lag and noise read through the ADC model, and PWM duty → watts from the true supply
-//! and heater resistances. `no_std` and allocation-free.
+//! The simulated board around a plant: what stands between a simulated link and the
+//! controller on a real board. The heater output stage (a stuck MOSFET, an open heater), the
+//! thermistor dividers and ADC (with noise, an open or shorted thermistor) and the `SIM`
+//! commands. The plant (`morphlink-plant`) gives bead temperatures, supply and radius; this
+//! module turns them into the ADC frame the controller reads and turns the controller's duties
+//! into what reaches the heaters.
+//!
+//! Used by the host rig (`morphlink-sim`) and by the emulated firmware image alike, so both
+//! run the same board model. Built with the `sim` feature; `no_std` and allocation-free.
 
+use crate::controller::{Config, Inputs, Outputs};
+use crate::fixed::Fixed;
+use crate::protocol::{Medium, OutLine, Sensor, SimCommand, SimFault};
 use core::fmt::Write;
-use morphlink::controller::{Config, Inputs, Outputs};
-use morphlink::fixed::Fixed;
-use morphlink::protocol::{Medium, OutLine, Sensor, SimCommand, SimFault};
-use morphlink_model::mechanics::{
-    curvature_with_extra_per_m, pla_extra_stiffness_nm2, pla_flow_time_s,
-};
-use morphlink_model::params::{H_AIR_W_M2K, H_WATER_W_M2K};
-use morphlink_model::thermal::{lag_remaining, node, Network};
-use morphlink_model::LinkParams;
+use morphlink_plant::{Duties, LumpedSpec, Plant, Setting};
 
 /// Highest supply `SIM SUPPLY` accepts, V (the supervisor's limit is lower, so faults can be tried).
 pub const SIM_SUPPLY_MAX_V: f32 = 30.0;
 /// Range `SIM AMBIENT` accepts, °C.
 pub const SIM_AMBIENT_RANGE_C: (f32, f32) = (-10.0, 60.0);
 
-/// What differs between the real (simulated) link and what the controller assumes.
+/// The nominal lumped link: the built-in parameters, nominal heaters (30 Ω wrap, 6.5 Ω TCA)
+/// and a 12 V supply, 3 s thermistor lag. The plant of `morph-sim` and the emulated image.
+pub const NOMINAL_LINK: LumpedSpec = LumpedSpec {
+    params: crate::link::LINK,
+    heater_ohm: [30.0, 6.5],
+    supply_v: 12.0,
+    sensor_tau_s: [3.0, 3.0, 3.0],
+};
+
+/// The rig's side of the thermistors: noise on their readings and its seed.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Plant {
-    /// The link's true physical parameters (h, ambient, fitted constants...).
-    pub params: LinkParams,
-    /// True heater resistances, Ω: PLA wrap, TCA.
-    pub heater_ohm: [f64; 2],
-    /// True heater supply, V.
-    pub supply_v: f64,
-    /// Thermistor time constants (PLA, TCA, ambient), s. Datasheets give 6.5–12 s in still air
-    /// for a bare bead; embedded in silicone against the heater it is faster: 3 s.
-    pub sensor_tau_s: [f64; 3],
+pub struct Noise {
     /// Standard deviation of thermistor noise, °C.
     pub sensor_noise_c: f64,
     /// Seed of the noise generator.
     pub seed: u64,
 }
 
-impl Plant {
-    /// The nominal link: the built-in parameters, nominal heaters and supply, 3 s sensor lag
-    /// and 0.05 °C noise.
-    pub const NOMINAL: Plant = Plant {
-        params: morphlink::link::LINK,
-        heater_ohm: [30.0, 6.5],
-        supply_v: 12.0,
-        sensor_tau_s: [3.0, 3.0, 3.0],
+impl Noise {
+    /// 0.05 °C: a 12-bit ADC oversampled 16× on a 10 kΩ divider, plus pickup.
+    pub const NOMINAL: Noise = Noise {
         sensor_noise_c: 0.05,
         seed: 0x5eed_1234,
     };
 }
 
-/// The simulated link's state.
+/// A plant on a simulated board.
 #[derive(Clone, Debug)]
-pub struct SimLink {
-    plant: Plant,
+pub struct Bench<P> {
+    plant: P,
     board: Config,
-    net: Network,
-    kappa_per_m: f64,
-    kappa_ref_per_m: f64,
-    sensed_c: [f64; 3],
+    noise: Noise,
     thermistor_fault: [Option<SimFault>; 3],
     heater_open: [bool; 2],
     heater_stuck: [bool; 2],
-    powers_w: [f64; 2],
     rng: u64,
-    time_s: f64,
 }
 
-impl SimLink {
-    /// A link at rest at ambient temperature, holding the curvature it relaxes to with the TCA
-    /// cold (its pre-bend), read through `board`'s ADC model.
-    pub fn new(plant: Plant, board: Config) -> Self {
-        let p = &plant.params;
-        let amb = p.surroundings.ambient_c;
-        let rest = curvature_with_extra_per_m(p, amb, 0.0, 0.0);
-        SimLink {
+impl<P: Plant> Bench<P> {
+    /// `plant` read through `board`'s thermistor and ADC model, with `noise`.
+    pub fn new(plant: P, board: Config, noise: Noise) -> Self {
+        Bench {
             plant,
             board,
-            net: Network::new(p),
-            kappa_per_m: rest,
-            kappa_ref_per_m: rest,
-            sensed_c: [amb; 3],
+            noise,
             thermistor_fault: [None; 3],
             heater_open: [false; 2],
             heater_stuck: [false; 2],
-            powers_w: [0.0; 2],
-            rng: plant.seed | 1,
-            time_s: 0.0,
+            rng: noise.seed | 1,
         }
     }
 
-    /// Simulated time, s.
-    pub fn time_s(&self) -> f64 {
-        self.time_s
+    /// The plant.
+    pub fn plant(&self) -> &P {
+        &self.plant
+    }
+
+    /// The plant, to change it directly (tests).
+    pub fn plant_mut(&mut self) -> &mut P {
+        &mut self.plant
     }
 
     /// True bending radius, mm.
     pub fn radius_mm(&self) -> f64 {
-        1e3 / self.kappa_per_m
-    }
-
-    /// True PLA and TCA temperatures, °C.
-    pub fn temps_c(&self) -> (f64, f64) {
-        (self.net.temp_c[node::PLA], self.net.temp_c[node::TCA])
-    }
-
-    /// Temperatures the PLA, TCA and ambient thermistor beads are at (lagged, before noise), °C.
-    pub fn sensed_c(&self) -> [f64; 3] {
-        self.sensed_c
+        self.plant.sample().radius_mm
     }
 
     /// Heater powers actually dissipated in the last step, W (PLA, TCA).
     pub fn powers_w(&self) -> [f64; 2] {
-        self.powers_w
+        let t = self.plant.truth();
+        [t.pla_w, t.tca_w]
     }
 
-    /// Ambient temperature, °C.
-    pub fn ambient_c(&self) -> f64 {
-        self.plant.params.surroundings.ambient_c
-    }
-
-    /// The plant (true parameters).
-    pub fn plant(&self) -> &Plant {
-        &self.plant
-    }
-
-    fn heater_power_w(&self, i: usize, duty: f32) -> f64 {
+    /// The duty that reaches heater `i` (0 PLA, 1 TCA) when `duty` is commanded.
+    fn delivered(&self, i: usize, duty: f32) -> f64 {
         if self.heater_open[i] {
-            return 0.0;
-        }
-        let d = if self.heater_stuck[i] {
+            0.0
+        } else if self.heater_stuck[i] {
             1.0
         } else {
-            (duty as f64).clamp(0.0, 1.0)
-        };
-        let v = self.plant.supply_v;
-        d * v * v / self.plant.heater_ohm[i]
-    }
-
-    /// Advances the link by `dt_s` with PWM duties `out` held constant.
-    pub fn advance(&mut self, dt_s: f64, out: Outputs) {
-        let p_pla = self.heater_power_w(0, out.pla_duty);
-        let p_tca = self.heater_power_w(1, out.tca_duty);
-        self.powers_w = [p_pla, p_tca];
-        let amb = self.ambient_c();
-        self.net.advance(dt_s, p_tca, p_pla, amb);
-        let (t_pla, t_tca) = self.temps_c();
-        let params = &self.plant.params;
-        let extra = pla_extra_stiffness_nm2(params, t_pla);
-        self.kappa_per_m = curvature_with_extra_per_m(params, t_tca, extra, self.kappa_ref_per_m);
-        let keep = lag_remaining(dt_s, pla_flow_time_s(&params.pla_stiffness, t_pla));
-        self.kappa_ref_per_m = self.kappa_per_m + (self.kappa_ref_per_m - self.kappa_per_m) * keep;
-        let nodes = [t_pla, t_tca, amb];
-        for ((sensed, node), tau_s) in self
-            .sensed_c
-            .iter_mut()
-            .zip(nodes)
-            .zip(self.plant.sensor_tau_s)
-        {
-            *sensed = node + (*sensed - node) * lag_remaining(dt_s, tau_s);
+            duty as f64
         }
-        self.time_s += dt_s;
     }
 
-    /// Approximately normal noise with the plant's standard deviation (sum of four uniforms).
+    /// Lets the plant run `dt_s` with PWM duties `out` commanded.
+    pub fn advance(&mut self, dt_s: f64, out: Outputs) {
+        let duty = Duties {
+            pla: self.delivered(0, out.pla_duty),
+            tca: self.delivered(1, out.tca_duty),
+        };
+        self.plant.step(dt_s, duty);
+    }
+
+    /// Approximately normal noise with the bench's standard deviation (sum of four uniforms).
     fn noise_c(&mut self) -> f64 {
         let mut s = 0.0;
         for _ in 0..4 {
@@ -173,14 +122,16 @@ impl SimLink {
             s += (self.rng >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
         }
         // Four uniforms on [-0.5, 0.5] have variance 1/3.
-        s * libm::sqrt(3.0) * self.plant.sensor_noise_c
+        s * libm::sqrt(3.0) * self.noise.sensor_noise_c
     }
 
-    /// The ADC frame the controller would read now (summed counts).
+    /// The ADC frame the controller would read now (summed counts), stamped `sample_ms`.
     pub fn inputs(&mut self, sample_ms: u64) -> Inputs {
+        let s = self.plant.sample();
+        let beads = [s.t_pla_c, s.t_tca_c, s.t_amb_c];
         let mut counts = [0u32; 3];
         for (i, c) in counts.iter_mut().enumerate() {
-            let t = self.sensed_c[i] + self.noise_c();
+            let t = beads[i] + self.noise_c();
             *c = match self.thermistor_fault[i] {
                 Some(SimFault::ThermistorOpen) => self.board.thermistor.adc_full_scale,
                 Some(SimFault::ThermistorShort) => 0,
@@ -189,7 +140,7 @@ impl SimLink {
         }
         Inputs {
             thermistor_counts: counts,
-            supply_counts: self.board.supply.counts(self.plant.supply_v as f32),
+            supply_counts: self.board.supply.counts(s.supply_v as f32),
             sample_ms,
         }
     }
@@ -214,21 +165,20 @@ impl SimLink {
 
     /// Sets the true supply voltage, V.
     pub fn set_supply_v(&mut self, v: f64) {
-        self.plant.supply_v = v;
+        let _ = self.plant.set(Setting::SupplyV(v));
     }
 
     /// Sets the medium's temperature, °C.
     pub fn set_ambient_c(&mut self, c: f64) {
-        self.plant.params.surroundings.ambient_c = c;
+        let _ = self.plant.set(Setting::AmbientC(c));
     }
 
     /// Sets the medium (its convection coefficient).
     pub fn set_medium(&mut self, m: Medium) {
-        self.plant.params.surroundings.h_w_m2k = match m {
-            Medium::Water => H_WATER_W_M2K,
-            Medium::Air => H_AIR_W_M2K,
-        };
-        self.net.set_params(&self.plant.params);
+        let _ = self.plant.set(Setting::Medium(match m {
+            Medium::Water => morphlink_plant::Medium::Water,
+            Medium::Air => morphlink_plant::Medium::Air,
+        }));
     }
 
     /// Carries out a `SIM` command and writes its one reply line through `out`.
@@ -236,14 +186,14 @@ impl SimLink {
         let mut l = OutLine::new();
         match cmd {
             SimCommand::State => {
-                let (pla, tca) = self.temps_c();
+                let t = self.plant.truth();
                 let _ = write!(
                     l,
                     "ok time_s={} radius_mm={} t_pla_c={} t_tca_c={}",
-                    Fixed(self.time_s() as f32, 1),
+                    Fixed(t.time_s as f32, 1),
                     Fixed(self.radius_mm() as f32, 2),
-                    Fixed(pla as f32, 2),
-                    Fixed(tca as f32, 2)
+                    Fixed(t.pla_c as f32, 2),
+                    Fixed(t.tca_c as f32, 2)
                 );
             }
             SimCommand::Fault(kind, target) => {

@@ -1,0 +1,171 @@
+//! B-L475E-IOT01A under QEMU (`qemu-system-arm -M b-l475e-iot01a`): the same firmware — core,
+//! control and serial tasks, protocol — with only the pieces QEMU does not model replaced:
+//!
+//! | on hardware | here | why |
+//! | --- | --- | --- |
+//! | TIM2 embassy time driver | [`time_driver`]: SysTick, running [`SPEEDUP`]× real time | QEMU models no STM32 timers |
+//! | `embassy_stm32::init` (HSI → PLL 80 MHz) | reset clock (MSI 4 MHz), no init | init waits forever for PWR/RCC ready bits QEMU never sets |
+//! | ADC1 thermistors and supply | [`Sensors`]: the firmware's [`SimulatedLink`] | QEMU's ADC never becomes ready |
+//! | TIM3 PWM heaters | [`Heaters`]: duties into the [`SimulatedLink`] | no timers |
+//! | buffered USART1 (embassy) | [`usart`]: register-level USART1 with an RX interrupt | QEMU's USART needs 32-bit accesses and never sets IDLE |
+//! | IWDG | [`Iwdg`]: the same 500 ms rule checked in the SysTick interrupt | no IWDG model |
+//! | panic/HardFault → reset | heaters off, message on the semihosting console, QEMU exits 1 | a test must see it |
+//!
+//! The simulated link is the firmware's (a plant from `morphlink-plant` on the core's simulated
+//! board, `morphlink::bench`): the very code `morph-sim` and the host tests run. This module
+//! only calls it through [`SimulatedLink`], at firmware time, so a whole morph runs
+//! [`SPEEDUP`] times faster than real time.
+
+use crate::{AnalogInputs, HeaterOutputs, ResetFlags, Watchdog, INPUTS};
+use core::cell::Cell;
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use critical_section::Mutex;
+use embassy_stm32::pac;
+
+mod time_driver;
+pub mod usart;
+
+/// Board name, as in the feature and the boot line.
+pub const NAME: &str = "b-l475e-iot01a-emulated";
+/// Core clock after reset (MSI), Hz: the SysTick reference in QEMU.
+pub const CPU_HZ: u32 = 4_000_000;
+/// The simulated ADC returns the 16× oversampled sums directly, as the G4's hardware does.
+pub const HW_OVERSAMPLE: u32 = 16;
+/// Firmware time runs this many times faster than wall-clock time: a 100 ms control tick takes
+/// 5 ms of wall time, so a whole morph finishes in seconds. QEMU keeps up easily: one tick is a
+/// few thousand emulated instructions.
+pub const SPEEDUP: u32 = 20;
+/// Watchdog timeout, firmware ms: as the hardware IWDG's 500 ms.
+pub const WATCHDOG_MS: u64 = 500;
+
+/// What stands in for the ADC and the heater PWM: a simulated link the firmware keeps. Its
+/// methods take `&self` (it keeps its own lock) and firmware time in ms.
+pub trait SimulatedLink: Sync {
+    /// One read of every input at `now_ms`, ADC counts as [`AnalogInputs::read`] gives them.
+    fn read(&self, now_ms: u64) -> [u16; INPUTS];
+    /// Applies both duties from `now_ms` on.
+    fn apply(&self, now_ms: u64, pla_duty: f32, tca_duty: f32);
+    /// Both heaters off, from a panic or the watchdog: must not block or panic.
+    fn heaters_off(&self);
+}
+
+static LINK: Mutex<Cell<Option<&'static dyn SimulatedLink>>> = Mutex::new(Cell::new(None));
+
+fn link() -> Option<&'static dyn SimulatedLink> {
+    critical_section::with(|cs| LINK.borrow(cs).get())
+}
+
+fn now_ms() -> u64 {
+    embassy_time::Instant::now().as_millis()
+}
+
+/// Drives both heater gates low by raw register writes (PA6 and PA7, as on the hardware board)
+/// and switches the simulated heaters off, whatever state the rest of the firmware is in.
+pub fn heater_pins_low() {
+    for pin in [6, 7] {
+        pac::GPIOA.bsrr().write(|w| w.set_br(pin, true));
+        pac::GPIOA
+            .moder()
+            .modify(|w| w.set_moder(pin, pac::gpio::vals::Moder::OUTPUT));
+    }
+    if let Some(l) = link() {
+        l.heaters_off();
+    }
+}
+
+/// The simulated thermistor and supply inputs.
+pub struct Sensors(&'static dyn SimulatedLink);
+
+impl AnalogInputs for Sensors {
+    fn read(&mut self) -> [u16; INPUTS] {
+        self.0.read(now_ms())
+    }
+}
+
+/// The simulated heaters: duties go into the link.
+pub struct Heaters(&'static dyn SimulatedLink);
+
+impl HeaterOutputs for Heaters {
+    fn apply(&mut self, pla_duty: f32, tca_duty: f32) {
+        self.0.apply(now_ms(), pla_duty, tca_duty);
+    }
+}
+
+static WDG_ARMED: AtomicBool = AtomicBool::new(false);
+static WDG_LAST_PET_MS: AtomicU32 = AtomicU32::new(0);
+
+/// Watchdog with the hardware IWDG's rule: once started, a control task that stops feeding it
+/// for [`WATCHDOG_MS`] ends the run (heaters off, QEMU exits with failure).
+pub struct Iwdg(());
+
+impl Watchdog for Iwdg {
+    fn start(&mut self) {
+        WDG_LAST_PET_MS.store(now_ms() as u32, Ordering::Relaxed);
+        WDG_ARMED.store(true, Ordering::Relaxed);
+    }
+
+    fn feed(&mut self) {
+        WDG_LAST_PET_MS.store(now_ms() as u32, Ordering::Relaxed);
+    }
+}
+
+/// Called from the SysTick interrupt every firmware millisecond.
+fn watchdog_check(now_ms: u64) {
+    let since_pet = (now_ms as u32).wrapping_sub(WDG_LAST_PET_MS.load(Ordering::Relaxed));
+    if WDG_ARMED.load(Ordering::Relaxed) && u64::from(since_pet) > WATCHDOG_MS {
+        heater_pins_low();
+        fatal(format_args!(
+            "watchdog: the control task stopped feeding the watchdog; heaters off"
+        ));
+    }
+}
+
+/// QEMU does not model the DWT cycle counter (it reads 0), so the emulated build counts
+/// [`CPU_HZ`] cycles per second of firmware time from the SysTick clock instead: `STATS` then
+/// reports firmware-time durations (20× compressed), in 5 µs steps.
+pub fn cycles() -> u32 {
+    (embassy_time::Instant::now().as_micros() * u64::from(CPU_HZ / 1_000_000)) as u32
+}
+
+/// Prints `reason` on the semihosting console and ends QEMU with exit code 1 (heaters are
+/// already off).
+pub fn fatal(reason: core::fmt::Arguments) -> ! {
+    cortex_m_semihosting::hprintln!("{}", reason);
+    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+/// USART1 transmit half.
+pub type SerialTx = usart::Tx;
+/// USART1 receive half.
+pub type SerialRx = usart::Rx;
+
+/// The board's parts.
+pub type Parts = crate::Parts<Sensors, Heaters, Iwdg, SerialTx, SerialRx>;
+
+/// Sets up the time source and USART1 around the firmware's simulated `link`.
+pub fn init(link: &'static dyn SimulatedLink) -> Parts {
+    let csr = pac::RCC.csr().read();
+    let reset_flags = ResetFlags {
+        watchdog: csr.iwdgrstf(),
+        window_watchdog: csr.wwdgrstf(),
+        software: csr.sftrstf(),
+        low_power: csr.lpwrrstf(),
+        power_on: csr.borrstf(),
+        pin: csr.pinrstf(),
+    };
+    critical_section::with(|cs| LINK.borrow(cs).set(Some(link)));
+    heater_pins_low();
+    time_driver::start(CPU_HZ, SPEEDUP, watchdog_check);
+    let (tx, rx) = usart::init(CPU_HZ, crate::BAUD);
+    crate::Parts {
+        sensors: Sensors(link),
+        heaters: Heaters(link),
+        watchdog: Iwdg(()),
+        tx,
+        rx,
+        reset_flags,
+    }
+}

@@ -1,0 +1,117 @@
+//! Board support for the morphlink firmware.
+//!
+//! The firmware's tasks (`src/main.rs`) are written once against the traits here; each board
+//! module implements them for its peripherals and is picked by one cargo feature:
+//!
+//! | feature | module | board |
+//! | --- | --- | --- |
+//! | `nucleo-f401re` | [`nucleo_f401re`] | NUCLEO-F401RE (the default) |
+//! | `nucleo-g431rb` | `nucleo_g431rb` | NUCLEO-G431RB (hardware ADC oversampling) |
+//! | `b-l475e-iot01a` | `b_l475e_iot01a` | B-L475E-IOT01A |
+//! | `b-l475e-iot01a-emulated` | `emulated` | the same board under QEMU |
+//!
+//! The selected module is re-exported as `selected`. Every board module provides the same
+//! items: `NAME`, `CPU_HZ`, `HW_OVERSAMPLE`, `init() -> Parts`, `heater_pins_low()`,
+//! `cycles()` and `fatal()`. Nothing here knows the controller: the board moves ADC counts
+//! and PWM duties, and bytes through its serial port (`embedded_io_async::{Read, Write}`).
+//! On the host only the traits and [`ResetFlags`] compile.
+#![no_std]
+#![deny(missing_docs)]
+
+/// Which analog input: the order of [`AnalogInputs::read`]'s counts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(usize)]
+pub enum Input {
+    /// PLA thermistor divider.
+    PlaThermistor = 0,
+    /// TCA thermistor divider.
+    TcaThermistor = 1,
+    /// Ambient thermistor divider.
+    AmbThermistor = 2,
+    /// Heater supply divider.
+    Supply = 3,
+}
+
+/// Serial line speed on every board, baud: the ST-LINK virtual COM port's usual default (8N1,
+/// no flow control).
+pub const BAUD: u32 = 115_200;
+
+/// Number of analog inputs.
+pub const INPUTS: usize = 4;
+
+/// The thermistor and supply inputs.
+pub trait AnalogInputs {
+    /// One read of every input, ADC counts, indexed by [`Input`] (a read is one conversion,
+    /// or the sum of `HW_OVERSAMPLE` conversions where the ADC oversamples in hardware).
+    fn read(&mut self) -> [u16; INPUTS];
+}
+
+/// Both heaters' PWM outputs.
+pub trait HeaterOutputs {
+    /// Sets both duties, fractions in [0, 1]; anything else, NaN included, is off.
+    fn apply(&mut self, pla_duty: f32, tca_duty: f32);
+}
+
+/// A watchdog that resets (or, emulated, ends) the firmware when it is not fed in time.
+pub trait Watchdog {
+    /// Starts it; from now on [`Watchdog::feed`] must come within the board's timeout.
+    fn start(&mut self);
+    /// Proves the control task is alive.
+    fn feed(&mut self);
+}
+
+/// The reset flags a chip reports (STM32 `RCC_CSR`); each is true if set.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ResetFlags {
+    /// Independent watchdog (`IWDGRSTF`).
+    pub watchdog: bool,
+    /// Window watchdog (`WWDGRSTF`).
+    pub window_watchdog: bool,
+    /// Software (`SFTRSTF`; the panic and HardFault handlers end in one).
+    pub software: bool,
+    /// Low-power management (`LPWRRSTF`).
+    pub low_power: bool,
+    /// Power-on or brown-out (`PORRSTF`, `BORRSTF`).
+    pub power_on: bool,
+    /// Reset pin (`PINRSTF`/`PADRSTF`).
+    pub pin: bool,
+}
+
+/// A board's peripherals, configured and ready for the tasks: heaters at 0 % duty.
+pub struct Parts<S, H, W, Tx, Rx> {
+    /// Thermistor and supply inputs.
+    pub sensors: S,
+    /// Both heaters, off.
+    pub heaters: H,
+    /// The watchdog, not started yet.
+    pub watchdog: W,
+    /// Serial transmit half.
+    pub tx: Tx,
+    /// Serial receive half.
+    pub rx: Rx,
+    /// Reset flags read (and cleared) at boot.
+    pub reset_flags: ResetFlags,
+}
+
+#[cfg(all(target_os = "none", feature = "_stm32"))]
+pub mod stm32;
+
+#[cfg(all(target_os = "none", feature = "nucleo-f401re"))]
+pub mod nucleo_f401re;
+#[cfg(all(target_os = "none", feature = "nucleo-f401re"))]
+pub use nucleo_f401re as selected;
+
+#[cfg(all(target_os = "none", feature = "nucleo-g431rb"))]
+pub mod nucleo_g431rb;
+#[cfg(all(target_os = "none", feature = "nucleo-g431rb"))]
+pub use nucleo_g431rb as selected;
+
+#[cfg(all(target_os = "none", feature = "b-l475e-iot01a"))]
+pub mod b_l475e_iot01a;
+#[cfg(all(target_os = "none", feature = "b-l475e-iot01a"))]
+pub use b_l475e_iot01a as selected;
+
+#[cfg(all(target_os = "none", feature = "b-l475e-iot01a-emulated"))]
+pub mod emulated;
+#[cfg(all(target_os = "none", feature = "b-l475e-iot01a-emulated"))]
+pub use emulated as selected;

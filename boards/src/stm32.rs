@@ -1,0 +1,198 @@
+//! What the hardware boards share: both heaters on TIM3 channels 1 and 2 (PA6 = Arduino D12,
+//! PA7 = D11, pins without a pull-up at reset), the four analog inputs on ADC1, the independent
+//! watchdog, the buffered UART, the DWT cycle counter and the reset that ends a fatal error.
+
+use crate::{AnalogInputs, HeaterOutputs, Parts, ResetFlags, Watchdog, INPUTS};
+use embassy_stm32::adc::{Adc, AnyAdcChannel, SampleTime};
+use embassy_stm32::peripherals::{ADC1, IWDG, TIM3};
+use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::simple_pwm::{SimplePwm, SimplePwmChannel, SimplePwmChannels};
+use embassy_stm32::timer::{Channel, GeneralInstance4Channel};
+use embassy_stm32::usart::{self, BufferedUart, BufferedUartRx, BufferedUartTx};
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{pac, Peri};
+
+/// Heater PWM frequency: 1 kHz. The heaters' thermal time constants are ≥ 1 s, so any
+/// frequency above ~10 Hz gives a ripple-free temperature; 1 kHz keeps switching losses of
+/// a GPIO-driven logic-level MOSFET negligible (edges of ~1 µs are 0.2 % of the period)
+/// and still gives a 16-bit timer tens of thousands of duty steps.
+pub const PWM_FREQUENCY: Hertz = Hertz(1_000);
+
+/// Independent-watchdog timeout, µs: 5 control ticks. The control task feeds it every
+/// 100 ms; the LSI that clocks it may run up to ~47 % fast, which still leaves > 3 ticks.
+/// A stalled control task resets the chip, and the reset leaves both heaters off.
+pub const WATCHDOG_TIMEOUT_US: u32 = 500_000;
+
+/// UART receive buffer, bytes: four maximal lines; more is a flood, and the assembler
+/// reports an over-long line once rather than per byte.
+pub const UART_RX_BYTES: usize = 256;
+/// UART transmit buffer, bytes: holds a whole HELP reply, so replies rarely wait.
+pub const UART_TX_BYTES: usize = 1024;
+
+/// Timer driving both heaters.
+pub type HeaterTimer = TIM3;
+/// Timer channel of the PLA heater (PA6).
+pub const PLA_CHANNEL: Channel = Channel::Ch1;
+/// Timer channel of the TCA heater (PA7).
+pub const TCA_CHANNEL: Channel = Channel::Ch2;
+
+/// The buffered UART's transmit half.
+pub type SerialTx = BufferedUartTx<'static>;
+/// The buffered UART's receive half.
+pub type SerialRx = BufferedUartRx<'static>;
+
+/// A hardware board's parts.
+pub type HardwareParts = Parts<Sensors, Heaters, Iwdg, SerialTx, SerialRx>;
+/// Both heaters on [`HeaterTimer`].
+pub type Heaters = PwmHeaters<HeaterTimer>;
+
+/// Drives one GPIO low as a plain output: sets the output latch low, then switches the
+/// pin from its timer function to output mode. Raw register writes only, so it works from
+/// a panic or HardFault whatever the drivers were doing (if the port's clock is still off,
+/// the pin is in its reset state and the gate pull-down holds it low anyway).
+pub fn force_low(port: pac::gpio::Gpio, pin: usize) {
+    port.bsrr().write(|w| w.set_br(pin, true));
+    port.moder()
+        .modify(|w| w.set_moder(pin, pac::gpio::vals::Moder::OUTPUT));
+}
+
+/// Drives both heater gates low by raw register writes (output mode, level low), whatever
+/// state the timer and the rest of the firmware are in. For the panic and HardFault handlers.
+pub fn heater_pins_low() {
+    force_low(pac::GPIOA, 6);
+    force_low(pac::GPIOA, 7);
+}
+
+/// CPU cycle count for the loop timing of `STATS`: the DWT cycle counter.
+pub fn cycles() -> u32 {
+    cortex_m::peripheral::DWT::cycle_count()
+}
+
+/// Ends a fatal error (heaters already off): a system reset, reported at the next boot as
+/// `reset=software`.
+pub fn fatal(_reason: core::fmt::Arguments) -> ! {
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// UART buffers, allocated once.
+pub fn uart_buffers() -> (&'static mut [u8], &'static mut [u8]) {
+    let tx = cortex_m::singleton!(: [u8; UART_TX_BYTES] = [0; UART_TX_BYTES]).expect("called once");
+    let rx = cortex_m::singleton!(: [u8; UART_RX_BYTES] = [0; UART_RX_BYTES]).expect("called once");
+    (tx, rx)
+}
+
+/// 115 200 8N1.
+pub fn uart_config() -> usart::Config {
+    let mut c = usart::Config::default();
+    c.baudrate = crate::BAUD;
+    c
+}
+
+/// Both heater channels of one PWM timer.
+pub struct PwmHeaters<T: GeneralInstance4Channel> {
+    pla: SimplePwmChannel<'static, T>,
+    tca: SimplePwmChannel<'static, T>,
+}
+
+impl<T: GeneralInstance4Channel> PwmHeaters<T> {
+    /// Takes the board's timer and its two heater channels (which must differ); both
+    /// outputs are enabled at 0 % duty, so the timer drives both gates low.
+    pub fn new(pwm: SimplePwm<'static, T>, pla: Channel, tca: Channel) -> Self {
+        let SimplePwmChannels { ch1, ch2, ch3, ch4 } = pwm.split();
+        let mut slots = [Some(ch1), Some(ch2), Some(ch3), Some(ch4)];
+        let mut take = |c: Channel| {
+            let mut ch = slots[c.index()]
+                .take()
+                .expect("two different heater channels");
+            ch.set_duty_cycle_fully_off();
+            ch.enable();
+            ch
+        };
+        let pla = take(pla);
+        let tca = take(tca);
+        PwmHeaters { pla, tca }
+    }
+}
+
+impl<T: GeneralInstance4Channel> HeaterOutputs for PwmHeaters<T> {
+    fn apply(&mut self, pla_duty: f32, tca_duty: f32) {
+        set_duty(&mut self.pla, pla_duty);
+        set_duty(&mut self.tca, tca_duty);
+    }
+}
+
+/// Sets one channel's duty from a fraction: 0 (or not a number) is fully off.
+fn set_duty<T: GeneralInstance4Channel>(ch: &mut SimplePwmChannel<'static, T>, duty: f32) {
+    if duty > 0.0 {
+        let max = ch.max_duty_cycle();
+        ch.set_duty_cycle((duty.min(1.0) * max as f32) as u32);
+    } else {
+        ch.set_duty_cycle_fully_off();
+    }
+}
+
+/// The thermistor and supply inputs on ADC1.
+pub struct Sensors {
+    adc: Adc<'static, ADC1>,
+    channels: [AnyAdcChannel<'static, ADC1>; INPUTS],
+    sample_time: SampleTime,
+}
+
+impl Sensors {
+    /// The ADC with the PLA, TCA and ambient thermistor channels and the supply channel, in
+    /// [`crate::Input`] order, each converted with `sample_time`.
+    pub fn new(
+        adc: Adc<'static, ADC1>,
+        channels: [AnyAdcChannel<'static, ADC1>; INPUTS],
+        sample_time: SampleTime,
+    ) -> Self {
+        Sensors {
+            adc,
+            channels,
+            sample_time,
+        }
+    }
+}
+
+impl AnalogInputs for Sensors {
+    fn read(&mut self) -> [u16; INPUTS] {
+        let (adc, t) = (&mut self.adc, self.sample_time);
+        self.channels.each_mut().map(|ch| adc.blocking_read(ch, t))
+    }
+}
+
+/// The independent watchdog at [`WATCHDOG_TIMEOUT_US`].
+pub struct Iwdg(IndependentWatchdog<'static, IWDG>);
+
+impl Watchdog for Iwdg {
+    fn start(&mut self) {
+        self.0.unleash();
+    }
+
+    fn feed(&mut self) {
+        self.0.pet();
+    }
+}
+
+/// The parts of a hardware board from its configured peripherals; starts the DWT cycle
+/// counter for [`cycles`].
+pub fn parts(
+    sensors: Sensors,
+    pwm: SimplePwm<'static, HeaterTimer>,
+    serial: BufferedUart<'static>,
+    iwdg: Peri<'static, IWDG>,
+    reset_flags: ResetFlags,
+) -> HardwareParts {
+    let mut cp = cortex_m::Peripherals::take().expect("taken once");
+    cp.DCB.enable_trace();
+    cp.DWT.enable_cycle_counter();
+    let (tx, rx) = serial.split();
+    Parts {
+        sensors,
+        heaters: PwmHeaters::new(pwm, PLA_CHANNEL, TCA_CHANNEL),
+        watchdog: Iwdg(IndependentWatchdog::new(iwdg, WATCHDOG_TIMEOUT_US)),
+        tx,
+        rx,
+        reset_flags,
+    }
+}
