@@ -3,10 +3,8 @@
 //! with lag and noise read through the ADC model, and PWM duty → watts from the true supply
 //! and heater resistances. `no_std` and allocation-free.
 
-use core::fmt::Write;
 use morphlink::controller::{Config, Inputs, Outputs};
-use morphlink::fixed::Fixed;
-use morphlink::protocol::{Medium, OutLine, Sensor, SimCommand, SimFault};
+use morphlink::protocol::{format_error, reply, Medium, OutLine, Sensor, SimCommand, SimFault};
 use morphlink_model::mechanics::{
     curvature_with_extra_per_m, pla_extra_stiffness_nm2, pla_flow_time_s,
 };
@@ -237,14 +235,8 @@ impl SimLink {
         match cmd {
             SimCommand::State => {
                 let (pla, tca) = self.temps_c();
-                let _ = write!(
-                    l,
-                    "ok time_s={} radius_mm={} t_pla_c={} t_tca_c={}",
-                    Fixed(self.time_s() as f32, 1),
-                    Fixed(self.radius_mm() as f32, 2),
-                    Fixed(pla as f32, 2),
-                    Fixed(tca as f32, 2)
-                );
+                let (time_s, radius_mm) = (self.time_s() as f32, self.radius_mm() as f32);
+                reply::sim_state(&mut l, time_s, radius_mm, pla as f32, tca as f32);
             }
             SimCommand::Fault(kind, target) => {
                 let index = match target {
@@ -253,47 +245,35 @@ impl SimLink {
                     Sensor::Amb => 2,
                 };
                 self.inject(kind, index);
-                let _ = write!(l, "ok fault={} target={}", kind.as_str(), target.as_str());
+                reply::sim_fault(&mut l, kind, target);
             }
             SimCommand::Supply(v) => {
                 if !(0.0..=SIM_SUPPLY_MAX_V).contains(&v) {
-                    let _ = write!(
-                        l,
-                        "error: out-of-range supply must be 0..{} V",
-                        Fixed(SIM_SUPPLY_MAX_V, 0)
-                    );
+                    reply::sim_supply_out_of_range(&mut l, SIM_SUPPLY_MAX_V);
                 } else {
                     self.set_supply_v(v as f64);
-                    let _ = write!(l, "ok supply_v={}", Fixed(v, 2));
+                    reply::sim_supply(&mut l, v);
                 }
             }
             SimCommand::Ambient(c) => {
                 let (lo, hi) = SIM_AMBIENT_RANGE_C;
                 if !(lo..=hi).contains(&c) {
-                    let _ = write!(
-                        l,
-                        "error: out-of-range ambient must be {}..{} C",
-                        Fixed(lo, 0),
-                        Fixed(hi, 0)
-                    );
+                    reply::sim_ambient_out_of_range(&mut l, lo, hi);
                 } else {
                     self.set_ambient_c(c as f64);
-                    let _ = write!(l, "ok t_amb_c={}", Fixed(c, 2));
+                    reply::sim_ambient(&mut l, c);
                 }
             }
             SimCommand::Medium(m) => {
                 self.set_medium(m);
-                let _ = write!(l, "ok medium={}", m.as_str());
+                reply::sim_medium(&mut l, m);
             }
             SimCommand::Panic => {
-                let _ = write!(
-                    l,
-                    "error: unsupported SIM PANIC exists only in the emulated image"
-                );
+                l = format_error(&reply::ERR_SIM_PANIC_UNSUPPORTED);
             }
             SimCommand::Clear => {
                 self.clear_faults();
-                let _ = write!(l, "ok");
+                reply::ok(&mut l);
             }
         }
         out(&l);
