@@ -2,8 +2,8 @@
 mod common;
 use common::Bench;
 use morphlink::protocol::{
-    classify, format_error, is_final_reply as is_final, Assembled, LineAssembler,
-    ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
+    classify, format_error, is_final_reply as is_final, Assembled, LineAssembler, ERR_INVALID_LINE,
+    ERR_LINE_TOO_LONG,
 };
 use proptest::prelude::*;
 

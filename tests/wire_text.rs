@@ -75,7 +75,8 @@ fn only_the_protocol_module_writes_wire_text() {
 
 #[test]
 fn the_scanner_finds_wire_text() {
-    let text = "fn f() {\n    out(\"ok\");\n    // \"error: in a comment\"\n}\n#[cfg(test)]\n\"ok \"\n";
+    let text =
+        "fn f() {\n    out(\"ok\");\n    // \"error: in a comment\"\n}\n#[cfg(test)]\n\"ok \"\n";
     let hits: Vec<usize> = code_lines(text)
         .filter(|(_, l)| FORBIDDEN.iter().any(|p| l.contains(p)))
         .map(|(n, _)| n)

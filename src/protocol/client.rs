@@ -113,7 +113,10 @@ mod tests {
     #[test]
     fn error_lines() {
         assert_eq!(classify("error: busy a morph is running"), LineKind::Error);
-        assert_eq!(classify("error: line-too-long Lines are..."), LineKind::Error);
+        assert_eq!(
+            classify("error: line-too-long Lines are..."),
+            LineKind::Error
+        );
         assert!(is_final_reply("error: unknown-command x"));
         assert_eq!(classify("errors"), LineKind::Other);
     }
@@ -129,7 +132,10 @@ mod tests {
 
     #[test]
     fn event_lines() {
-        for l in ["event: phase soften t=0.0", "event: phase bend t=20.0 power_w=0.700"] {
+        for l in [
+            "event: phase soften t=0.0",
+            "event: phase bend t=20.0 power_w=0.700",
+        ] {
             assert_eq!(classify(l), LineKind::Event, "{l}");
             assert!(classify(l).is_unsolicited() && !is_final_reply(l));
         }

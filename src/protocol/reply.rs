@@ -185,12 +185,21 @@ pub fn reset_cleared(l: &mut OutLine, code: FaultCode) {
 
 /// RESET refused: `error: fault-active <code> <sentence>`.
 pub fn fault_active(l: &mut OutLine, still: &Fault) {
-    error(l, ErrorCode::FaultActive, format_args!("{}", FaultText(still)));
+    error(
+        l,
+        ErrorCode::FaultActive,
+        format_args!("{}", FaultText(still)),
+    );
 }
 
 /// `event: phase <phase> t=<s>[ power_w=<W>]`.
 pub fn phase_event(l: &mut OutLine, phase: Phase, t_s: f32, power_w: Option<f32>) {
-    let _ = write!(l, "{EVENT_TAG} phase {} t={}", phase.as_str(), Fixed(t_s, 1));
+    let _ = write!(
+        l,
+        "{EVENT_TAG} phase {} t={}",
+        phase.as_str(),
+        Fixed(t_s, 1)
+    );
     if let Some(p) = power_w {
         let _ = write!(l, " power_w={}", Fixed(p, 3));
     }
@@ -390,7 +399,10 @@ mod tests {
     #[test]
     fn sim_replies() {
         let l = line(|l| sim_state(l, 12.34, 38.456, 70.0, 40.125));
-        assert_eq!(l, "ok time_s=12.3 radius_mm=38.46 t_pla_c=70.00 t_tca_c=40.13");
+        assert_eq!(
+            l,
+            "ok time_s=12.3 radius_mm=38.46 t_pla_c=70.00 t_tca_c=40.13"
+        );
         let l = line(|l| sim_fault(l, SimFault::HeaterOpen, Sensor::Tca));
         assert_eq!(l, "ok fault=heater-open target=tca");
         assert_eq!(line(|l| sim_supply(l, 5.0)), "ok supply_v=5.00");
@@ -421,10 +433,19 @@ mod tests {
         let cases = [
             (line(busy_no_reading), ErrorCode::Busy),
             (line(|l| busy_morphing(l, Phase::Bend)), ErrorCode::Busy),
-            (line(|l| fault_latched(l, FaultCode::StaleSensor)), ErrorCode::FaultLatched),
+            (
+                line(|l| fault_latched(l, FaultCode::StaleSensor)),
+                ErrorCode::FaultLatched,
+            ),
             (line(|l| fault_active(l, &fault)), ErrorCode::FaultActive),
-            (line(|l| radius_out_of_range(l, 30.0, 46.0)), ErrorCode::OutOfRange),
-            (line(|l| sim_supply_out_of_range(l, 30.0)), ErrorCode::OutOfRange),
+            (
+                line(|l| radius_out_of_range(l, 30.0, 46.0)),
+                ErrorCode::OutOfRange,
+            ),
+            (
+                line(|l| sim_supply_out_of_range(l, 30.0)),
+                ErrorCode::OutOfRange,
+            ),
             (format_error(&ERR_STATS_UNSUPPORTED), ErrorCode::Unsupported),
             (format_error(&ERR_SIM_UNSUPPORTED), ErrorCode::Unsupported),
         ];
