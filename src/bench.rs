@@ -9,9 +9,7 @@
 //! run the same board model. Built with the `sim` feature; `no_std` and allocation-free.
 
 use crate::controller::{Config, Inputs, Outputs};
-use crate::fixed::Fixed;
-use crate::protocol::{Medium, OutLine, Sensor, SimCommand, SimFault};
-use core::fmt::Write;
+use crate::protocol::{format_error, reply, Medium, OutLine, Sensor, SimCommand, SimFault};
 use morphlink_plant::{Duties, LumpedSpec, Plant, Setting};
 
 /// Highest supply `SIM SUPPLY` accepts, V (the supervisor's limit is lower, so faults can be tried).
@@ -187,14 +185,8 @@ impl<P: Plant> Bench<P> {
         match cmd {
             SimCommand::State => {
                 let t = self.plant.truth();
-                let _ = write!(
-                    l,
-                    "ok time_s={} radius_mm={} t_pla_c={} t_tca_c={}",
-                    Fixed(t.time_s as f32, 1),
-                    Fixed(self.radius_mm() as f32, 2),
-                    Fixed(t.pla_c as f32, 2),
-                    Fixed(t.tca_c as f32, 2)
-                );
+                let radius_mm = self.radius_mm() as f32;
+                reply::sim_state(&mut l, t.time_s as f32, radius_mm, t.pla_c as f32, t.tca_c as f32);
             }
             SimCommand::Fault(kind, target) => {
                 let index = match target {
@@ -203,47 +195,35 @@ impl<P: Plant> Bench<P> {
                     Sensor::Amb => 2,
                 };
                 self.inject(kind, index);
-                let _ = write!(l, "ok fault={} target={}", kind.as_str(), target.as_str());
+                reply::sim_fault(&mut l, kind, target);
             }
             SimCommand::Supply(v) => {
                 if !(0.0..=SIM_SUPPLY_MAX_V).contains(&v) {
-                    let _ = write!(
-                        l,
-                        "error: out-of-range supply must be 0..{} V",
-                        Fixed(SIM_SUPPLY_MAX_V, 0)
-                    );
+                    reply::sim_supply_out_of_range(&mut l, SIM_SUPPLY_MAX_V);
                 } else {
                     self.set_supply_v(v as f64);
-                    let _ = write!(l, "ok supply_v={}", Fixed(v, 2));
+                    reply::sim_supply(&mut l, v);
                 }
             }
             SimCommand::Ambient(c) => {
                 let (lo, hi) = SIM_AMBIENT_RANGE_C;
                 if !(lo..=hi).contains(&c) {
-                    let _ = write!(
-                        l,
-                        "error: out-of-range ambient must be {}..{} C",
-                        Fixed(lo, 0),
-                        Fixed(hi, 0)
-                    );
+                    reply::sim_ambient_out_of_range(&mut l, lo, hi);
                 } else {
                     self.set_ambient_c(c as f64);
-                    let _ = write!(l, "ok t_amb_c={}", Fixed(c, 2));
+                    reply::sim_ambient(&mut l, c);
                 }
             }
             SimCommand::Medium(m) => {
                 self.set_medium(m);
-                let _ = write!(l, "ok medium={}", m.as_str());
+                reply::sim_medium(&mut l, m);
             }
             SimCommand::Panic => {
-                let _ = write!(
-                    l,
-                    "error: unsupported SIM PANIC exists only in the emulated image"
-                );
+                l = format_error(&reply::ERR_SIM_PANIC_UNSUPPORTED);
             }
             SimCommand::Clear => {
                 self.clear_faults();
-                let _ = write!(l, "ok");
+                reply::ok(&mut l);
             }
         }
         out(&l);

@@ -5,15 +5,13 @@
 //! Per tick: ADC counts → classified temperatures and supply volts → supervisor (a trip turns
 //! both heaters off in this same tick and latches) → sequencer → watts → PWM duties.
 
-use crate::fixed::Fixed;
 use crate::heater::HeaterConfig;
-use crate::protocol::{self, Command, ErrorCode, Mode, OutLine, ProtoError, SimCommand};
+use crate::protocol::{self, reply, Command, Mode, OutLine, SimCommand};
 use crate::sequencer::{Phase, Powers, SeqEvent, Sequencer};
 use crate::stats::LoopTiming;
-use crate::supervisor::{Fault, FaultCode, Frame, Subject, Supervisor, SUPPLY_MAX_V, SUPPLY_MIN_V};
+use crate::supervisor::{Fault, FaultCode, Frame, Subject, Supervisor};
 use crate::table;
 use crate::thermistor::ThermistorConfig;
-use core::fmt::Write;
 use heapless::Deque;
 
 /// Control rate, Hz. The fastest thermal part (the TCA, about 1 s) is sampled ten times per
@@ -322,89 +320,66 @@ impl Controller {
                 }
                 self.powers = Powers::default();
                 self.outputs = Outputs::default();
-                out("ok");
+                out(protocol::OK);
             }
             Command::Reset => self.reset(now_ms, out),
             Command::Range => {
                 let (min, max) = table::range_mm();
-                let _ = write!(l, "ok min_mm={} max_mm={}", Fixed(min, 2), Fixed(max, 2));
+                reply::range(&mut l, min, max);
                 out(&l);
             }
             Command::Table => {
                 for row in crate::link::TABLE.iter() {
                     l.clear();
-                    let _ = write!(
-                        l,
-                        "data: {} {}",
-                        Fixed(row.power_w, 3),
-                        Fixed(row.radius_mm, 2)
-                    );
+                    reply::table_row(&mut l, row.power_w, row.radius_mm);
                     out(&l);
                 }
-                out("ok");
+                out(protocol::OK);
             }
             Command::Version => {
-                let _ = write!(l, "ok version={} protocol=1", VERSION);
+                reply::version(&mut l, VERSION);
                 out(&l);
             }
             Command::Help => {
-                for h in HELP {
+                for h in reply::HELP {
                     l.clear();
-                    let _ = write!(l, "data: {h}");
+                    reply::data(&mut l, h);
                     out(&l);
                 }
-                out("ok");
+                out(protocol::OK);
             }
             Command::Stats => match &self.timing {
                 Some(t) => {
                     t.write_stats(&mut l);
                     out(&l);
                 }
-                None => out(&protocol::format_error(&ProtoError {
-                    code: ErrorCode::Unsupported,
-                    text: "STATS measures the control loop on hardware; this build has none",
-                })),
+                None => out(&protocol::format_error(&reply::ERR_STATS_UNSUPPORTED)),
             },
-            Command::Sim(_) => out(&protocol::format_error(&ProtoError {
-                code: ErrorCode::Unsupported,
-                text: "SIM commands exist only in simulated builds (morph-sim, the emulator)",
-            })),
+            Command::Sim(_) => out(&protocol::format_error(&reply::ERR_SIM_UNSUPPORTED)),
         }
     }
 
     fn morph(&mut self, now_ms: u64, radius_mm: f32, mode: Mode, out: &mut impl FnMut(&str)) {
         let mut l = OutLine::new();
         if let Some(f) = self.fault {
-            let _ = write!(
-                l,
-                "error: fault-latched {} is latched; send RESET once it has cleared",
-                f.code.as_str()
-            );
+            reply::fault_latched(&mut l, f.code);
             return out(&l);
         }
         if self.seq.busy() {
-            let _ = write!(
-                l,
-                "error: busy a morph is in phase {}; send ABORT first",
-                self.seq.phase().as_str()
-            );
+            reply::busy_morphing(&mut l, self.seq.phase());
             return out(&l);
         }
         if self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan() {
-            return out("error: busy no sensor reading yet; try again in a moment");
+            reply::busy_no_reading(&mut l);
+            return out(&l);
         }
         match table::power_for_radius_w(radius_mm) {
             Err(r) => {
-                let _ = write!(
-                    l,
-                    "error: out-of-range reachable={}..{}",
-                    Fixed(r.min_mm, 2),
-                    Fixed(r.max_mm, 2)
-                );
+                reply::radius_out_of_range(&mut l, r.min_mm, r.max_mm);
                 out(&l);
             }
             Ok(power_w) => {
-                out("ok");
+                out(protocol::OK);
                 let mut first: heapless::Vec<SeqEvent, 2> = heapless::Vec::new();
                 let m = self.sup.measurements();
                 self.seq
@@ -419,8 +394,10 @@ impl Controller {
     }
 
     fn reset(&mut self, now_ms: u64, out: &mut impl FnMut(&str)) {
+        let mut l = OutLine::new();
         let Some(latched) = self.fault else {
-            return out("ok fault=none");
+            reply::reset_nothing(&mut l);
+            return out(&l);
         };
         let check = match &self.frame {
             Some(frame) => self.sup.condition_clear(now_ms, frame),
@@ -431,14 +408,11 @@ impl Controller {
                 self.fault = None;
                 self.seq.clear_fault();
                 self.sup.rearm();
-                let mut l = OutLine::new();
-                let _ = write!(l, "ok cleared={}", latched.code.as_str());
+                reply::reset_cleared(&mut l, latched.code);
                 out(&l);
             }
             Err(still) => {
-                let mut l = OutLine::new();
-                let _ = write!(l, "error: fault-active ");
-                write_fault_text(&mut l, &still);
+                reply::fault_active(&mut l, &still);
                 out(&l);
             }
         }
@@ -446,24 +420,18 @@ impl Controller {
 
     fn write_status(&self, l: &mut OutLine) {
         let m = self.sup.measurements();
-        let _ = write!(l, "ok phase={} target_mm=", self.phase().as_str());
-        let target = self.seq.target_mm();
-        if target.is_nan() {
-            let _ = write!(l, "-");
-        } else {
-            let _ = write!(l, "{}", Fixed(target, 2));
-        }
-        let _ = write!(
-            l,
-            " t_pla_c={} t_tca_c={} t_amb_c={} p_pla_w={} p_tca_w={} supply_v={} fault={}",
-            Fixed(m.t_pla_c, 2),
-            Fixed(m.t_tca_c, 2),
-            Fixed(m.t_amb_c, 2),
-            Fixed(self.powers.pla_w, 3),
-            Fixed(self.powers.tca_w, 3),
-            Fixed(self.supply_v, 2),
-            self.fault.map(|f| f.code.as_str()).unwrap_or("none"),
-        );
+        let status = reply::StatusReport {
+            phase: self.phase(),
+            target_mm: self.seq.target_mm(),
+            t_pla_c: m.t_pla_c,
+            t_tca_c: m.t_tca_c,
+            t_amb_c: m.t_amb_c,
+            p_pla_w: self.powers.pla_w,
+            p_tca_w: self.powers.tca_w,
+            supply_v: self.supply_v,
+            fault: self.fault.map(|f| f.code),
+        };
+        reply::status(l, &status);
     }
 
     /// Formats the next queued event as a protocol line (`event: ...` or `alarm: ...`).
@@ -475,84 +443,12 @@ impl Controller {
                 phase,
                 t_s,
                 power_w,
-            }) => {
-                let _ = write!(l, "event: phase {} t={}", phase.as_str(), Fixed(t_s, 1));
-                if let Some(p) = power_w {
-                    let _ = write!(l, " power_w={}", Fixed(p, 3));
-                }
-            }
+            }) => reply::phase_event(&mut l, phase, t_s, power_w),
             Event::Seq(SeqEvent::Done { t_s, radius_mm }) => {
-                let _ = write!(
-                    l,
-                    "event: done t={} radius_mm={}",
-                    Fixed(t_s, 1),
-                    Fixed(radius_mm, 2)
-                );
+                reply::done_event(&mut l, t_s, radius_mm)
             }
-            Event::Alarm(f) => {
-                let _ = write!(l, "alarm: ");
-                write_fault_text(&mut l, &f);
-                let _ = write!(l, "; heaters off, RESET when cleared");
-            }
+            Event::Alarm(f) => reply::alarm(&mut l, &f),
         }
         Some(l)
     }
 }
-
-fn subject_str(s: &Subject) -> &'static str {
-    match s {
-        Subject::Sensor(x) => x.as_str(),
-        Subject::Heater(h) => h.as_str(),
-        Subject::Phase(p) => p.as_str(),
-        Subject::Supply => "supply",
-        Subject::Frame => "sensors",
-    }
-}
-
-/// Writes `<code> <sentence>` for a fault.
-fn write_fault_text(l: &mut OutLine, f: &Fault) {
-    let s = subject_str(&f.subject);
-    let v = Fixed(f.value, 1);
-    let _ = match f.code {
-        FaultCode::ThermistorOpen => write!(
-            l,
-            "thermistor-open {s} thermistor reads open circuit; check its wiring"
-        ),
-        FaultCode::ThermistorShort => write!(
-            l,
-            "thermistor-short {s} thermistor reads short circuit; check its wiring"
-        ),
-        FaultCode::UnderTemperature => {
-            write!(l, "under-temperature {s} reads {v} C, below its minimum")
-        }
-        FaultCode::OverTemperature => {
-            write!(l, "over-temperature {s} reads {v} C, above its maximum")
-        }
-        FaultCode::HeaterNotHeating => write!(
-            l,
-            "heater-not-heating {s} heater rose only {v} K; check heater wiring and MOSFET"
-        ),
-        FaultCode::StaleSensor => write!(l, "stale-sensor no sensor frame for {v} s"),
-        FaultCode::SupplyOutOfRange => write!(
-            l,
-            "supply-out-of-range supply reads {v} V, allowed {}..{}",
-            Fixed(SUPPLY_MIN_V, 1),
-            Fixed(SUPPLY_MAX_V, 1)
-        ),
-        FaultCode::PhaseTimeout => write!(l, "phase-timeout phase {s} did not finish in time"),
-    };
-}
-
-/// HELP text, one `data:` line each.
-const HELP: [&str; 10] = [
-    "MORPH <radius_mm> [auto|paper|gated|boost|closed]  morph to a radius (see RANGE)",
-    "STATUS                          phase, temperatures, powers, supply, fault",
-    "ABORT                           both heaters off at once, phase idle",
-    "RESET                           clear a latched fault once its cause is gone",
-    "RANGE                           reachable radii in mm",
-    "TABLE                           TCA power / radius table",
-    "VERSION                         firmware and protocol version",
-    "HELP                            this list",
-    "STATS                           control-loop timing (us) and reset cause; hardware only",
-    "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|CLEAR|PANIC  simulated builds only",
-];

@@ -5,8 +5,7 @@
 //! applied, and passes the three counts here; the reset flags it reads from the chip are
 //! decoded here too. Simulated builds record nothing, and `STATS` says so.
 
-use crate::protocol::OutLine;
-use core::fmt::Write;
+use crate::protocol::{reply, OutLine};
 
 /// Why the chip last reset, decoded from its reset flags by [`ResetCause::from_flags`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -70,13 +69,7 @@ impl ResetCause {
 /// Writes the line the firmware sends once at boot:
 /// `event: boot reset=<cause> board=<name> version=<v>`.
 pub fn write_boot_line(l: &mut OutLine, cause: ResetCause, board: &str) {
-    let _ = write!(
-        l,
-        "event: boot reset={} board={} version={}",
-        cause.as_str(),
-        board,
-        crate::controller::VERSION
-    );
+    reply::boot(l, cause, board, crate::controller::VERSION);
 }
 
 /// Timing of the control loop, from cycle-counter readings. All durations are µs.
@@ -175,20 +168,18 @@ impl LoopTiming {
         } else {
             (self.period_min_us, self.period_max_us)
         };
-        let _ = write!(
-            l,
-            "ok ticks={} step_us={} step_max_us={} adc_max_us={} period_min_us={} \
-             period_max_us={} jitter_max_us={} late={} reset={}",
-            self.ticks,
-            self.step_last_us,
-            self.step_max_us,
-            self.adc_max_us,
-            pmin,
-            pmax,
-            self.jitter_max_us(),
-            self.late_ticks,
-            self.reset.as_str()
-        );
+        let report = reply::StatsReport {
+            ticks: self.ticks,
+            step_us: self.step_last_us,
+            step_max_us: self.step_max_us,
+            adc_max_us: self.adc_max_us,
+            period_min_us: pmin,
+            period_max_us: pmax,
+            jitter_max_us: self.jitter_max_us(),
+            late: self.late_ticks,
+            reset: self.reset,
+        };
+        reply::stats(l, &report);
     }
 }
 

@@ -1,6 +1,7 @@
 //! Whole morphs on the simulated link with nominal parameters.
 mod common;
 use common::Bench;
+use morphlink::protocol::{classify, LineKind};
 use morphlink::table;
 
 /// Targets spread over the reachable range, ends included (0.2 mm inside).
@@ -24,7 +25,7 @@ fn auto_morphs_reach_every_target_within_two_percent_with_phases_in_order() {
         let done = b
             .lines
             .iter()
-            .find(|l| l.starts_with("event: done"))
+            .find(|l| classify(l) == LineKind::Done)
             .expect("done event");
         let estimate: f32 = Bench::field(done, "radius_mm").unwrap().parse().unwrap();
         // Let the TCA cool fully: spring-back included.

@@ -2,7 +2,8 @@
 mod common;
 use common::Bench;
 use morphlink::protocol::{
-    format_error, Assembled, LineAssembler, ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
+    classify, format_error, is_final_reply as is_final, Assembled, LineAssembler, ERR_INVALID_LINE,
+    ERR_LINE_TOO_LONG,
 };
 use proptest::prelude::*;
 
@@ -22,10 +23,6 @@ fn feed(b: &mut Bench, bytes: &[u8]) -> Vec<String> {
         }
     }
     out
-}
-
-fn is_final(l: &str) -> bool {
-    l == "ok" || l.starts_with("ok ") || l.starts_with("error: ")
 }
 
 #[test]
@@ -185,7 +182,7 @@ fn every_reply_fits_the_shell_reply_buffer() {
         let bytes: usize = b
             .send(cmd)
             .iter()
-            .filter(|l| !l.starts_with("event:") && !l.starts_with("alarm:"))
+            .filter(|l| !classify(l).is_unsolicited())
             .map(|l| l.len() + 1)
             .sum();
         assert!(

@@ -4,6 +4,7 @@
 mod common;
 use common::Bench;
 use morphlink::controller::Outputs;
+use morphlink::protocol::{classify, LineKind};
 use morphlink::sequencer::Phase;
 
 const ZERO: Outputs = Outputs {
@@ -44,7 +45,7 @@ fn expect_alarm(b: &mut Bench, code: &str, max_s: f64) -> String {
     let end = b.rig.now_ms() + (max_s * 1000.0) as u64;
     while b.rig.now_ms() < end {
         let (out, ev) = b.tick();
-        if let Some(a) = ev.iter().find(|l| l.starts_with("alarm: ")) {
+        if let Some(a) = ev.iter().find(|l| classify(l) == LineKind::Alarm) {
             assert!(
                 a.starts_with(&format!("alarm: {code} ")),
                 "expected {code}, got {a}"

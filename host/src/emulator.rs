@@ -4,6 +4,7 @@
 //! Used by `cargo xtask emulate` and by the emulator tests. QEMU 10 is needed (Debian
 //! bookworm-backports: `apt-get install -t bookworm-backports qemu-system-arm`).
 
+use morphlink::protocol::is_final_reply;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
@@ -244,7 +245,7 @@ impl Emulator {
         loop {
             let left = end.saturating_duration_since(Instant::now());
             let l = self.next_line(left).map_err(|e| format!("`{line}`: {e}"))?;
-            let last = l == "ok" || l.starts_with("ok ") || l.starts_with("error: ");
+            let last = is_final_reply(&l);
             got.push(l);
             if last {
                 return Ok(got);

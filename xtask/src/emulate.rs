@@ -1,6 +1,7 @@
 //! `cargo xtask emulate`: build the emulated firmware image and boot it under QEMU's
 //! b-l475e-iot01a machine, either serving USART1 on a loopback TCP port for any client, or
 //! running one morph and printing what the firmware says.
+use morphlink::protocol::{classify, LineKind};
 use morphlink_host::emulator::{build_image, find_qemu, qemu_command, Emulator};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -55,18 +56,17 @@ fn demo(qemu: &Path, image: &Path, radius_mm: f32) -> Result<(), String> {
     let morph_start = Instant::now();
     for l in emu.command(&format!("MORPH {radius_mm}"), Duration::from_secs(5))? {
         println!("{l}");
-        if l.starts_with("error: ") {
+        if classify(&l) == LineKind::Error {
             return Err(format!("the firmware refused MORPH {radius_mm}"));
         }
     }
     loop {
         let l = emu.next_line(DEMO_TIMEOUT)?;
         println!("{l}");
-        if l.starts_with("alarm: ") {
-            return Err("the morph ended in a fault".into());
-        }
-        if l.starts_with("event: done") {
-            break;
+        match classify(&l) {
+            LineKind::Alarm => return Err("the morph ended in a fault".into()),
+            LineKind::Done => break,
+            _ => {}
         }
     }
     let morph_wall = morph_start.elapsed();

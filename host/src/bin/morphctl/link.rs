@@ -2,14 +2,15 @@
 //! a protocol session on it: the VERSION handshake, commands with their final reply, and the
 //! unsolicited `event:`/`alarm:` lines.
 
+use morphlink::protocol::client::{classify, data_text, LineKind};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
-/// Protocol version this tool speaks (`VERSION` replies `ok version=<v> protocol=1`).
-pub const PROTOCOL: &str = "1";
+/// Protocol version this tool speaks (`VERSION` replies `ok version=<v> protocol=<PROTOCOL>`).
+pub const PROTOCOL: u32 = morphlink::protocol::PROTOCOL_VERSION;
 /// Time a device has to answer VERSION, s: a board answers within a tick (100 ms); 3 s leaves
 /// room for a board that was just reset by the port opening (USB CDC on some boards).
 pub const HANDSHAKE_TIMEOUT_S: f64 = 3.0;
@@ -227,19 +228,17 @@ impl Link {
                 ));
             }
             let Some(l) = self.recv(left)? else { continue };
-            if l.starts_with("event:") || l.starts_with("alarm:") {
-                on_event(&l);
-            } else if let Some(d) = l.strip_prefix("data:") {
-                data.push(d.trim_start().to_string());
-            } else if l == "ok" || l.starts_with("ok ") || l.starts_with("error:") {
-                return Ok((data, l));
-            } else if !l.is_empty() {
-                return Err(not_morphlink(&self.name, &l));
+            match classify(&l) {
+                kind if kind.is_unsolicited() => on_event(&l),
+                LineKind::Data => data.push(data_text(&l).unwrap_or_default().to_string()),
+                kind if kind.is_final() => return Ok((data, l)),
+                LineKind::Blank => {}
+                _ => return Err(not_morphlink(&self.name, &l)),
             }
         }
     }
 
-    /// Checks the device speaks protocol 1: `VERSION` must reply `ok version=.. protocol=1`.
+    /// Checks the device speaks [`PROTOCOL`]: `VERSION` must reply `ok version=.. protocol=<PROTOCOL>`.
     /// Returns the firmware version.
     pub fn handshake(&mut self) -> Result<String, String> {
         let (_, reply) = self
@@ -248,8 +247,9 @@ impl Link {
                 format!("{e}; is this a morphlink board? (it must answer VERSION with `ok version=.. protocol={PROTOCOL}`)")
             })?;
         let version = field(&reply, "version");
-        match (reply.starts_with("ok "), version, field(&reply, "protocol")) {
-            (true, Some(v), Some(p)) if p == PROTOCOL => Ok(v),
+        let ok = classify(&reply) == LineKind::Ok;
+        match (ok, version, field(&reply, "protocol")) {
+            (true, Some(v), Some(p)) if p == PROTOCOL.to_string() => Ok(v),
             (true, Some(_), Some(p)) => Err(format!(
                 "{} speaks morphlink protocol {p}; this morphctl speaks protocol {PROTOCOL}",
                 self.name

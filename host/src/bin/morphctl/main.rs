@@ -6,6 +6,7 @@ mod telemetry;
 
 use clap::{Parser, Subcommand};
 use link::{default_sim_program, field, Link, Target, REPLY_TIMEOUT_S};
+use morphlink::protocol::client::{classify, LineKind};
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -188,7 +189,7 @@ fn simple(link: &mut Link, line: &str) -> Result<ExitCode, String> {
         println!("data: {d}");
     }
     println!("{fin}");
-    Ok(if fin.starts_with("error:") {
+    Ok(if classify(&fin) == LineKind::Error {
         ExitCode::FAILURE
     } else {
         ExitCode::SUCCESS
@@ -221,7 +222,7 @@ fn morph(link: &mut Link, o: &MorphOpts) -> Result<(ExitCode, Vec<Sample>), Stri
         REPLY_TIMEOUT_S,
         &mut |l| events.push(l.to_string()),
     )?;
-    if reply != "ok" {
+    if reply != morphlink::protocol::OK {
         return Err(format!("MORPH refused: {reply}"));
     }
     let start = Instant::now();
@@ -232,10 +233,10 @@ fn morph(link: &mut Link, o: &MorphOpts) -> Result<(ExitCode, Vec<Sample>), Stri
     while outcome.is_none() {
         for e in events.drain(..) {
             println!("\r{e:<78}");
-            if e.starts_with("event: done") {
-                outcome = Some(ExitCode::SUCCESS);
-            } else if e.starts_with("alarm:") {
-                outcome = Some(ExitCode::FAILURE);
+            match classify(&e) {
+                LineKind::Done => outcome = Some(ExitCode::SUCCESS),
+                LineKind::Alarm => outcome = Some(ExitCode::FAILURE),
+                _ => {}
             }
         }
         let mut on_event = |l: &str| events.push(l.to_string());

@@ -1,9 +1,33 @@
-//! Protocol v1: bounded line assembly, command parsing and reply/event formatting.
+//! Protocol v1: the one home of the wire text. Bounded line assembly and the vocabulary here,
+//! command parsing in [`command`], every reply, event and alarm line in [`reply`], and the
+//! client side's line classifier in [`client`]. No other module writes wire text (checked by
+//! `tests/wire_text.rs`).
 //!
 //! ASCII lines ending in `\n` (a `\r` before it is ignored), at most [`MAX_LINE`] characters,
 //! commands case-insensitive. Every command line gets exactly one final reply (`ok ...` or
 //! `error: <code> <text>`), optionally preceded by `data: ...` lines. Unsolicited lines are
 //! `event: ...` and `alarm: <code> <text>`.
+
+pub mod client;
+pub mod command;
+pub mod reply;
+
+pub use client::{classify, is_final_reply, LineKind};
+pub use command::parse_line;
+
+/// Protocol version, as `VERSION` reports it (`ok version=<v> protocol=<PROTOCOL_VERSION>`).
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// A reply line that is exactly this, or starts with it and a space, is a success.
+pub const OK: &str = "ok";
+/// Tag of the error reply, `error: <code> <text>`.
+pub const ERROR_TAG: &str = "error:";
+/// Tag of a data line before a final reply, `data: ...`.
+pub const DATA_TAG: &str = "data:";
+/// Tag of an unsolicited event line, `event: <name> ...`.
+pub const EVENT_TAG: &str = "event:";
+/// Tag of an unsolicited alarm line, `alarm: <code> <text>`.
+pub const ALARM_TAG: &str = "alarm:";
 
 /// Longest accepted line in characters, excluding the line ending.
 pub const MAX_LINE: usize = 64;
@@ -230,189 +254,6 @@ pub const MODES: [Mode; 5] = [
     Mode::Boost,
     Mode::Closed,
 ];
-/// Every [`Sensor`], for matching wire words.
-const SENSORS: [Sensor; 3] = [Sensor::Pla, Sensor::Tca, Sensor::Amb];
-/// Every [`Medium`], for matching wire words.
-const MEDIA: [Medium; 2] = [Medium::Water, Medium::Air];
-/// Every [`SimFault`], for matching wire words.
-const SIM_FAULTS: [SimFault; 4] = [
-    SimFault::ThermistorOpen,
-    SimFault::ThermistorShort,
-    SimFault::HeaterOpen,
-    SimFault::HeaterStuck,
-];
-
-/// Finds the item whose wire word equals `word`, ignoring ASCII case.
-fn lookup<T: Copy>(items: &[T], word: &str, name: fn(T) -> &'static str) -> Option<T> {
-    items
-        .iter()
-        .copied()
-        .find(|&item| name(item).eq_ignore_ascii_case(word))
-}
-
-/// Shorthand for a `bad-argument` error.
-const fn bad(text: &'static str) -> ProtoError {
-    ProtoError {
-        code: ErrorCode::BadArgument,
-        text,
-    }
-}
-
-/// Reply to a first word that is no command.
-const UNKNOWN: ProtoError = ProtoError {
-    code: ErrorCode::UnknownCommand,
-    text: "Unknown command; send HELP for the list of commands.",
-};
-
-/// Splits on runs of spaces and tabs.
-fn words(line: &str) -> impl Iterator<Item = &str> {
-    line.split([' ', '\t']).filter(|w| !w.is_empty())
-}
-
-/// Parses one command line (without its line ending).
-///
-/// Leading/trailing ASCII whitespace is ignored and a blank line gives `Ok(None)`. Command and
-/// keyword words match case-insensitively; numbers use [`crate::fixed::parse_decimal`]. Only the
-/// syntax is checked here: a MORPH radius must be a positive number, but whether it is
-/// reachable (and whether SIM values are within limits) is decided by the caller.
-pub fn parse_line(line: &str) -> Result<Option<Command>, ProtoError> {
-    let line = line.trim_matches(|c: char| c.is_ascii_whitespace());
-    let mut args = words(line);
-    let Some(first) = args.next() else {
-        return Ok(None);
-    };
-    let simple = [
-        ("STATUS", Command::Status, "STATUS takes no arguments."),
-        ("ABORT", Command::Abort, "ABORT takes no arguments."),
-        ("RESET", Command::Reset, "RESET takes no arguments."),
-        ("RANGE", Command::Range, "RANGE takes no arguments."),
-        ("TABLE", Command::Table, "TABLE takes no arguments."),
-        ("VERSION", Command::Version, "VERSION takes no arguments."),
-        ("HELP", Command::Help, "HELP takes no arguments."),
-        ("STATS", Command::Stats, "STATS takes no arguments."),
-    ];
-    for (word, command, extra) in simple {
-        if first.eq_ignore_ascii_case(word) {
-            return no_more(args, extra).map(|()| Some(command));
-        }
-    }
-    if first.eq_ignore_ascii_case("MORPH") {
-        parse_morph(args).map(Some)
-    } else if first.eq_ignore_ascii_case("SIM") {
-        parse_sim(args).map(|sim| Some(Command::Sim(sim)))
-    } else {
-        Err(UNKNOWN)
-    }
-}
-
-/// `Ok` if `args` is exhausted, else `bad-argument` with `text`.
-fn no_more<'a>(
-    mut args: impl Iterator<Item = &'a str>,
-    text: &'static str,
-) -> Result<(), ProtoError> {
-    match args.next() {
-        None => Ok(()),
-        Some(_) => Err(bad(text)),
-    }
-}
-
-/// `MORPH <radius_mm> [auto|paper|gated|boost|closed]` after the command word.
-fn parse_morph<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<Command, ProtoError> {
-    let radius = args
-        .next()
-        .ok_or(bad("MORPH needs a radius in mm, e.g. MORPH 38."))?;
-    let radius_mm = crate::fixed::parse_decimal(radius).ok_or(bad(
-        "MORPH radius must be a plain number of mm, e.g. MORPH 38.5.",
-    ))?;
-    if !radius_mm.is_finite() || radius_mm <= 0.0 {
-        return Err(bad("MORPH radius must be greater than 0 mm."));
-    }
-    let mode = match args.next() {
-        None => Mode::Auto,
-        Some(word) => lookup(&MODES, word, Mode::as_str).ok_or(bad(
-            "MORPH mode must be auto, paper, gated, boost or closed.",
-        ))?,
-    };
-    no_more(
-        args,
-        "MORPH takes a radius and an optional mode (auto, paper, gated, boost, closed).",
-    )?;
-    Ok(Command::Morph { radius_mm, mode })
-}
-
-/// `SIM <subcommand> ...` after the command word.
-fn parse_sim<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<SimCommand, ProtoError> {
-    const NEEDS_SUB: &str = "SIM needs STATE, FAULT, SUPPLY, AMBIENT, MEDIUM, CLEAR or PANIC.";
-    let sub = args.next().ok_or(bad(NEEDS_SUB))?;
-    let is = |word: &str| sub.eq_ignore_ascii_case(word);
-    let sim = if is("STATE") {
-        SimCommand::State
-    } else if is("CLEAR") {
-        SimCommand::Clear
-    } else if is("PANIC") {
-        SimCommand::Panic
-    } else if is("FAULT") {
-        parse_sim_fault(&mut args)?
-    } else if is("SUPPLY") {
-        let volts = number(
-            args.next(),
-            "SIM SUPPLY needs a voltage in V, e.g. SIM SUPPLY 5.",
-        )?;
-        SimCommand::Supply(volts)
-    } else if is("AMBIENT") {
-        let temp_c = number(
-            args.next(),
-            "SIM AMBIENT needs a temperature in degrees C, e.g. SIM AMBIENT 25.",
-        )?;
-        SimCommand::Ambient(temp_c)
-    } else if is("MEDIUM") {
-        let medium = args
-            .next()
-            .and_then(|word| lookup(&MEDIA, word, Medium::as_str))
-            .ok_or(bad("SIM MEDIUM needs water or air."))?;
-        SimCommand::Medium(medium)
-    } else {
-        return Err(bad(NEEDS_SUB));
-    };
-    let extra = match sim {
-        SimCommand::State => "SIM STATE takes no arguments.",
-        SimCommand::Clear => "SIM CLEAR takes no arguments.",
-        SimCommand::Panic => "SIM PANIC takes no arguments.",
-        SimCommand::Fault(..) => "SIM FAULT takes a kind and an optional target (pla, tca or amb).",
-        SimCommand::Supply(_) => "SIM SUPPLY takes one voltage.",
-        SimCommand::Ambient(_) => "SIM AMBIENT takes one temperature.",
-        SimCommand::Medium(_) => "SIM MEDIUM takes one medium.",
-    };
-    no_more(args, extra)?;
-    Ok(sim)
-}
-
-/// `SIM FAULT <kind> [pla|tca|amb]` after `FAULT`; the target defaults to `pla`.
-fn parse_sim_fault<'a>(args: &mut impl Iterator<Item = &'a str>) -> Result<SimCommand, ProtoError> {
-    let kind = args
-        .next()
-        .and_then(|word| lookup(&SIM_FAULTS, word, SimFault::as_str))
-        .ok_or(bad(
-            "SIM FAULT needs thermistor-open, thermistor-short, heater-open or heater-stuck.",
-        ))?;
-    let target = match args.next() {
-        None => Sensor::Pla,
-        Some(word) => lookup(&SENSORS, word, Sensor::as_str)
-            .ok_or(bad("SIM FAULT target must be pla, tca or amb."))?,
-    };
-    let heater_fault = matches!(kind, SimFault::HeaterOpen | SimFault::HeaterStuck);
-    if heater_fault && target == Sensor::Amb {
-        return Err(bad("Heater faults target pla or tca; amb has no heater."));
-    }
-    Ok(SimCommand::Fault(kind, target))
-}
-
-/// A required decimal argument, `bad-argument` with `text` if missing or malformed.
-fn number(word: Option<&str>, text: &'static str) -> Result<f32, ProtoError> {
-    word.and_then(crate::fixed::parse_decimal)
-        .filter(|v| v.is_finite())
-        .ok_or(bad(text))
-}
 
 /// What [`LineAssembler::push`] reports when a line ends.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -502,7 +343,7 @@ pub type OutLine = heapless::String<192>;
 /// reaches).
 pub fn format_error(err: &ProtoError) -> OutLine {
     let mut out = OutLine::new();
-    for part in ["error: ", err.code.as_str(), " ", err.text] {
+    for part in [ERROR_TAG, " ", err.code.as_str(), " ", err.text] {
         for c in part.chars() {
             if out.push(c).is_err() {
                 return out;

@@ -1,0 +1,175 @@
+//! The client side: what kind of line a device sent. Used by morphctl, the QEMU harness, xtask
+//! and the tests, so "is this the final reply?" is answered in one place.
+//!
+//! A command's reply is any number of `data:` lines and then exactly one final line, `ok[ ...]`
+//! or `error: ...` (multi-line replies such as HELP and TABLE end with a plain `ok`; there is
+//! no other terminator). `event:` and `alarm:` lines may arrive at any time, also between a
+//! command and its final reply.
+
+use super::{ALARM_TAG, DATA_TAG, ERROR_TAG, EVENT_TAG, OK};
+
+/// The kind of a received line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LineKind {
+    /// A final success reply: `ok` alone or `ok <fields>`.
+    Ok,
+    /// A final error reply: `error:...` (the firmware writes `error: <code> <text>`).
+    Error,
+    /// A data line before a final reply: `data:...`.
+    Data,
+    /// The boot line: `event: boot ...`.
+    Boot,
+    /// The end of a morph: `event: done ...`.
+    Done,
+    /// Any other event (`event: phase ...`).
+    Event,
+    /// A safety trip: `alarm:...`.
+    Alarm,
+    /// An empty line.
+    Blank,
+    /// Anything else: not the morphlink protocol.
+    Other,
+}
+
+impl LineKind {
+    /// True for the line that ends a command's reply (`ok...` or `error:...`).
+    pub fn is_final(self) -> bool {
+        matches!(self, LineKind::Ok | LineKind::Error)
+    }
+
+    /// True for unsolicited lines (events, the boot line and alarms).
+    pub fn is_unsolicited(self) -> bool {
+        matches!(
+            self,
+            LineKind::Boot | LineKind::Done | LineKind::Event | LineKind::Alarm
+        )
+    }
+}
+
+/// True if `rest` is empty or starts with a space: `word` was a whole word.
+fn word_ends(rest: &str) -> bool {
+    rest.is_empty() || rest.starts_with(' ')
+}
+
+/// Classifies one received line (without its line ending).
+pub fn classify(line: &str) -> LineKind {
+    if let Some(rest) = line.strip_prefix(OK) {
+        if word_ends(rest) {
+            return LineKind::Ok;
+        }
+        return LineKind::Other;
+    }
+    if line.starts_with(ERROR_TAG) {
+        return LineKind::Error;
+    }
+    if line.starts_with(DATA_TAG) {
+        return LineKind::Data;
+    }
+    if line.starts_with(ALARM_TAG) {
+        return LineKind::Alarm;
+    }
+    if let Some(rest) = line.strip_prefix(EVENT_TAG) {
+        let rest = rest.trim_start_matches(' ');
+        let is = |name: &str| rest.strip_prefix(name).is_some_and(word_ends);
+        return if is("boot") {
+            LineKind::Boot
+        } else if is("done") {
+            LineKind::Done
+        } else {
+            LineKind::Event
+        };
+    }
+    if line.is_empty() {
+        LineKind::Blank
+    } else {
+        LineKind::Other
+    }
+}
+
+/// True if `line` ends a command's reply (`ok`, `ok ...` or `error:...`).
+pub fn is_final_reply(line: &str) -> bool {
+    classify(line).is_final()
+}
+
+/// The text of a `data:` line after its tag, leading whitespace removed; None for other lines.
+pub fn data_text(line: &str) -> Option<&str> {
+    line.strip_prefix(DATA_TAG).map(str::trim_start)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ok_lines() {
+        assert_eq!(classify("ok"), LineKind::Ok);
+        assert_eq!(classify("ok phase=idle target_mm=-"), LineKind::Ok);
+        assert_eq!(classify("okay"), LineKind::Other);
+        assert_eq!(classify("OK"), LineKind::Other);
+        assert!(is_final_reply("ok"));
+        assert!(is_final_reply("ok version=0.1.0 protocol=1"));
+    }
+
+    #[test]
+    fn error_lines() {
+        assert_eq!(classify("error: busy a morph is running"), LineKind::Error);
+        assert_eq!(
+            classify("error: line-too-long Lines are..."),
+            LineKind::Error
+        );
+        assert!(is_final_reply("error: unknown-command x"));
+        assert_eq!(classify("errors"), LineKind::Other);
+    }
+
+    #[test]
+    fn data_lines() {
+        assert_eq!(classify("data: 0.000 46.46"), LineKind::Data);
+        assert!(!is_final_reply("data: 0.000 46.46"));
+        assert_eq!(data_text("data: 0.000 46.46"), Some("0.000 46.46"));
+        assert_eq!(data_text("data:x"), Some("x"));
+        assert_eq!(data_text("ok"), None);
+    }
+
+    #[test]
+    fn event_lines() {
+        for l in [
+            "event: phase soften t=0.0",
+            "event: phase bend t=20.0 power_w=0.700",
+        ] {
+            assert_eq!(classify(l), LineKind::Event, "{l}");
+            assert!(classify(l).is_unsolicited() && !is_final_reply(l));
+        }
+        assert_eq!(classify("event: doneness"), LineKind::Event);
+    }
+
+    #[test]
+    fn done_lines() {
+        let l = "event: done t=95.0 radius_mm=38.00";
+        assert_eq!(classify(l), LineKind::Done);
+        assert!(classify(l).is_unsolicited() && !is_final_reply(l));
+    }
+
+    #[test]
+    fn boot_lines() {
+        let l = "event: boot reset=pin board=nucleo-f401re version=0.1.0";
+        assert_eq!(classify(l), LineKind::Boot);
+        assert!(classify(l).is_unsolicited() && !is_final_reply(l));
+    }
+
+    #[test]
+    fn alarm_lines() {
+        let l = "alarm: stale-sensor no sensor frame for 1.0 s; heaters off, RESET when cleared";
+        assert_eq!(classify(l), LineKind::Alarm);
+        assert!(classify(l).is_unsolicited() && !is_final_reply(l));
+    }
+
+    #[test]
+    fn blank_and_other_lines() {
+        assert_eq!(classify(""), LineKind::Blank);
+        assert_eq!(classify(" "), LineKind::Other);
+        assert_eq!(classify("AT+OK"), LineKind::Other);
+        for k in [LineKind::Blank, LineKind::Other] {
+            assert!(!k.is_final() && !k.is_unsolicited());
+        }
+    }
+}

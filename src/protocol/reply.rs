@@ -1,0 +1,473 @@
+//! Every reply, event and alarm line the firmware and the simulated builds send.
+//!
+//! Each function appends one line (without its ending) to an [`OutLine`]; the callers
+//! (controller, stats, the simulated link) pass values, never text. Error replies are built from
+//! an [`ErrorCode`] and their detail. Nothing here reaches [`OutLine`]'s capacity.
+
+use super::{
+    ErrorCode, Medium, OutLine, ProtoError, Sensor, SimFault, ALARM_TAG, DATA_TAG, ERROR_TAG,
+    EVENT_TAG, OK, PROTOCOL_VERSION,
+};
+use crate::fixed::Fixed;
+use crate::sequencer::Phase;
+use crate::stats::ResetCause;
+use crate::supervisor::{Fault, FaultCode, Subject, SUPPLY_MAX_V, SUPPLY_MIN_V};
+use core::fmt::{self, Write};
+
+/// HELP text, one `data:` line each.
+pub const HELP: [&str; 10] = [
+    "MORPH <radius_mm> [auto|paper|gated|boost|closed]  morph to a radius (see RANGE)",
+    "STATUS                          phase, temperatures, powers, supply, fault",
+    "ABORT                           both heaters off at once, phase idle",
+    "RESET                           clear a latched fault once its cause is gone",
+    "RANGE                           reachable radii in mm",
+    "TABLE                           TCA power / radius table",
+    "VERSION                         firmware and protocol version",
+    "HELP                            this list",
+    "STATS                           control-loop timing (us) and reset cause; hardware only",
+    "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|CLEAR|PANIC  simulated builds only",
+];
+
+/// `STATS` on a build that does not time its control loop.
+pub const ERR_STATS_UNSUPPORTED: ProtoError = ProtoError {
+    code: ErrorCode::Unsupported,
+    text: "STATS measures the control loop on hardware; this build has none",
+};
+
+/// `SIM ...` on hardware.
+pub const ERR_SIM_UNSUPPORTED: ProtoError = ProtoError {
+    code: ErrorCode::Unsupported,
+    text: "SIM commands exist only in simulated builds (morph-sim, the emulator)",
+};
+
+/// `SIM PANIC` on the host simulator.
+pub const ERR_SIM_PANIC_UNSUPPORTED: ProtoError = ProtoError {
+    code: ErrorCode::Unsupported,
+    text: "SIM PANIC exists only in the emulated image",
+};
+
+/// `error: <code> <detail>`.
+pub fn error(l: &mut OutLine, code: ErrorCode, detail: fmt::Arguments<'_>) {
+    let _ = write!(l, "{ERROR_TAG} {} {detail}", code.as_str());
+}
+
+/// `data: <text>`.
+pub fn data(l: &mut OutLine, text: impl fmt::Display) {
+    let _ = write!(l, "{DATA_TAG} {text}");
+}
+
+/// The bare success reply, `ok`.
+pub fn ok(l: &mut OutLine) {
+    let _ = l.push_str(OK);
+}
+
+/// `ok <fields>`.
+fn ok_with(l: &mut OutLine, fields: fmt::Arguments<'_>) {
+    let _ = write!(l, "{OK} {fields}");
+}
+
+/// `RANGE`: `ok min_mm=<min> max_mm=<max>`.
+pub fn range(l: &mut OutLine, min_mm: f32, max_mm: f32) {
+    ok_with(
+        l,
+        format_args!("min_mm={} max_mm={}", Fixed(min_mm, 2), Fixed(max_mm, 2)),
+    );
+}
+
+/// One `TABLE` row: `data: <power_w> <radius_mm>`.
+pub fn table_row(l: &mut OutLine, power_w: f32, radius_mm: f32) {
+    data(
+        l,
+        format_args!("{} {}", Fixed(power_w, 3), Fixed(radius_mm, 2)),
+    );
+}
+
+/// `VERSION`: `ok version=<firmware> protocol=<PROTOCOL_VERSION>`.
+pub fn version(l: &mut OutLine, firmware: &str) {
+    ok_with(
+        l,
+        format_args!("version={firmware} protocol={PROTOCOL_VERSION}"),
+    );
+}
+
+/// What `STATUS` reports.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StatusReport {
+    /// Current phase.
+    pub phase: Phase,
+    /// Target radius, mm (NaN when there is none: written `-`).
+    pub target_mm: f32,
+    /// PLA temperature, °C.
+    pub t_pla_c: f32,
+    /// TCA temperature, °C.
+    pub t_tca_c: f32,
+    /// Ambient temperature, °C.
+    pub t_amb_c: f32,
+    /// PLA heater power, W.
+    pub p_pla_w: f32,
+    /// TCA heater power, W.
+    pub p_tca_w: f32,
+    /// Supply, V.
+    pub supply_v: f32,
+    /// The latched fault, if any.
+    pub fault: Option<FaultCode>,
+}
+
+/// `STATUS`: `ok phase= target_mm= t_pla_c= t_tca_c= t_amb_c= p_pla_w= p_tca_w= supply_v= fault=`.
+pub fn status(l: &mut OutLine, s: &StatusReport) {
+    let _ = write!(l, "{OK} phase={} target_mm=", s.phase.as_str());
+    if s.target_mm.is_nan() {
+        let _ = write!(l, "-");
+    } else {
+        let _ = write!(l, "{}", Fixed(s.target_mm, 2));
+    }
+    let _ = write!(
+        l,
+        " t_pla_c={} t_tca_c={} t_amb_c={} p_pla_w={} p_tca_w={} supply_v={} fault={}",
+        Fixed(s.t_pla_c, 2),
+        Fixed(s.t_tca_c, 2),
+        Fixed(s.t_amb_c, 2),
+        Fixed(s.p_pla_w, 3),
+        Fixed(s.p_tca_w, 3),
+        Fixed(s.supply_v, 2),
+        s.fault.map(|f| f.as_str()).unwrap_or("none"),
+    );
+}
+
+/// MORPH refused: `error: fault-latched <code> is latched; ...`.
+pub fn fault_latched(l: &mut OutLine, code: FaultCode) {
+    error(
+        l,
+        ErrorCode::FaultLatched,
+        format_args!(
+            "{} is latched; send RESET once it has cleared",
+            code.as_str()
+        ),
+    );
+}
+
+/// MORPH refused while a morph runs: `error: busy a morph is in phase <phase>; ...`.
+pub fn busy_morphing(l: &mut OutLine, phase: Phase) {
+    error(
+        l,
+        ErrorCode::Busy,
+        format_args!("a morph is in phase {}; send ABORT first", phase.as_str()),
+    );
+}
+
+/// MORPH refused before the first sensor frame: `error: busy no sensor reading yet; ...`.
+pub fn busy_no_reading(l: &mut OutLine) {
+    error(
+        l,
+        ErrorCode::Busy,
+        format_args!("no sensor reading yet; try again in a moment"),
+    );
+}
+
+/// MORPH radius outside the table: `error: out-of-range reachable=<min>..<max>`.
+pub fn radius_out_of_range(l: &mut OutLine, min_mm: f32, max_mm: f32) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!("reachable={}..{}", Fixed(min_mm, 2), Fixed(max_mm, 2)),
+    );
+}
+
+/// RESET with nothing latched: `ok fault=none`.
+pub fn reset_nothing(l: &mut OutLine) {
+    ok_with(l, format_args!("fault=none"));
+}
+
+/// RESET cleared a fault: `ok cleared=<code>`.
+pub fn reset_cleared(l: &mut OutLine, code: FaultCode) {
+    ok_with(l, format_args!("cleared={}", code.as_str()));
+}
+
+/// RESET refused: `error: fault-active <code> <sentence>`.
+pub fn fault_active(l: &mut OutLine, still: &Fault) {
+    error(
+        l,
+        ErrorCode::FaultActive,
+        format_args!("{}", FaultText(still)),
+    );
+}
+
+/// `event: phase <phase> t=<s>[ power_w=<W>]`.
+pub fn phase_event(l: &mut OutLine, phase: Phase, t_s: f32, power_w: Option<f32>) {
+    let _ = write!(
+        l,
+        "{EVENT_TAG} phase {} t={}",
+        phase.as_str(),
+        Fixed(t_s, 1)
+    );
+    if let Some(p) = power_w {
+        let _ = write!(l, " power_w={}", Fixed(p, 3));
+    }
+}
+
+/// `event: done t=<s> radius_mm=<mm>`.
+pub fn done_event(l: &mut OutLine, t_s: f32, radius_mm: f32) {
+    let _ = write!(
+        l,
+        "{EVENT_TAG} done t={} radius_mm={}",
+        Fixed(t_s, 1),
+        Fixed(radius_mm, 2)
+    );
+}
+
+/// `alarm: <code> <sentence>; heaters off, RESET when cleared`.
+pub fn alarm(l: &mut OutLine, f: &Fault) {
+    let _ = write!(
+        l,
+        "{ALARM_TAG} {}; heaters off, RESET when cleared",
+        FaultText(f)
+    );
+}
+
+/// The line the firmware sends once at boot:
+/// `event: boot reset=<cause> board=<name> version=<v>`.
+pub fn boot(l: &mut OutLine, cause: ResetCause, board: &str, firmware: &str) {
+    let _ = write!(
+        l,
+        "{EVENT_TAG} boot reset={} board={} version={}",
+        cause.as_str(),
+        board,
+        firmware
+    );
+}
+
+/// What `STATS` reports, µs unless named otherwise.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StatsReport {
+    /// Ticks since boot.
+    pub ticks: u32,
+    /// Last step time.
+    pub step_us: u32,
+    /// Longest step time.
+    pub step_max_us: u32,
+    /// Longest ADC burst.
+    pub adc_max_us: u32,
+    /// Shortest tick period (0 before two ticks).
+    pub period_min_us: u32,
+    /// Longest tick period (0 before two ticks).
+    pub period_max_us: u32,
+    /// Largest deviation of a period from nominal.
+    pub jitter_max_us: u32,
+    /// Late ticks.
+    pub late: u32,
+    /// Why the chip last reset.
+    pub reset: ResetCause,
+}
+
+/// `STATS`: `ok ticks= step_us= step_max_us= adc_max_us= period_min_us= period_max_us=
+/// jitter_max_us= late= reset=`.
+pub fn stats(l: &mut OutLine, s: &StatsReport) {
+    ok_with(
+        l,
+        format_args!(
+            "ticks={} step_us={} step_max_us={} adc_max_us={} period_min_us={} \
+             period_max_us={} jitter_max_us={} late={} reset={}",
+            s.ticks,
+            s.step_us,
+            s.step_max_us,
+            s.adc_max_us,
+            s.period_min_us,
+            s.period_max_us,
+            s.jitter_max_us,
+            s.late,
+            s.reset.as_str()
+        ),
+    );
+}
+
+/// `SIM STATE`: `ok time_s= radius_mm= t_pla_c= t_tca_c=` (the simulated truth).
+pub fn sim_state(l: &mut OutLine, time_s: f32, radius_mm: f32, t_pla_c: f32, t_tca_c: f32) {
+    ok_with(
+        l,
+        format_args!(
+            "time_s={} radius_mm={} t_pla_c={} t_tca_c={}",
+            Fixed(time_s, 1),
+            Fixed(radius_mm, 2),
+            Fixed(t_pla_c, 2),
+            Fixed(t_tca_c, 2)
+        ),
+    );
+}
+
+/// `SIM FAULT`: `ok fault=<kind> target=<sensor>`.
+pub fn sim_fault(l: &mut OutLine, kind: SimFault, target: Sensor) {
+    ok_with(
+        l,
+        format_args!("fault={} target={}", kind.as_str(), target.as_str()),
+    );
+}
+
+/// `SIM SUPPLY`: `ok supply_v=<V>`.
+pub fn sim_supply(l: &mut OutLine, supply_v: f32) {
+    ok_with(l, format_args!("supply_v={}", Fixed(supply_v, 2)));
+}
+
+/// `SIM SUPPLY` refused: `error: out-of-range supply must be 0..<max> V`.
+pub fn sim_supply_out_of_range(l: &mut OutLine, max_v: f32) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!("supply must be 0..{} V", Fixed(max_v, 0)),
+    );
+}
+
+/// `SIM AMBIENT`: `ok t_amb_c=<°C>`.
+pub fn sim_ambient(l: &mut OutLine, t_amb_c: f32) {
+    ok_with(l, format_args!("t_amb_c={}", Fixed(t_amb_c, 2)));
+}
+
+/// `SIM AMBIENT` refused: `error: out-of-range ambient must be <lo>..<hi> C`.
+pub fn sim_ambient_out_of_range(l: &mut OutLine, lo_c: f32, hi_c: f32) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!("ambient must be {}..{} C", Fixed(lo_c, 0), Fixed(hi_c, 0)),
+    );
+}
+
+/// `SIM MEDIUM`: `ok medium=<water|air>`.
+pub fn sim_medium(l: &mut OutLine, m: Medium) {
+    ok_with(l, format_args!("medium={}", m.as_str()));
+}
+
+/// The word of a fault's subject.
+fn subject_str(s: &Subject) -> &'static str {
+    match s {
+        Subject::Sensor(x) => x.as_str(),
+        Subject::Heater(h) => h.as_str(),
+        Subject::Phase(p) => p.as_str(),
+        Subject::Supply => "supply",
+        Subject::Frame => "sensors",
+    }
+}
+
+/// `<code> <sentence>` for a fault (alarms and `fault-active`).
+struct FaultText<'a>(&'a Fault);
+
+impl fmt::Display for FaultText<'_> {
+    fn fmt(&self, l: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let f = self.0;
+        let s = subject_str(&f.subject);
+        let v = Fixed(f.value, 1);
+        match f.code {
+            FaultCode::ThermistorOpen => write!(
+                l,
+                "thermistor-open {s} thermistor reads open circuit; check its wiring"
+            ),
+            FaultCode::ThermistorShort => write!(
+                l,
+                "thermistor-short {s} thermistor reads short circuit; check its wiring"
+            ),
+            FaultCode::UnderTemperature => {
+                write!(l, "under-temperature {s} reads {v} C, below its minimum")
+            }
+            FaultCode::OverTemperature => {
+                write!(l, "over-temperature {s} reads {v} C, above its maximum")
+            }
+            FaultCode::HeaterNotHeating => write!(
+                l,
+                "heater-not-heating {s} heater rose only {v} K; check heater wiring and MOSFET"
+            ),
+            FaultCode::StaleSensor => write!(l, "stale-sensor no sensor frame for {v} s"),
+            FaultCode::SupplyOutOfRange => write!(
+                l,
+                "supply-out-of-range supply reads {v} V, allowed {}..{}",
+                Fixed(SUPPLY_MIN_V, 1),
+                Fixed(SUPPLY_MAX_V, 1)
+            ),
+            FaultCode::PhaseTimeout => write!(l, "phase-timeout phase {s} did not finish in time"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::format_error;
+
+    fn line(f: impl FnOnce(&mut OutLine)) -> OutLine {
+        let mut l = OutLine::new();
+        f(&mut l);
+        l
+    }
+
+    #[test]
+    fn sim_replies() {
+        let l = line(|l| sim_state(l, 12.34, 38.456, 70.0, 40.125));
+        assert_eq!(
+            l,
+            "ok time_s=12.3 radius_mm=38.46 t_pla_c=70.00 t_tca_c=40.13"
+        );
+        let l = line(|l| sim_fault(l, SimFault::HeaterOpen, Sensor::Tca));
+        assert_eq!(l, "ok fault=heater-open target=tca");
+        assert_eq!(line(|l| sim_supply(l, 5.0)), "ok supply_v=5.00");
+        assert_eq!(
+            line(|l| sim_supply_out_of_range(l, 30.0)),
+            "error: out-of-range supply must be 0..30 V"
+        );
+        assert_eq!(line(|l| sim_ambient(l, -5.0)), "ok t_amb_c=-5.00");
+        assert_eq!(
+            line(|l| sim_ambient_out_of_range(l, -10.0, 60.0)),
+            "error: out-of-range ambient must be -10..60 C"
+        );
+        assert_eq!(line(|l| sim_medium(l, Medium::Air)), "ok medium=air");
+        assert_eq!(line(ok), "ok");
+        assert_eq!(
+            format_error(&ERR_SIM_PANIC_UNSUPPORTED),
+            "error: unsupported SIM PANIC exists only in the emulated image"
+        );
+    }
+
+    #[test]
+    fn every_error_code_is_built_from_its_variant() {
+        let fault = Fault {
+            code: FaultCode::StaleSensor,
+            subject: Subject::Frame,
+            value: 1.0,
+        };
+        let cases = [
+            (line(busy_no_reading), ErrorCode::Busy),
+            (line(|l| busy_morphing(l, Phase::Bend)), ErrorCode::Busy),
+            (
+                line(|l| fault_latched(l, FaultCode::StaleSensor)),
+                ErrorCode::FaultLatched,
+            ),
+            (line(|l| fault_active(l, &fault)), ErrorCode::FaultActive),
+            (
+                line(|l| radius_out_of_range(l, 30.0, 46.0)),
+                ErrorCode::OutOfRange,
+            ),
+            (
+                line(|l| sim_supply_out_of_range(l, 30.0)),
+                ErrorCode::OutOfRange,
+            ),
+            (format_error(&ERR_STATS_UNSUPPORTED), ErrorCode::Unsupported),
+            (format_error(&ERR_SIM_UNSUPPORTED), ErrorCode::Unsupported),
+        ];
+        for (l, code) in cases {
+            let rest = l.strip_prefix("error: ").expect("an error line");
+            assert!(rest.starts_with(code.as_str()), "{l}");
+            assert!(crate::protocol::classify(&l) == crate::protocol::LineKind::Error);
+        }
+        assert_eq!(
+            line(|l| busy_morphing(l, Phase::Bend)),
+            "error: busy a morph is in phase bend; send ABORT first"
+        );
+        assert_eq!(
+            line(|l| fault_active(l, &fault)),
+            "error: fault-active stale-sensor no sensor frame for 1.0 s"
+        );
+    }
+
+    #[test]
+    fn version_names_the_protocol_version() {
+        let l = line(|l| version(l, "0.1.0"));
+        assert_eq!(l, "ok version=0.1.0 protocol=1");
+        assert_eq!(PROTOCOL_VERSION, 1);
+    }
+}
