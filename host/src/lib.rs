@@ -3,4 +3,5 @@
 #![deny(missing_docs)]
 
 pub mod emulator;
+pub mod plot;
 pub mod workspace;
