@@ -573,3 +573,107 @@ pub fn human_time(s: f64) -> String {
         format!("{s:.2} s")
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scored(level: Level, shift_mm: f64, seconds: f64) -> Scored {
+        Scored {
+            level,
+            radius_mm: POWERS_W.iter().map(|p| 45.0 - 8.0 * p + shift_mm).collect(),
+            seconds,
+            error_vs_reference_mm: shift_mm.abs(),
+            error_vs_measured_mm: 0.1 + shift_mm.abs(),
+            uncalibrated_difference_mm: 0.0,
+            constants: (1.5e-5, 0.17, 2.8e-3),
+        }
+    }
+
+    #[test]
+    fn every_study_chart_renders_its_titles_and_series() {
+        let dir = std::env::temp_dir().join(format!("morph-model-charts-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let s = [
+            scored(Level::LUMPED, 0.3, 1e-5),
+            scored(Level::REFERENCE, 0.0, 2.0),
+        ];
+        let fig9 = Fig9 {
+            measured: vec![(0.1, 44.96), (0.8, 36.94), (1.5, 32.85)],
+            paper_model: vec![(0.1, 45.1), (0.8, 37.0), (1.5, 32.7)],
+        };
+        let grid: Vec<GridRow> = [8usize, 16, 32]
+            .iter()
+            .map(|&n| GridRow {
+                rings: n,
+                cells: n * n,
+                concentric_error: 1.0 / (n * n) as f64,
+                r_tt: 34.2,
+                link_error: 0.5 / (n * n) as f64,
+                explicit_limit_s: 1e-3,
+            })
+            .collect();
+        let transient: Vec<TransientRow> = (1..=600)
+            .map(|k| {
+                let t = k as f64 * 0.1;
+                let r = 1.0 - (-t / 10.0).exp();
+                (t, 30.0 * r, 20.0 * r, 29.0 * r, 21.0 * r)
+            })
+            .collect();
+        let path = |n: &str| dir.join(n);
+        pareto_chart(&path("p.svg"), "pareto title", &s, |x| {
+            x.error_vs_reference_mm
+        })
+        .unwrap();
+        radius_chart(&path("r.svg"), &s, &fig9, &["lumped", "fv96+cosserat"]).unwrap();
+        table_chart(
+            &path("t.svg"),
+            &[(2, 1.0, 24), (16, 0.02, 192), (64, 1e-3, 768)],
+        )
+        .unwrap();
+        grid_chart(&path("g.svg"), &grid).unwrap();
+        transient_chart(&path("tr.svg"), &transient, 32).unwrap();
+        let has = |n: &str, want: &[&str]| {
+            let text = std::fs::read_to_string(path(n)).unwrap();
+            for w in want {
+                assert!(text.contains(w), "{n}: `{w}` missing");
+            }
+        };
+        has(
+            "p.svg",
+            &[
+                "pareto title",
+                "Pareto front",
+                "lumped",
+                "run time of one 15-power curve, s",
+            ],
+        );
+        has(
+            "r.svg",
+            &[
+                "Radius versus TCA power",
+                "lumped",
+                "paper&apos;s model (Fig. 9)",
+                "measured (Fig. 9)",
+            ],
+        );
+        has("t.svg", &["Firmware table: entries", "192 B", "entries"]);
+        has(
+            "g.svg",
+            &[
+                "grid convergence",
+                "concentric heater vs exact",
+                "link R_tt vs 96 rings",
+            ],
+        );
+        has(
+            "tr.svg",
+            &[
+                "Heater rises",
+                "TCA, finite volumes (32 rings)",
+                "PLA, lumped network",
+            ],
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
