@@ -3,12 +3,17 @@
 //! CSV of the numbers, and prints a summary.
 
 use indicatif::{ProgressBar, ProgressStyle};
+use morphlink_host::plot::{self, prelude::*};
 use morphlink_model::reference::fv_thermal::{CrossSection, Inclusion, Layout};
 use morphlink_model::reference::levels::{self, Level, Scored, POWERS_W, REFERENCE_RINGS};
 use morphlink_model::LinkParams;
-use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::Path;
+
+/// The study's charts: 20 px captions, 15 px margins, room for `1e-3` labels on log axes.
+const STUDY: Frame = Frame::new(20, 15, 45, 70);
+/// The same on linear axes, whose labels are shorter.
+const STUDY_LINEAR: Frame = Frame::new(20, 15, 45, 60);
 
 /// Measured and paper-predicted points of Fig. 9, `(power_w, radius_mm)`.
 pub struct Fig9 {
@@ -124,20 +129,6 @@ pub fn orders(rows: &[(usize, f64)]) -> Vec<f64> {
         .collect()
 }
 
-fn color(i: usize) -> RGBColor {
-    const C: [RGBColor; 8] = [
-        RGBColor(31, 119, 180),
-        RGBColor(255, 127, 14),
-        RGBColor(44, 160, 44),
-        RGBColor(214, 39, 40),
-        RGBColor(148, 103, 189),
-        RGBColor(140, 86, 75),
-        RGBColor(227, 119, 194),
-        RGBColor(23, 190, 207),
-    ];
-    C[i % C.len()]
-}
-
 /// Error-versus-time scatter with labels and the Pareto front.
 fn pareto_chart(
     path: &Path,
@@ -156,163 +147,110 @@ fn pareto_chart(
     let (ymin, ymax) = pts
         .iter()
         .fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.1), b.max(p.1)));
-    let root = SVGBackend::new(path, (1000, 700)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d(
+    Ok(plot::write_svg(path, (1000, 700), |root| {
+        let mut chart = STUDY.builder(root, Some(title)).build_cartesian_2d(
             (xmin / 2.0..xmax * 3.0).log_scale(),
             (ymin / 2.0..ymax * 3.0).log_scale(),
+        )?;
+        mesh(
+            &mut chart,
+            "run time of one 15-power curve, s",
+            "max |radius error|, mm (zero drawn at 1e-6)",
+            true,
         )
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("run time of one 15-power curve, s")
-        .y_desc("max |radius error|, mm (zero drawn at 1e-6)")
-        .x_label_formatter(&|v| format!("{v:.0e}"))
-        .y_label_formatter(&|v| format!("{v:.0e}"))
-        .draw()
-        .map_err(err)?;
-    let line: Vec<(f64, f64)> = front.iter().map(|&i| pts[i]).collect();
-    chart
-        .draw_series(LineSeries::new(line, RED.stroke_width(2)))
-        .map_err(err)?
-        .label("Pareto front")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
-    for (i, (s, p)) in scored.iter().zip(&pts).enumerate() {
-        let on = front.contains(&i);
-        let c = if on { RED } else { color(i) };
-        chart
-            .draw_series(std::iter::once(Circle::new(*p, 5, c.filled())))
-            .map_err(err)?;
-        chart
-            .draw_series(std::iter::once(Text::new(
-                s.level.name(),
-                *p,
-                ("sans-serif", 12).into_font().color(&BLACK),
-            )))
-            .map_err(err)?;
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
-    root.present().map_err(err)
+        .x_label_formatter(&sci)
+        .y_label_formatter(&sci)
+        .draw()?;
+        let front_pts: Vec<(f64, f64)> = front.iter().map(|&i| pts[i]).collect();
+        line(
+            &mut chart,
+            front_pts,
+            RED.stroke_width(2),
+            Some("Pareto front"),
+        )?;
+        for (i, (s, p)) in scored.iter().zip(&pts).enumerate() {
+            let c = if front.contains(&i) { RED } else { palette(i) };
+            labelled_point(&mut chart, *p, 5, c, &s.level.name())?;
+        }
+        legend(&mut chart, SeriesLabelPosition::MiddleRight)
+    })?)
 }
 
 fn radius_chart(path: &Path, scored: &[Scored], fig9: &Fig9, shown: &[&str]) -> Result<(), String> {
-    let root = SVGBackend::new(path, (1000, 700)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "Radius versus TCA power (PLA held at 1.5 W, under water)",
-            ("sans-serif", 20),
-        )
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.0..1.6, 30.0..50.0)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("TCA power, W")
-        .y_desc("radius, mm")
-        .draw()
-        .map_err(err)?;
-    for (i, s) in scored
-        .iter()
-        .filter(|s| shown.contains(&s.level.name().as_str()))
-        .enumerate()
-    {
-        let c = color(i);
-        let data: Vec<(f64, f64)> = POWERS_W
+    Ok(plot::write_svg(path, (1000, 700), |root| {
+        let mut chart = STUDY_LINEAR
+            .builder(
+                root,
+                Some("Radius versus TCA power (PLA held at 1.5 W, under water)"),
+            )
+            .build_cartesian_2d(0.0..1.6, 30.0..50.0)?;
+        mesh(&mut chart, "TCA power, W", "radius, mm", true).draw()?;
+        for (i, s) in scored
             .iter()
-            .copied()
-            .zip(s.radius_mm.iter().copied())
-            .collect();
+            .filter(|s| shown.contains(&s.level.name().as_str()))
+            .enumerate()
+        {
+            let data: Vec<(f64, f64)> = POWERS_W
+                .iter()
+                .copied()
+                .zip(s.radius_mm.iter().copied())
+                .collect();
+            line(
+                &mut chart,
+                data,
+                palette(i).stroke_width(2),
+                Some(&s.level.name()),
+            )?;
+        }
         chart
-            .draw_series(LineSeries::new(data, c.stroke_width(2)))
-            .map_err(err)?
-            .label(s.level.name())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-    }
-    chart
-        .draw_series(
-            fig9.paper_model
-                .iter()
-                .map(|p| Cross::new(*p, 5, BLACK.stroke_width(1))),
-        )
-        .map_err(err)?
-        .label("paper's model (Fig. 9)")
-        .legend(|(x, y)| Cross::new((x + 10, y), 5, BLACK.stroke_width(1)));
-    chart
-        .draw_series(
-            fig9.measured
-                .iter()
-                .map(|p| Circle::new(*p, 6, BLACK.filled())),
-        )
-        .map_err(err)?
-        .label("measured (Fig. 9)")
-        .legend(|(x, y)| Circle::new((x + 10, y), 5, BLACK.filled()));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
-    root.present().map_err(err)
+            .draw_series(
+                fig9.paper_model
+                    .iter()
+                    .map(|p| Cross::new(*p, 5, BLACK.stroke_width(1))),
+            )?
+            .label("paper's model (Fig. 9)")
+            .legend(|(x, y)| Cross::new((x + 10, y), 5, BLACK.stroke_width(1)));
+        chart
+            .draw_series(
+                fig9.measured
+                    .iter()
+                    .map(|p| Circle::new(*p, 6, BLACK.filled())),
+            )?
+            .label("measured (Fig. 9)")
+            .legend(|(x, y)| Circle::new((x + 10, y), 5, BLACK.filled()));
+        legend(&mut chart, SeriesLabelPosition::MiddleRight)
+    })?)
 }
 
 fn table_chart(path: &Path, rows: &[(usize, f64, usize)]) -> Result<(), String> {
-    let root = SVGBackend::new(path, (1000, 600)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
     let ymax = rows.iter().map(|r| r.1).fold(0.0, f64::max) * 2.0;
     let ymin = rows.iter().map(|r| r.1).fold(f64::MAX, f64::min) / 2.0;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "Firmware table: entries vs worst radius error (labels: flash bytes)",
-            ("sans-serif", 20),
+    Ok(plot::write_svg(path, (1000, 600), |root| {
+        let mut chart = STUDY
+            .builder(
+                root,
+                Some("Firmware table: entries vs worst radius error (labels: flash bytes)"),
+            )
+            .build_cartesian_2d((2.0..80.0).log_scale(), (ymin..ymax).log_scale())?;
+        mesh(
+            &mut chart,
+            "entries",
+            "worst |radius error| of interpolation, mm",
+            true,
         )
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d((2.0..80.0).log_scale(), (ymin..ymax).log_scale())
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("entries")
-        .y_desc("worst |radius error| of interpolation, mm")
-        .x_label_formatter(&|v| format!("{v:.0}"))
-        .y_label_formatter(&|v| format!("{v:.0e}"))
-        .draw()
-        .map_err(err)?;
-    let data: Vec<(f64, f64)> = rows.iter().map(|r| (r.0 as f64, r.1)).collect();
-    chart
-        .draw_series(LineSeries::new(data.clone(), BLUE.stroke_width(2)))
-        .map_err(err)?;
-    for (r, d) in rows.iter().zip(&data) {
-        chart
-            .draw_series(std::iter::once(Circle::new(*d, 4, BLUE.filled())))
-            .map_err(err)?;
-        chart
-            .draw_series(std::iter::once(Text::new(
-                format!("{} B", r.2),
-                *d,
-                ("sans-serif", 12).into_font(),
-            )))
-            .map_err(err)?;
-    }
-    root.present().map_err(err)
+        .x_label_formatter(&whole)
+        .y_label_formatter(&sci)
+        .draw()?;
+        let data: Vec<(f64, f64)> = rows.iter().map(|r| (r.0 as f64, r.1)).collect();
+        line(&mut chart, data.clone(), BLUE.stroke_width(2), None)?;
+        for (r, d) in rows.iter().zip(&data) {
+            labelled_point(&mut chart, *d, 4, BLUE, &format!("{} B", r.2))?;
+        }
+        Ok(())
+    })?)
 }
 
 fn grid_chart(path: &Path, rows: &[GridRow]) -> Result<(), String> {
-    let root = SVGBackend::new(path, (1000, 600)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
     let all: Vec<f64> = rows
         .iter()
         .flat_map(|r| [r.concentric_error, r.link_error])
@@ -320,46 +258,41 @@ fn grid_chart(path: &Path, rows: &[GridRow]) -> Result<(), String> {
         .collect();
     let ymin = all.iter().copied().fold(f64::MAX, f64::min) / 2.0;
     let ymax = all.iter().copied().fold(0.0, f64::max) * 2.0;
-    let mut chart = ChartBuilder::on(&root)
-        .caption("Finite-volume grid convergence", ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d((6.0..80.0).log_scale(), (ymin..ymax).log_scale())
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("rings (sectors ≈ π × rings for the link, 8 for the concentric case)")
-        .y_desc("relative error of R")
-        .x_label_formatter(&|v| format!("{v:.0}"))
-        .y_label_formatter(&|v| format!("{v:.0e}"))
-        .draw()
-        .map_err(err)?;
-    let c: Vec<(f64, f64)> = rows
-        .iter()
-        .map(|r| (r.rings as f64, r.concentric_error))
-        .collect();
-    let l: Vec<(f64, f64)> = rows
-        .iter()
-        .map(|r| (r.rings as f64, r.link_error))
-        .collect();
-    chart
-        .draw_series(LineSeries::new(c, BLUE.stroke_width(2)))
-        .map_err(err)?
-        .label("concentric heater vs exact (Eq. 11 form)")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(2)));
-    chart
-        .draw_series(LineSeries::new(l, RED.stroke_width(2)))
-        .map_err(err)?
-        .label(format!("link R_tt vs {REFERENCE_RINGS} rings"))
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
-    root.present().map_err(err)
+    Ok(plot::write_svg(path, (1000, 600), |root| {
+        let mut chart = STUDY
+            .builder(root, Some("Finite-volume grid convergence"))
+            .build_cartesian_2d((6.0..80.0).log_scale(), (ymin..ymax).log_scale())?;
+        mesh(
+            &mut chart,
+            "rings (sectors ≈ π × rings for the link, 8 for the concentric case)",
+            "relative error of R",
+            true,
+        )
+        .x_label_formatter(&whole)
+        .y_label_formatter(&sci)
+        .draw()?;
+        let c: Vec<(f64, f64)> = rows
+            .iter()
+            .map(|r| (r.rings as f64, r.concentric_error))
+            .collect();
+        let l: Vec<(f64, f64)> = rows
+            .iter()
+            .map(|r| (r.rings as f64, r.link_error))
+            .collect();
+        line(
+            &mut chart,
+            c,
+            BLUE.stroke_width(2),
+            Some("concentric heater vs exact (Eq. 11 form)"),
+        )?;
+        line(
+            &mut chart,
+            l,
+            RED.stroke_width(2),
+            Some(&format!("link R_tt vs {REFERENCE_RINGS} rings")),
+        )?;
+        legend(&mut chart, SeriesLabelPosition::MiddleRight)
+    })?)
 }
 
 /// One transient sample: `(t_s, fv_tca_k, fv_pla_k, net_tca_k, net_pla_k)`.
@@ -394,62 +327,41 @@ pub fn transient_study(p: &LinkParams, rings: usize) -> Result<Vec<TransientRow>
 }
 
 fn transient_chart(path: &Path, rows: &[TransientRow], rings: usize) -> Result<(), String> {
-    let root = SVGBackend::new(path, (1000, 600)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
     let ymax = rows
         .iter()
         .map(|r| r.1.max(r.2).max(r.3).max(r.4))
         .fold(0.0, f64::max)
         * 1.1;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "Heater rises, TCA 1 W + PLA 1.5 W from ambient: reference grid vs lumped network",
-            ("sans-serif", 20),
-        )
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.0..60.0, 0.0..ymax)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("time, s")
-        .y_desc("rise above ambient, K")
-        .draw()
-        .map_err(err)?;
-    let pick = |r: &TransientRow, i: usize| [r.1, r.2, r.3, r.4][i];
-    let series = [
-        ("TCA, finite volumes", 0usize),
-        ("PLA, finite volumes", 1),
-        ("TCA, lumped network", 2),
-        ("PLA, lumped network", 3),
-    ];
-    for (name, i) in series {
-        let c = color(i);
-        chart
-            .draw_series(LineSeries::new(
+    Ok(plot::write_svg(path, (1000, 600), |root| {
+        let mut chart = STUDY_LINEAR
+            .builder(
+                root,
+                Some("Heater rises, TCA 1 W + PLA 1.5 W from ambient: reference grid vs lumped network"),
+            )
+            .build_cartesian_2d(0.0..60.0, 0.0..ymax)?;
+        mesh(&mut chart, "time, s", "rise above ambient, K", true).draw()?;
+        let pick = |r: &TransientRow, i: usize| [r.1, r.2, r.3, r.4][i];
+        let series = [
+            ("TCA, finite volumes", 0usize),
+            ("PLA, finite volumes", 1),
+            ("TCA, lumped network", 2),
+            ("PLA, lumped network", 3),
+        ];
+        for (name, i) in series {
+            let label = if name.contains("finite") {
+                format!("{name} ({rings} rings)")
+            } else {
+                name.to_string()
+            };
+            line(
+                &mut chart,
                 rows.iter().map(|r| (r.0, pick(r, i))),
-                c.stroke_width(2),
-            ))
-            .map_err(err)?
-            .label(format!(
-                "{name}{}",
-                if name.contains("finite") {
-                    format!(" ({rings} rings)")
-                } else {
-                    String::new()
-                }
-            ))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-    }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
-    root.present().map_err(err)
+                palette(i).stroke_width(2),
+                Some(&label),
+            )?;
+        }
+        legend(&mut chart, SeriesLabelPosition::LowerRight)
+    })?)
 }
 
 /// Worst error of the firmware's 16-entry table (f32, linear in curvature) against a curve at
@@ -659,5 +571,109 @@ pub fn human_time(s: f64) -> String {
         format!("{:.2} ms", s * 1e3)
     } else {
         format!("{s:.2} s")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scored(level: Level, shift_mm: f64, seconds: f64) -> Scored {
+        Scored {
+            level,
+            radius_mm: POWERS_W.iter().map(|p| 45.0 - 8.0 * p + shift_mm).collect(),
+            seconds,
+            error_vs_reference_mm: shift_mm.abs(),
+            error_vs_measured_mm: 0.1 + shift_mm.abs(),
+            uncalibrated_difference_mm: 0.0,
+            constants: (1.5e-5, 0.17, 2.8e-3),
+        }
+    }
+
+    #[test]
+    fn every_study_chart_renders_its_titles_and_series() {
+        let dir = std::env::temp_dir().join(format!("morph-model-charts-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let s = [
+            scored(Level::LUMPED, 0.3, 1e-5),
+            scored(Level::REFERENCE, 0.0, 2.0),
+        ];
+        let fig9 = Fig9 {
+            measured: vec![(0.1, 44.96), (0.8, 36.94), (1.5, 32.85)],
+            paper_model: vec![(0.1, 45.1), (0.8, 37.0), (1.5, 32.7)],
+        };
+        let grid: Vec<GridRow> = [8usize, 16, 32]
+            .iter()
+            .map(|&n| GridRow {
+                rings: n,
+                cells: n * n,
+                concentric_error: 1.0 / (n * n) as f64,
+                r_tt: 34.2,
+                link_error: 0.5 / (n * n) as f64,
+                explicit_limit_s: 1e-3,
+            })
+            .collect();
+        let transient: Vec<TransientRow> = (1..=600)
+            .map(|k| {
+                let t = k as f64 * 0.1;
+                let r = 1.0 - (-t / 10.0).exp();
+                (t, 30.0 * r, 20.0 * r, 29.0 * r, 21.0 * r)
+            })
+            .collect();
+        let path = |n: &str| dir.join(n);
+        pareto_chart(&path("p.svg"), "pareto title", &s, |x| {
+            x.error_vs_reference_mm
+        })
+        .unwrap();
+        radius_chart(&path("r.svg"), &s, &fig9, &["lumped", "fv96+cosserat"]).unwrap();
+        table_chart(
+            &path("t.svg"),
+            &[(2, 1.0, 24), (16, 0.02, 192), (64, 1e-3, 768)],
+        )
+        .unwrap();
+        grid_chart(&path("g.svg"), &grid).unwrap();
+        transient_chart(&path("tr.svg"), &transient, 32).unwrap();
+        let has = |n: &str, want: &[&str]| {
+            let text = std::fs::read_to_string(path(n)).unwrap();
+            for w in want {
+                assert!(text.contains(w), "{n}: `{w}` missing");
+            }
+        };
+        has(
+            "p.svg",
+            &[
+                "pareto title",
+                "Pareto front",
+                "lumped",
+                "run time of one 15-power curve, s",
+            ],
+        );
+        has(
+            "r.svg",
+            &[
+                "Radius versus TCA power",
+                "lumped",
+                "paper&apos;s model (Fig. 9)",
+                "measured (Fig. 9)",
+            ],
+        );
+        has("t.svg", &["Firmware table: entries", "192 B", "entries"]);
+        has(
+            "g.svg",
+            &[
+                "grid convergence",
+                "concentric heater vs exact",
+                "link R_tt vs 96 rings",
+            ],
+        );
+        has(
+            "tr.svg",
+            &[
+                "Heater rises",
+                "TCA, finite volumes (32 rings)",
+                "PLA, lumped network",
+            ],
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

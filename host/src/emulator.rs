@@ -47,11 +47,12 @@ pub fn find_qemu() -> Result<PathBuf, String> {
 }
 
 /// Builds the firmware for `board` (the `board-<board>` feature) in release into `target_dir`;
-/// returns the ELF path. Used for the emulated image here and for every board by
-/// `cargo xtask boards`.
+/// returns the ELF path, as cargo reports it (its JSON messages name the executable it wrote).
+/// Used for the emulated image here and for every board by `cargo xtask boards`; callers take
+/// `target_dir` from [`crate::workspace::Workspace`], so it honours `CARGO_TARGET_DIR`.
 pub fn build_firmware(workspace: &Path, board: &str, target_dir: &Path) -> Result<PathBuf, String> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
+    let mut child = Command::new(cargo)
         .current_dir(workspace)
         .args([
             "build",
@@ -61,17 +62,33 @@ pub fn build_firmware(workspace: &Path, board: &str, target_dir: &Path) -> Resul
             "--bin",
             "morphlink",
             "--no-default-features",
+            // Artifacts as JSON on stdout; diagnostics still rendered for people on stderr.
+            "--message-format=json-render-diagnostics",
         ])
         .args(["--features", &format!("board-{board}")])
         .env("CARGO_TARGET_DIR", target_dir)
-        .status()
+        .stdout(Stdio::piped())
+        .spawn()
         .map_err(|e| format!("cannot run cargo: {e}"))?;
+    let mut elf = None;
+    if let Some(out) = child.stdout.take() {
+        for m in cargo_metadata::Message::parse_stream(BufReader::new(out)).map_while(Result::ok) {
+            if let cargo_metadata::Message::CompilerArtifact(a) = m {
+                if a.target.name == "morphlink" {
+                    if let Some(exe) = a.executable {
+                        elf = Some(exe.into_std_path_buf());
+                    }
+                }
+            }
+        }
+    }
+    let status = child.wait().map_err(|e| format!("cannot run cargo: {e}"))?;
     if !status.success() {
         return Err(format!(
             "building the firmware for {board} failed ({status})"
         ));
     }
-    Ok(target_dir.join(TARGET).join("release").join("morphlink"))
+    elf.ok_or_else(|| format!("cargo built the firmware for {board} but named no executable"))
 }
 
 /// Builds the emulated image in release into `target_dir`; returns the ELF path.

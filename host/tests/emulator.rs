@@ -3,7 +3,8 @@
 //! path. Needs `qemu-system-arm` 9 or newer; without it these tests fail and say how to install
 //! it, unless `MORPHLINK_SKIP_EMULATOR=1` is set, which skips them with a loud warning.
 use morphlink_host::emulator::{build_image, find_qemu, Emulator};
-use std::path::PathBuf;
+use morphlink_host::workspace::Workspace;
+use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard, OnceLock};
 use std::time::Duration;
 
@@ -26,11 +27,10 @@ fn setup() -> Option<(PathBuf, PathBuf)> {
                 }
                 Err(e) => panic!("{e}\n(set MORPHLINK_SKIP_EMULATOR=1 to skip the emulator tests)"),
             };
-            let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-                .parent()
-                .unwrap()
-                .to_path_buf();
-            let image = build_image(&root, &root.join("target").join("emulated"))
+            // The workspace and cargo's target directory (CARGO_TARGET_DIR if set), from cargo.
+            let ws = Workspace::containing(Path::new(env!("CARGO_MANIFEST_DIR")))
+                .unwrap_or_else(|e| panic!("{e}"));
+            let image = build_image(&ws.root, &ws.target_dir.join("emulated"))
                 .unwrap_or_else(|e| panic!("{e}"));
             Some((qemu, image))
         })

@@ -7,6 +7,7 @@
 //!   static RAM plus [`STACK_RESERVE_BYTES`] ≤ its `RAM` length;
 //! - the default board's image also fits a small part of the same family:
 //!   [`SMALL_PART_FLASH_BYTES`] of flash and [`SMALL_PART_RAM_BYTES`] of RAM.
+use morphlink_host::workspace::Workspace;
 use object::elf::{SHF_ALLOC, SHF_WRITE, SHT_NOBITS};
 use object::{Object, ObjectSection, ObjectSymbol, SectionFlags};
 use std::path::{Path, PathBuf};
@@ -121,10 +122,10 @@ pub fn stack_start(elf: &[u8]) -> Option<u64> {
     Some(sym.address())
 }
 
-fn build(root: &Path, board: &str) -> Result<PathBuf, String> {
-    let elf = morphlink_host::emulator::build_firmware(root, board, &root.join("target"))?;
+fn build(ws: &Workspace, board: &str) -> Result<PathBuf, String> {
+    let elf = morphlink_host::emulator::build_firmware(&ws.root, board, &ws.target_dir)?;
     // Each build overwrites the same ELF; keep a copy per board (e.g. to flash with probe-rs).
-    let dir = root.join("target").join("boards");
+    let dir = ws.target_dir.join("boards");
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let copy = dir.join(format!("morphlink-{board}.elf"));
     std::fs::copy(&elf, &copy).map_err(|e| format!("{}: {e}", elf.display()))?;
@@ -136,10 +137,11 @@ fn kib(bytes: u64) -> String {
 }
 
 /// Runs the task: build every board, print the table, check the budgets.
-pub fn run(root: &Path) -> Result<(), String> {
+pub fn run(ws: &Workspace) -> Result<(), String> {
+    let root = ws.root.as_path();
     let mut images = Vec::new();
     for board in boards(root)? {
-        let elf_path = build(root, &board)?;
+        let elf_path = build(ws, &board)?;
         let elf = std::fs::read(&elf_path).map_err(|e| e.to_string())?;
         let (flash_bytes, ram_bytes) = image_sizes(&elf)?;
         let mem_path = memory_x(root, &board);
@@ -251,7 +253,9 @@ mod tests {
 
     #[test]
     fn every_board_memory_x_parses() {
-        let root = crate::workspace_root();
+        let root = Workspace::containing(Path::new(env!("CARGO_MANIFEST_DIR")))
+            .unwrap()
+            .root;
         for b in boards(&root).unwrap() {
             let m = std::fs::read_to_string(memory_x(&root, &b)).unwrap();
             assert!(region_length(&m, "FLASH").unwrap() >= 64 * 1024, "{b}");

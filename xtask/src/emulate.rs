@@ -3,6 +3,7 @@
 //! running one morph and printing what the firmware says.
 use morphlink::protocol::{classify, LineKind};
 use morphlink_host::emulator::{build_image, find_qemu, qemu_command, Emulator};
+use morphlink_host::workspace::Workspace;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -21,9 +22,10 @@ pub struct Args {
 const DEMO_TIMEOUT: Duration = Duration::from_secs(120);
 
 /// Runs the task.
-pub fn run(args: &Args, root: &Path) -> Result<(), String> {
+pub fn run(args: &Args, ws: &Workspace) -> Result<(), String> {
     let qemu = find_qemu()?;
-    let image = build_image(root, &root.join("target").join("emulated"))?;
+    // Its own directory inside cargo's target directory, as the emulator tests use.
+    let image = build_image(&ws.root, &ws.target_dir.join("emulated"))?;
     match (args.port, args.morph) {
         (Some(port), _) => serve(&qemu, &image, port),
         (None, Some(radius_mm)) => demo(&qemu, &image, radius_mm),

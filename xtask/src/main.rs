@@ -1,9 +1,15 @@
 //! `cargo xtask <task>`: project automation in Rust (the xtask convention), one module per task.
+//!
+//! The workspace and its target directory come from `cargo metadata` at run time (the checkout
+//! `cargo xtask` is run in, and `CARGO_TARGET_DIR` or `build.target-dir` if set), never from
+//! paths baked in when xtask was compiled: with a shared target directory the same xtask binary
+//! serves several checkouts.
 use clap::{Parser, Subcommand};
 
 mod boards;
 mod emulate;
 mod strategies;
+use morphlink_host::workspace::Workspace;
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -26,15 +32,16 @@ enum Task {
 }
 
 fn main() -> ExitCode {
-    let result: Result<(), String> = match Cli::parse().task {
+    let task = Cli::parse().task;
+    let result: Result<(), String> = Workspace::current().and_then(|ws| match task {
         Task::Root => {
-            println!("{}", workspace_root().display());
+            println!("{}", ws.root.display());
             Ok(())
         }
-        Task::Boards => boards::run(&workspace_root()),
-        Task::Strategies(a) => strategies::run(&a, &workspace_root()),
-        Task::Emulate(a) => emulate::run(&a, &workspace_root()),
-    };
+        Task::Boards => boards::run(&ws),
+        Task::Strategies(a) => strategies::run(&a, &ws.root),
+        Task::Emulate(a) => emulate::run(&a, &ws),
+    });
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -42,12 +49,4 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
-}
-
-/// The workspace root (the parent of this crate's directory).
-pub fn workspace_root() -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("xtask lives in the workspace")
-        .to_path_buf()
 }

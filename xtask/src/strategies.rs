@@ -8,10 +8,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 use morphlink::protocol::Mode;
 use morphlink::sequencer::AUTO_STRATEGY;
 use morphlink::table;
+use morphlink_host::plot::{self, prelude::*};
 use morphlink_sim::ensemble::{
     run_morph, run_morph_traced, Mismatch, Outcome, RunResult, TracePoint,
 };
-use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -320,9 +320,9 @@ fn summarize(rows: &[Row]) -> Summary {
 fn colour(s: Mode) -> RGBColor {
     match s {
         Mode::Paper => RGBColor(120, 120, 120),
-        Mode::Gated => RGBColor(31, 119, 180),
-        Mode::Boost => RGBColor(255, 127, 14),
-        _ => RGBColor(44, 160, 44),
+        Mode::Gated => TAB_BLUE,
+        Mode::Boost => TAB_ORANGE,
+        _ => TAB_GREEN,
     }
 }
 
@@ -344,9 +344,6 @@ fn pareto_front(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
 }
 
 fn pareto_chart(path: &Path, rows: &[Row], summary: &Summary) -> Result<(), String> {
-    let err = |e: Box<dyn std::error::Error>| e.to_string();
-    let root = SVGBackend::new(path, (900, 600)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| err(e.into()))?;
     let done = |r: &&Row| r.result.outcome == Outcome::Done;
     let e_max = rows
         .iter()
@@ -354,185 +351,136 @@ fn pareto_chart(path: &Path, rows: &[Row], summary: &Summary) -> Result<(), Stri
         .map(|r| r.result.error_pct.abs())
         .fold(AIM_ERROR_PCT * 1.5, f64::max)
         .min(10.0);
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "Morph time vs final radius error (water: dots, air: crosses; large: p95 of water runs)",
-            ("sans-serif", 18),
+    Ok(plot::write_svg(path, (900, 600), |root| {
+        let mut chart = Frame::new(18, 12, 45, 60)
+            .builder(
+                root,
+                Some("Morph time vs final radius error (water: dots, air: crosses; large: p95 of water runs)"),
+            )
+            .build_cartesian_2d((5f64..1000f64).log_scale(), 0f64..e_max)?;
+        mesh(
+            &mut chart,
+            "morph time, MORPH to done (s, log scale)",
+            "|final radius error| (%)",
+            true,
         )
-        .margin(12)
-        .x_label_area_size(45)
-        .y_label_area_size(60)
-        .build_cartesian_2d((5f64..1000f64).log_scale(), 0f64..e_max)
-        .map_err(|e| err(e.into()))?;
-    chart
-        .configure_mesh()
-        .x_desc("morph time, MORPH to done (s, log scale)")
-        .y_desc("|final radius error| (%)")
-        .draw()
-        .map_err(|e| err(e.into()))?;
-    for s in STRATEGIES {
-        let c = colour(s);
-        let pts = |air: bool| {
-            rows.iter()
-                .filter(done)
-                .filter(move |r| r.strategy == s && r.mismatch.air == air)
-                .map(|r| (r.result.time_s, r.result.error_pct.abs().min(e_max)))
-        };
-        chart
-            .draw_series(pts(false).map(|p| Circle::new(p, 2, c.mix(0.45).filled())))
-            .map_err(|e| err(e.into()))?
-            .label(s.as_str())
-            .legend(move |(x, y)| Circle::new((x + 8, y), 4, c.filled()));
-        chart
-            .draw_series(pts(true).map(|p| Cross::new(p, 3, c.mix(0.6))))
-            .map_err(|e| err(e.into()))?;
-    }
-    for (s, st) in &summary.water {
-        let c = colour(*s);
-        chart
-            .draw_series(std::iter::once(TriangleMarker::new(
+        .draw()?;
+        for s in STRATEGIES {
+            let c = colour(s);
+            let pts = |air: bool| {
+                rows.iter()
+                    .filter(done)
+                    .filter(move |r| r.strategy == s && r.mismatch.air == air)
+                    .map(|r| (r.result.time_s, r.result.error_pct.abs().min(e_max)))
+            };
+            chart
+                .draw_series(pts(false).map(|p| Circle::new(p, 2, c.mix(0.45).filled())))?
+                .label(s.as_str())
+                .legend(move |(x, y)| Circle::new((x + 8, y), 4, c.filled()));
+            chart.draw_series(pts(true).map(|p| Cross::new(p, 3, c.mix(0.6))))?;
+        }
+        for (s, st) in &summary.water {
+            chart.draw_series(std::iter::once(TriangleMarker::new(
                 (st.time_p95_s, st.err_p95_pct.min(e_max)),
                 9,
-                c.filled(),
-            )))
-            .map_err(|e| err(e.into()))?;
-    }
-    let all: Vec<(f64, f64)> = rows
-        .iter()
-        .filter(done)
-        .map(|r| (r.result.time_s, r.result.error_pct.abs()))
-        .collect();
-    let front = pareto_front(&all);
-    chart
-        .draw_series(LineSeries::new(front, BLACK.stroke_width(2)))
-        .map_err(|e| err(e.into()))?
-        .label("Pareto front (all runs)")
-        .legend(|(x, y)| PathElement::new([(x, y), (x + 16, y)], BLACK.stroke_width(2)));
-    let aim = ShapeStyle::from(&RED).stroke_width(1);
-    chart
-        .draw_series(LineSeries::new(
+                colour(*s).filled(),
+            )))?;
+        }
+        let all: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(done)
+            .map(|r| (r.result.time_s, r.result.error_pct.abs()))
+            .collect();
+        line(
+            &mut chart,
+            pareto_front(&all),
+            BLACK.stroke_width(2),
+            Some("Pareto front (all runs)"),
+        )?;
+        line(
+            &mut chart,
             [
                 (5.0, AIM_ERROR_PCT),
                 (AIM_TIME_S, AIM_ERROR_PCT),
                 (AIM_TIME_S, 0.0),
             ],
-            aim,
-        ))
-        .map_err(|e| err(e.into()))?
-        .label("aim: < 30 s, p95 < 2 %")
-        .legend(move |(x, y)| PathElement::new([(x, y), (x + 16, y)], aim));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(|e| err(e.into()))?;
-    root.present().map_err(|e| err(e.into()))
+            RED.stroke_width(1),
+            Some("aim: < 30 s, p95 < 2 %"),
+        )?;
+        legend(&mut chart, SeriesLabelPosition::UpperRight)
+    })?)
 }
 
 fn timeline_chart(path: &Path) -> Result<(), String> {
-    let err = |e: Box<dyn std::error::Error>| e.to_string();
-    let root = SVGBackend::new(path, (1000, 1100)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| err(e.into()))?;
-    let panels = root.split_evenly((STRATEGIES.len(), 1));
-    for (s, area) in STRATEGIES.iter().zip(panels.iter()) {
-        let mut trace: Vec<TracePoint> = Vec::new();
-        let plant = Mismatch::NONE.plant();
-        let r = run_morph_traced(plant, TIMELINE_TARGET_MM, *s, &mut |p| trace.push(*p));
-        let t_end = trace.last().map(|p| p.t_s).unwrap_or(1.0);
-        let title = format!(
-            "{}: MORPH {} mm, done at {:.1} s, final {:.2} mm ({:+.2} %)",
-            s.as_str(),
-            TIMELINE_TARGET_MM,
-            r.time_s,
-            r.final_mm,
-            r.error_pct
-        );
-        let mut chart = ChartBuilder::on(area)
-            .caption(title, ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(50)
-            .right_y_label_area_size(50)
-            .build_cartesian_2d(0f64..t_end, 15f64..130f64)
-            .map_err(|e| err(e.into()))?
-            .set_secondary_coord(0f64..t_end, 0f64..6f64);
-        chart
-            .configure_mesh()
-            .x_desc("time since MORPH (s)")
-            .y_desc("temperature (°C)")
-            .draw()
-            .map_err(|e| err(e.into()))?;
-        chart
-            .configure_secondary_axes()
-            .y_desc("power (W)")
-            .draw()
-            .map_err(|e| err(e.into()))?;
-        let red = RGBColor(214, 39, 40);
-        let blue = RGBColor(31, 119, 180);
-        let series: [(&str, RGBColor, bool, usize); 4] = [
-            ("PLA true", red, true, 0),
-            ("PLA thermistor", red, false, 0),
-            ("TCA true", blue, true, 1),
-            ("TCA thermistor", blue, false, 1),
-        ];
-        for (name, c, truth, i) in series {
-            let style = if truth {
-                c.stroke_width(2)
-            } else {
-                c.mix(0.5).stroke_width(1)
-            };
+    Ok(plot::write_svg(path, (1000, 1100), |root| {
+        let panels = root.split_evenly((STRATEGIES.len(), 1));
+        let frame = Frame::new(16, 8, 30, 50).right_y(50);
+        for (s, area) in STRATEGIES.iter().zip(panels.iter()) {
+            let mut trace: Vec<TracePoint> = Vec::new();
+            let plant = Mismatch::NONE.plant();
+            let r = run_morph_traced(plant, TIMELINE_TARGET_MM, *s, &mut |p| trace.push(*p));
+            let t_end = trace.last().map(|p| p.t_s).unwrap_or(1.0);
+            let title = format!(
+                "{}: MORPH {} mm, done at {:.1} s, final {:.2} mm ({:+.2} %)",
+                s.as_str(),
+                TIMELINE_TARGET_MM,
+                r.time_s,
+                r.final_mm,
+                r.error_pct
+            );
+            let mut chart = frame
+                .builder(area, Some(&title))
+                .build_cartesian_2d(0f64..t_end, 15f64..130f64)?
+                .set_secondary_coord(0f64..t_end, 0f64..6f64);
+            mesh(&mut chart, "time since MORPH (s)", "temperature (°C)", true).draw()?;
             chart
-                .draw_series(LineSeries::new(
+                .configure_secondary_axes()
+                .y_desc("power (W)")
+                .draw()?;
+            let series: [(&str, RGBColor, bool, usize); 4] = [
+                ("PLA true", TAB_RED, true, 0),
+                ("PLA thermistor", TAB_RED, false, 0),
+                ("TCA true", TAB_BLUE, true, 1),
+                ("TCA thermistor", TAB_BLUE, false, 1),
+            ];
+            for (name, c, truth, i) in series {
+                let style = if truth {
+                    c.stroke_width(2)
+                } else {
+                    c.mix(0.5).stroke_width(1)
+                };
+                line(
+                    &mut chart,
                     trace
                         .iter()
                         .map(|p| (p.t_s, if truth { p.true_c[i] } else { p.sensed_c[i] })),
                     style,
-                ))
-                .map_err(|e| err(e.into()))?
-                .label(name)
-                .legend(move |(x, y)| PathElement::new([(x, y), (x + 16, y)], style));
-        }
-        for (name, c, i) in [
-            ("PLA power", RGBColor(255, 127, 14), 0),
-            ("TCA power", RGBColor(44, 160, 44), 1),
-        ] {
-            chart
-                .draw_secondary_series(LineSeries::new(
-                    trace.iter().map(|p| (p.t_s, p.power_w[i])),
-                    c.stroke_width(1),
-                ))
-                .map_err(|e| err(e.into()))?
-                .label(name)
-                .legend(move |(x, y)| PathElement::new([(x, y), (x + 16, y)], c));
-        }
-        // Phase changes as thin vertical lines.
-        let mut last = "";
-        let mut marks = Vec::new();
-        for p in &trace {
-            if p.phase != last {
-                marks.push(p.t_s);
-                last = p.phase;
+                    Some(name),
+                )?;
             }
+            for (name, c, i) in [("PLA power", TAB_ORANGE, 0), ("TCA power", TAB_GREEN, 1)] {
+                chart
+                    .draw_secondary_series(LineSeries::new(
+                        trace.iter().map(|p| (p.t_s, p.power_w[i])),
+                        c.stroke_width(1),
+                    ))?
+                    .label(name)
+                    .legend(line_key(c.stroke_width(1)));
+            }
+            // Phase changes as thin vertical lines.
+            let mut last = "";
+            let mut changes = Vec::new();
+            for p in &trace {
+                if p.phase != last {
+                    changes.push(p.t_s);
+                    last = p.phase;
+                }
+            }
+            marks(&mut chart, changes, 15.0, 130.0)?;
+            legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         }
-        for t in marks {
-            chart
-                .draw_series(LineSeries::new(
-                    [(t, 15.0), (t, 130.0)],
-                    BLACK.mix(0.3).stroke_width(1),
-                ))
-                .map_err(|e| err(e.into()))?;
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(|e| err(e.into()))?;
-    }
-    root.present().map_err(|e| err(e.into()))
+        Ok(())
+    })?)
 }
 
 #[cfg(test)]

@@ -2,8 +2,7 @@
 //! and the plot of temperatures and powers against time (SVG with labels, PNG as curves only).
 
 use crate::link::field;
-use plotters::coord::Shift;
-use plotters::prelude::*;
+use morphlink_host::plot::{self, prelude::*};
 use std::path::Path;
 
 /// One telemetry sample.
@@ -112,123 +111,79 @@ pub fn plot(samples: &[Sample], title: &str, out: &Path) -> Result<(), String> {
     if samples.is_empty() {
         return Err("nothing to plot: no samples".into());
     }
-    let ext = out
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let size = (1000, 700);
-    match ext.as_deref() {
-        Some("svg") => draw(
-            SVGBackend::new(out, size).into_drawing_area(),
-            samples,
-            title,
-            true,
-        ),
-        // No font ships with the tool, so the PNG carries the curves and the phase marks only.
-        Some("png") => draw(
-            BitMapBackend::new(out, size).into_drawing_area(),
-            samples,
-            title,
-            false,
-        ),
-        _ => Err(format!(
-            "{}: the plot must end in .svg or .png",
-            out.display()
-        )),
-    }
+    // No font ships with the tool, so the PNG carries the curves and the phase marks only.
+    Ok(plot::write(out, (1000, 700), &RunPlot { samples, title })?)
 }
 
-fn draw<DB: DrawingBackend>(
-    root: DrawingArea<DB, Shift>,
-    s: &[Sample],
-    title: &str,
-    text: bool,
-) -> Result<(), String> {
-    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
-    root.fill(&WHITE).map_err(e)?;
-    let t_end = s.last().map(|x| x.t_s).unwrap_or(1.0).max(1.0);
-    let (top, bottom) = root.split_vertically(420);
-    let t_max = s
-        .iter()
-        .flat_map(|x| x.temps_c)
-        .filter(|v| v.is_finite())
-        .fold(40.0f64, f64::max)
-        + 5.0;
-    let p_max = s
-        .iter()
-        .flat_map(|x| x.powers_w)
-        .filter(|v| v.is_finite())
-        .fold(1.0f64, f64::max)
-        * 1.1;
-    let panels: [(&DrawingArea<DB, Shift>, f64, f64, &str); 2] = [
-        (&top, 10.0, t_max, "temperature (°C)"),
-        (&bottom, 0.0, p_max, "power (W)"),
-    ];
-    let colours = [
-        RGBColor(214, 39, 40),
-        RGBColor(31, 119, 180),
-        RGBColor(90, 90, 90),
-    ];
-    for (k, (area, lo, hi, y_desc)) in panels.into_iter().enumerate() {
-        let mut b = ChartBuilder::on(area);
-        b.margin(10);
-        if text {
-            b.x_label_area_size(35).y_label_area_size(55);
-            if k == 0 {
-                b.caption(title, ("sans-serif", 18));
+/// The two panels of a run.
+struct RunPlot<'a> {
+    samples: &'a [Sample],
+    title: &'a str,
+}
+
+impl Figure for RunPlot<'_> {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        format: Format,
+    ) -> PlotResult {
+        let s = self.samples;
+        let text = format.has_text();
+        let t_end = s.last().map(|x| x.t_s).unwrap_or(1.0).max(1.0);
+        let (top, bottom) = root.split_vertically(420);
+        let t_max = s
+            .iter()
+            .flat_map(|x| x.temps_c)
+            .filter(|v| v.is_finite())
+            .fold(40.0f64, f64::max)
+            + 5.0;
+        let p_max = s
+            .iter()
+            .flat_map(|x| x.powers_w)
+            .filter(|v| v.is_finite())
+            .fold(1.0f64, f64::max)
+            * 1.1;
+        let panels: [(&DrawingArea<DB, Shift>, f64, f64, &str); 2] = [
+            (&top, 10.0, t_max, "temperature (°C)"),
+            (&bottom, 0.0, p_max, "power (W)"),
+        ];
+        let colours = [TAB_RED, TAB_BLUE, RGBColor(90, 90, 90)];
+        let frame = Frame::new(18, 10, 35, 55).text(text);
+        for (k, (area, lo, hi, y_desc)) in panels.into_iter().enumerate() {
+            let mut chart = frame
+                .builder(area, (k == 0).then_some(self.title))
+                .build_cartesian_2d(0f64..t_end, lo..hi)?;
+            mesh(&mut chart, "time since MORPH (s)", y_desc, text).draw()?;
+            let names: &[&str] = if k == 0 {
+                &["PLA", "TCA", "ambient"]
+            } else {
+                &["PLA heater", "TCA heater"]
+            };
+            for (i, name) in names.iter().enumerate() {
+                let pts: Vec<(f64, f64)> = s
+                    .iter()
+                    .map(|x| (x.t_s, if k == 0 { x.temps_c[i] } else { x.powers_w[i] }))
+                    .filter(|p| p.1.is_finite())
+                    .collect();
+                line(
+                    &mut chart,
+                    pts,
+                    colours[i].stroke_width(2),
+                    text.then_some(*name),
+                )?;
             }
-        }
-        let mut chart = b.build_cartesian_2d(0f64..t_end, lo..hi).map_err(e)?;
-        let mut mesh = chart.configure_mesh();
-        if text {
-            mesh.x_desc("time since MORPH (s)").y_desc(y_desc);
-        } else {
-            mesh.x_labels(0).y_labels(0);
-        }
-        mesh.draw().map_err(e)?;
-        let names: &[&str] = if k == 0 {
-            &["PLA", "TCA", "ambient"]
-        } else {
-            &["PLA heater", "TCA heater"]
-        };
-        for (i, name) in names.iter().enumerate() {
-            let c = colours[i];
-            let pts: Vec<(f64, f64)> = s
-                .iter()
-                .map(|x| (x.t_s, if k == 0 { x.temps_c[i] } else { x.powers_w[i] }))
-                .filter(|p| p.1.is_finite())
-                .collect();
-            let series = chart
-                .draw_series(LineSeries::new(pts, c.stroke_width(2)))
-                .map_err(e)?;
+            // Phase changes as thin vertical lines.
+            let changes = s
+                .windows(2)
+                .filter(|w| w[0].phase != w[1].phase)
+                .map(|w| w[1].t_s);
+            marks(&mut chart, changes, lo, hi)?;
             if text {
-                series.label(*name).legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 16, y)], c.stroke_width(2))
-                });
+                legend(&mut chart, SeriesLabelPosition::UpperRight)?;
             }
         }
-        // Phase changes as thin vertical lines.
-        for w in s.windows(2) {
-            if w[0].phase != w[1].phase {
-                chart
-                    .draw_series(LineSeries::new(
-                        [(w[1].t_s, lo), (w[1].t_s, hi)],
-                        BLACK.mix(0.3).stroke_width(1),
-                    ))
-                    .map_err(e)?;
-            }
-        }
-        if text {
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()
-                .map_err(e)?;
-        }
+        Ok(())
     }
-    root.present().map_err(e)
 }
 
 #[cfg(test)]
