@@ -3,7 +3,7 @@
 //! CSV of the numbers, and prints a summary.
 
 use indicatif::{ProgressBar, ProgressStyle};
-use morphlink_host::plot::{self, prelude::*};
+use crate::plot::{self, prelude::*};
 use morphlink_model::reference::fv_thermal::{CrossSection, Inclusion, Layout};
 use morphlink_model::reference::levels::{self, Level, Scored, POWERS_W, REFERENCE_RINGS};
 use morphlink_model::LinkParams;

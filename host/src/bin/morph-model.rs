@@ -1,10 +1,8 @@
 //! `morph-model`: the link's models on the command line — fit the constants, print the
 //! parameters file and the firmware table; compare the lumped and reference thermal matrices,
 //! run the accuracy/cost study and its charts, pick the cheapest model for a tolerance.
-#[path = "../charts.rs"]
-mod charts;
-
 use clap::{Parser, Subcommand};
+use morphlink_host::charts;
 use morphlink_model::reference::levels::{self, Level, REFERENCE_RINGS};
 use morphlink_model::{calibrate, file, table, LinkParams};
 use std::path::PathBuf;
