@@ -173,11 +173,6 @@ impl Controller {
         }
     }
 
-    /// The control-loop timing, if this build records it.
-    pub fn timing(&self) -> Option<&LoopTiming> {
-        self.timing.as_ref()
-    }
-
     /// Current phase (Fault while a fault is latched).
     pub fn phase(&self) -> Phase {
         if self.fault.is_some() {

@@ -161,16 +161,6 @@ impl LoopTiming {
         self.ticks = self.ticks.wrapping_add(1);
     }
 
-    /// Ticks recorded since boot.
-    pub fn ticks(&self) -> u32 {
-        self.ticks
-    }
-
-    /// Longest step (ADC end → duties applied) since boot, µs.
-    pub fn step_max_us(&self) -> u32 {
-        self.step_max_us
-    }
-
     /// Largest deviation of a tick period from nominal since boot, µs (0 before two ticks).
     pub fn jitter_max_us(&self) -> u32 {
         if self.period_max_us == 0 {
@@ -209,6 +199,19 @@ impl LoopTiming {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Only the tests need this (the firmware never reads it back).
+    impl LoopTiming {
+        /// Ticks recorded since boot.
+        fn ticks(&self) -> u32 {
+            self.ticks
+        }
+
+        /// Longest step (ADC end → duties applied) since boot, µs.
+        fn step_max_us(&self) -> u32 {
+            self.step_max_us
+        }
+    }
 
     const MHZ84: u32 = 84_000_000;
 

@@ -52,12 +52,6 @@ pub fn power_for_radius_w(radius_mm: f32) -> Result<f32, OutOfRange> {
     ))
 }
 
-/// Radius the table predicts for a TCA power, mm (clamped to the table's ends).
-pub fn radius_for_power_mm(power_w: f32) -> f32 {
-    let p = power_w.clamp(TABLE[0].power_w, TABLE[TABLE.len() - 1].power_w);
-    1.0 / interpolate(&TABLE, p, |r| r.power_w, |r| 1.0 / r.radius_mm)
-}
-
 /// Radius for a measured steady TCA rise above ambient with the PLA at hold power, mm
 /// (clamped to the table's ends).
 pub fn radius_for_tca_rise_mm(rise_k: f32) -> f32 {
@@ -75,6 +69,12 @@ pub fn radius_for_tca_rise_mm(rise_k: f32) -> f32 {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// Radius the table predicts for a TCA power, mm (clamped to the table's ends).
+    pub fn radius_for_power_mm(power_w: f32) -> f32 {
+        let p = power_w.clamp(TABLE[0].power_w, TABLE[TABLE.len() - 1].power_w);
+        1.0 / interpolate(&TABLE, p, |r| r.power_w, |r| 1.0 / r.radius_mm)
+    }
 
     #[test]
     fn table_is_monotone_and_small() {

@@ -95,7 +95,7 @@ pub struct ThermistorConfig {
     /// Pull-up resistor from the ADC reference to the NTC, in ohms.
     pub pullup_ohm: f32,
     /// Count of a full-scale reading, after any oversampling (e.g. 16 · 4095 for 16 summed
-    /// 12-bit samples, see [`oversample`]).
+    /// 12-bit samples).
     pub adc_full_scale: u32,
     /// Fractions of full scale below this read as [`Reading::Short`].
     pub min_fraction: f32,
@@ -129,7 +129,7 @@ impl ThermistorConfig {
         max_fraction: DEFAULT_MAX_FRACTION,
     };
 
-    /// The same channel read with a different full scale (e.g. after [`oversample`]).
+    /// The same channel read with a different full scale (e.g. for oversampled, summed readings).
     pub const fn with_full_scale(self, adc_full_scale: u32) -> Self {
         ThermistorConfig {
             adc_full_scale,
@@ -197,17 +197,6 @@ impl ThermistorConfig {
             Reading::Open
         }
     }
-}
-
-/// Sums oversampled ADC conversions into one reading (saturating).
-///
-/// Summing instead of averaging keeps the extra resolution that noise dithering gives and
-/// needs no division: N summed 12-bit samples have full scale N · [`ADC_12BIT_MAX`], which is
-/// set with [`ThermistorConfig::with_full_scale`]; all conversions work with any full scale.
-pub fn oversample(samples: &[u16]) -> u32 {
-    samples
-        .iter()
-        .fold(0u32, |sum, &s| sum.saturating_add(s as u32))
 }
 
 /// Which out-of-range class the last samples were in.
@@ -476,6 +465,13 @@ mod tests {
         assert_eq!(cfg.counts_for_temp(5000.0), 0);
         assert!(cfg.counts_for_temp(-150.0) >= ADC_12BIT_MAX - 1);
         assert!((2047..=2048).contains(&cfg.counts_for_temp(25.0))); // R = R_pullup: half scale
+    }
+
+    /// Sums oversampled ADC conversions into one reading (saturating), as the boards do.
+    fn oversample(samples: &[u16]) -> u32 {
+        samples
+            .iter()
+            .fold(0u32, |sum, &s| sum.saturating_add(s as u32))
     }
 
     #[test]
