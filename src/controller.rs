@@ -8,11 +8,12 @@
 use crate::fixed::Fixed;
 use crate::heater::HeaterConfig;
 use crate::protocol::{self, Command, ErrorCode, Mode, OutLine, ProtoError, SimCommand};
-use crate::sequencer::{Phase, Powers, SeqEvent, Sequencer};
+use crate::sequencer::{SeqEvent, Sequencer};
 use crate::stats::LoopTiming;
 use crate::supervisor::{Fault, FaultCode, Frame, Subject, Supervisor, SUPPLY_MAX_V, SUPPLY_MIN_V};
 use crate::table;
 use crate::thermistor::ThermistorConfig;
+use crate::vocab::{Phase, Powers};
 use core::fmt::Write;
 use heapless::Deque;
 
@@ -139,8 +140,8 @@ pub struct Controller {
     timing: Option<LoopTiming>,
 }
 
-/// Firmware version reported by VERSION.
-pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+/// Firmware version reported by VERSION (defined in [`crate::vocab`]; here for the firmware).
+pub use crate::vocab::VERSION;
 
 impl Controller {
     /// A controller at rest (heaters off) with the given board settings.

@@ -89,7 +89,7 @@ pub fn write_boot_line(l: &mut OutLine, cause: ResetCause, board: &str) {
         "event: boot reset={} board={} version={}",
         cause.as_str(),
         board,
-        crate::controller::VERSION
+        crate::vocab::VERSION
     );
 }
 
@@ -309,7 +309,7 @@ mod tests {
         let rest = l
             .strip_prefix("event: boot reset=software board=nucleo-f401re version=")
             .unwrap();
-        assert_eq!(rest, crate::controller::VERSION);
+        assert_eq!(rest, crate::vocab::VERSION);
     }
 
     #[test]

@@ -7,9 +7,8 @@
 //! [`Fault`]; the controller turns both heaters off in the same tick and latches it.
 
 use crate::link::{R_PP_K_PER_W, R_TT_K_PER_W};
-use crate::protocol::{Heater, Sensor};
-use crate::sequencer::{Measurements, Phase, Powers};
 use crate::thermistor::{RangeCheck, Reading};
+use crate::vocab::{Heater, Measurements, Phase, Powers, Sensor};
 
 /// What tripped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

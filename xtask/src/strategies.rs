@@ -6,7 +6,7 @@
 
 use indicatif::{ProgressBar, ProgressStyle};
 use morphlink::protocol::Mode;
-use morphlink::sequencer::AUTO_STRATEGY;
+use morphlink::strategy::AUTO_STRATEGY;
 use morphlink::table;
 use morphlink_sim::ensemble::{
     run_morph, run_morph_traced, Mismatch, Outcome, RunResult, TracePoint,
