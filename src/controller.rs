@@ -92,7 +92,8 @@ impl Config {
 /// One tick's raw inputs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Inputs {
-    /// Summed ADC counts of the PLA, TCA and ambient thermistors.
+    /// Summed ADC counts of the thermistors, in [`crate::vocab::Sensor::index`] order (PLA,
+    /// TCA, ambient).
     pub thermistor_counts: [u32; 3],
     /// Summed ADC counts of the supply sense.
     pub supply_counts: u32,
