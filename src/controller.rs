@@ -132,7 +132,6 @@ pub struct Controller {
     cfg: Config,
     seq: Sequencer,
     sup: Supervisor,
-    fault: Option<Fault>,
     frame: Option<Frame>,
     powers: Powers,
     outputs: Outputs,
@@ -151,7 +150,6 @@ impl Controller {
             cfg,
             seq: Sequencer::new(),
             sup: Supervisor::new(),
-            fault: None,
             frame: None,
             powers: Powers::default(),
             outputs: Outputs::default(),
@@ -177,16 +175,12 @@ impl Controller {
 
     /// Current phase (Fault while a fault is latched).
     pub fn phase(&self) -> Phase {
-        if self.fault.is_some() {
-            Phase::Fault
-        } else {
-            self.seq.phase()
-        }
+        self.seq.phase()
     }
 
-    /// The latched fault, if any.
+    /// The latched fault, if any (the sequencer holds it: see [`Sequencer::fault`]).
     pub fn fault(&self) -> Option<Fault> {
-        self.fault
+        self.seq.fault()
     }
 
     /// Duties to apply now (also right after a command: ABORT zeroes them at once).
@@ -206,7 +200,7 @@ impl Controller {
 
     /// True while a morph is under way (not idle, not faulted).
     pub fn busy(&self) -> bool {
-        self.fault.is_none() && self.seq.busy()
+        self.seq.busy()
     }
 
     fn push(&mut self, e: Event) {
@@ -231,8 +225,7 @@ impl Controller {
     }
 
     fn trip(&mut self, fault: Fault) {
-        self.seq.fault();
-        self.fault = Some(fault);
+        self.seq.latch(fault);
         self.powers = Powers::default();
         self.outputs = Outputs::default();
         self.push(Event::Alarm(fault));
@@ -243,7 +236,7 @@ impl Controller {
         let frame = self.frame_of(inputs);
         self.frame = Some(frame);
         self.supply_v = frame.supply_v;
-        if self.fault.is_some() {
+        if self.fault().is_some() {
             self.powers = Powers::default();
             self.outputs = Outputs::default();
             return self.outputs;
@@ -272,11 +265,12 @@ impl Controller {
                     tca_duty: self.cfg.tca_heater.duty(p.tca_w, v),
                 };
             }
-            Err(timeout) => self.trip(Fault {
-                code: FaultCode::PhaseTimeout,
-                subject: Subject::Phase(timeout.0),
-                value: f32::NAN,
-            }),
+            // The sequencer has latched the timeout; report it and turn the heaters off.
+            Err(_) => {
+                if let Some(f) = self.seq.fault() {
+                    self.trip(f);
+                }
+            }
         }
         self.outputs
     }
@@ -314,7 +308,7 @@ impl Controller {
                 out(&l);
             }
             Command::Abort => {
-                if self.fault.is_none() {
+                if self.fault().is_none() {
                     self.seq.abort();
                 }
                 self.powers = Powers::default();
@@ -371,7 +365,7 @@ impl Controller {
 
     fn morph(&mut self, now_ms: u64, radius_mm: f32, mode: Mode, out: &mut impl FnMut(&str)) {
         let mut l = OutLine::new();
-        if let Some(f) = self.fault {
+        if let Some(f) = self.fault() {
             let _ = write!(
                 l,
                 "error: fault-latched {} is latched; send RESET once it has cleared",
@@ -416,7 +410,7 @@ impl Controller {
     }
 
     fn reset(&mut self, now_ms: u64, out: &mut impl FnMut(&str)) {
-        let Some(latched) = self.fault else {
+        let Some(latched) = self.fault() else {
             return out("ok fault=none");
         };
         let check = match &self.frame {
@@ -425,7 +419,6 @@ impl Controller {
         };
         match check {
             Ok(()) => {
-                self.fault = None;
                 self.seq.clear_fault();
                 self.sup.rearm();
                 let mut l = OutLine::new();
@@ -459,7 +452,7 @@ impl Controller {
             Fixed(self.powers.pla_w, 3),
             Fixed(self.powers.tca_w, 3),
             Fixed(self.supply_v, 2),
-            self.fault.map(|f| f.code.as_str()).unwrap_or("none"),
+            self.fault().map(|f| f.code.as_str()).unwrap_or("none"),
         );
     }
 

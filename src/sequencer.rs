@@ -6,6 +6,7 @@
 
 use crate::protocol::Mode;
 use crate::strategy::{AnyStrategy, Start, Strategy, Tick, RELEASE_S};
+use crate::supervisor::{Fault, FaultCode, Subject};
 use crate::vocab::{Measurements, Phase, Powers};
 
 /// Phase timeouts of the gated sequence, s. Soften reaches its threshold in about 5 s under
@@ -95,6 +96,9 @@ impl Progress {
 #[derive(Clone, Copy, Debug)]
 pub struct Sequencer {
     at: Progress,
+    /// The latched safety trip: the one place the fault state lives. While it is set the phase
+    /// reads [`Phase::Fault`] (derived; `at.phase` is then idle) and nothing runs.
+    fault: Option<Fault>,
     strategy: Option<AnyStrategy>,
     supply_v: f32,
 }
@@ -121,6 +125,7 @@ impl Sequencer {
                 phase_ms: 0,
                 estimate_mm: f32::NAN,
             },
+            fault: None,
             strategy: None,
             supply_v: f32::NAN,
         }
@@ -138,9 +143,18 @@ impl Sequencer {
         self.supply_v = supply_v;
     }
 
-    /// Current phase.
+    /// Current phase ([`Phase::Fault`] while a fault is latched).
     pub fn phase(&self) -> Phase {
-        self.at.phase
+        if self.fault.is_some() {
+            Phase::Fault
+        } else {
+            self.at.phase
+        }
+    }
+
+    /// The latched fault, if any.
+    pub fn fault(&self) -> Option<Fault> {
+        self.fault
     }
 
     /// Target radius of the running or last morph, mm (NaN if none).
@@ -148,9 +162,9 @@ impl Sequencer {
         self.at.target_mm
     }
 
-    /// True while a morph is under way.
+    /// True while a morph is under way (never while a fault is latched).
     pub fn busy(&self) -> bool {
-        self.at.phase.is_morphing()
+        self.fault.is_none() && self.at.phase.is_morphing()
     }
 
     /// Starts a morph to `radius_mm` with TCA power `tca_power_w` (from the table) in `mode`
@@ -186,16 +200,16 @@ impl Sequencer {
         self.at.phase = Phase::Idle;
     }
 
-    /// Enters Fault (the supervisor tripped); heaters off.
-    pub fn fault(&mut self) {
-        self.at.phase = Phase::Fault;
+    /// Latches `fault` (the supervisor tripped, or a phase timed out): the morph ends, heaters
+    /// off, phase Fault until [`Sequencer::clear_fault`].
+    pub fn latch(&mut self, fault: Fault) {
+        self.at.phase = Phase::Idle;
+        self.fault = Some(fault);
     }
 
-    /// Leaves Fault after a successful RESET.
+    /// Leaves Fault after a successful RESET: Idle.
     pub fn clear_fault(&mut self) {
-        if self.at.phase == Phase::Fault {
-            self.at.phase = Phase::Idle;
-        }
+        self.fault = None;
     }
 
     fn timeout_s(&self) -> f32 {
@@ -215,7 +229,11 @@ impl Sequencer {
     fn check_timeout(&mut self, now_ms: u64) -> Result<(), PhaseTimeout> {
         if self.busy() && since_s(now_ms, self.at.phase_ms) > self.timeout_s() {
             let p = self.at.phase;
-            self.at.phase = Phase::Fault;
+            self.latch(Fault {
+                code: FaultCode::PhaseTimeout,
+                subject: Subject::Phase(p),
+                value: f32::NAN,
+            });
             return Err(PhaseTimeout(p));
         }
         Ok(())
@@ -229,8 +247,11 @@ impl Sequencer {
         emit: &mut impl FnMut(SeqEvent),
     ) -> Result<Powers, PhaseTimeout> {
         self.check_timeout(now_ms)?;
+        if !self.busy() {
+            return Ok(Powers::default());
+        }
         let at = &mut self.at;
-        let Some(strategy) = self.strategy.as_mut().filter(|_| at.phase.is_morphing()) else {
+        let Some(strategy) = self.strategy.as_mut() else {
             return Ok(Powers::default());
         };
         let s = strategy.get_mut();
