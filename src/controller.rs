@@ -10,7 +10,9 @@ use crate::heater::HeaterConfig;
 use crate::protocol::{self, Command, ErrorCode, Mode, OutLine, ProtoError, SimCommand};
 use crate::sequencer::{SeqEvent, Sequencer};
 use crate::stats::LoopTiming;
-use crate::supervisor::{Fault, FaultCode, Frame, Subject, Supervisor, SUPPLY_MAX_V, SUPPLY_MIN_V};
+use crate::supervisor::{
+    Fault, FaultCode, Frame, Subject, Supervisor, SAFETY_README_SECTION, SUPPLY_MAX_V, SUPPLY_MIN_V,
+};
 use crate::table;
 use crate::thermistor::ThermistorConfig;
 use crate::vocab::{Phase, Powers};
@@ -22,6 +24,13 @@ use heapless::Deque;
 pub const CONTROL_HZ: u32 = 10;
 /// Control period, ms.
 pub const TICK_MS: u64 = 1000 / CONTROL_HZ as u64;
+// The tick divides the second exactly (timestamps and timeouts count whole ticks).
+const _: () = assert!(TICK_MS * CONTROL_HZ as u64 == 1000);
+// A stale frame is 10 ticks old (supervisor::STALE_AFTER_MS), and the heater command watchdog
+// outlasts the same 10 missed ticks (heater::CommandWatchdog::DEFAULT_MAX_AGE_MS): one late
+// tick never trips either.
+const _: () = assert!(crate::supervisor::STALE_AFTER_MS >= 10 * TICK_MS);
+const _: () = assert!(crate::heater::CommandWatchdog::DEFAULT_MAX_AGE_MS >= 10 * TICK_MS);
 /// ADC samples summed per reading (16 × 12-bit: 1 °C steps become about 0.03 °C, and mains
 /// noise averages out over the 16 ms burst).
 pub const OVERSAMPLE: u32 = 16;
@@ -479,11 +488,7 @@ impl Controller {
                     Fixed(radius_mm, 2)
                 );
             }
-            Event::Alarm(f) => {
-                let _ = write!(l, "alarm: ");
-                write_fault_text(&mut l, &f);
-                let _ = write!(l, "; heaters off, RESET when cleared");
-            }
+            Event::Alarm(f) => write_alarm(&mut l, &f),
         }
         Some(l)
     }
@@ -497,6 +502,20 @@ fn subject_str(s: &Subject) -> &'static str {
         Subject::Supply => "supply",
         Subject::Frame => "sensors",
     }
+}
+
+/// Writes the alarm line of a trip: `alarm: <code> <sentence>; heaters off, RESET when
+/// cleared (<settings>; see README "<section>")`, naming the settings that govern it and the
+/// README section that explains them.
+fn write_alarm(l: &mut OutLine, f: &Fault) {
+    let _ = write!(l, "alarm: ");
+    write_fault_text(l, f);
+    let _ = write!(
+        l,
+        "; heaters off, RESET when cleared ({}; see README \"{}\")",
+        f.settings(),
+        SAFETY_README_SECTION
+    );
 }
 
 /// Writes `<code> <sentence>` for a fault.
@@ -546,3 +565,76 @@ const HELP: [&str; 10] = [
     "STATS                           control-loop timing (us) and reset cause; hardware only",
     "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|CLEAR|PANIC  simulated builds only",
 ];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vocab::{Heater, Sensor};
+    extern crate std;
+    use std::format;
+    use std::vec::Vec;
+
+    const README: &str = include_str!("../README.md");
+
+    /// Every kind of trip, with every subject it can have.
+    fn every_fault() -> Vec<Fault> {
+        let sensors = Sensor::ALL.map(Subject::Sensor);
+        let phases = [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release].map(Subject::Phase);
+        let heaters = Heater::ALL.map(Subject::Heater);
+        let cases: [(FaultCode, &[Subject]); 8] = [
+            (FaultCode::ThermistorOpen, &sensors),
+            (FaultCode::ThermistorShort, &sensors),
+            (FaultCode::UnderTemperature, &sensors),
+            (FaultCode::OverTemperature, &sensors),
+            (FaultCode::HeaterNotHeating, &heaters),
+            (FaultCode::StaleSensor, &[Subject::Frame]),
+            (FaultCode::SupplyOutOfRange, &[Subject::Supply]),
+            (FaultCode::PhaseTimeout, &phases),
+        ];
+        cases
+            .iter()
+            .flat_map(|(code, subjects)| {
+                subjects.iter().map(move |&subject| Fault {
+                    code: *code,
+                    subject,
+                    value: -123.4,
+                })
+            })
+            .collect()
+    }
+
+    /// The README section `heading` (a `## ` heading), up to the next `## ` heading.
+    fn readme_section(heading: &str) -> &'static str {
+        let start = README
+            .find(&format!("\n## {heading}\n"))
+            .unwrap_or_else(|| panic!("README has no \"## {heading}\" heading"));
+        let body = &README[start + 1..];
+        let end = body[3..].find("\n## ").map_or(body.len(), |e| e + 3);
+        &body[..end]
+    }
+
+    #[test]
+    fn every_alarm_names_its_settings_and_a_readme_section_that_explains_them() {
+        let section = readme_section(SAFETY_README_SECTION);
+        for f in every_fault() {
+            let mut l = OutLine::new();
+            write_alarm(&mut l, &f);
+            assert!(
+                l.starts_with(&format!("alarm: {} ", f.code.as_str())),
+                "{l}"
+            );
+            let tail = format!(
+                "; heaters off, RESET when cleared ({}; see README \"{SAFETY_README_SECTION}\")",
+                f.settings()
+            );
+            // Not truncated: the whole suffix fits the line.
+            assert!(l.ends_with(&tail), "{l}");
+            for setting in f.settings().split(", ") {
+                assert!(
+                    section.contains(&format!("`{setting}`")),
+                    "README \"{SAFETY_README_SECTION}\" does not explain `{setting}` ({l})"
+                );
+            }
+        }
+    }
+}

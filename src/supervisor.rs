@@ -73,6 +73,40 @@ pub struct Fault {
     pub value: f32,
 }
 
+/// The README section that explains every check and its setting; alarm lines point to it.
+pub const SAFETY_README_SECTION: &str = "Safety defaults";
+
+impl Fault {
+    /// The named settings that govern this trip, as they are spelled in the source and in the
+    /// README's [`SAFETY_README_SECTION`] table (alarm lines name them).
+    pub fn settings(&self) -> &'static str {
+        match (self.code, self.subject) {
+            (FaultCode::ThermistorOpen, _) => "DEFAULT_MAX_FRACTION",
+            (FaultCode::ThermistorShort, _) => "DEFAULT_MIN_FRACTION",
+            (FaultCode::UnderTemperature | FaultCode::OverTemperature, Subject::Sensor(sensor)) => {
+                match sensor {
+                    Sensor::Pla => "PLA_LIMITS, LIMIT_CONSECUTIVE",
+                    Sensor::Tca => "TCA_LIMITS, LIMIT_CONSECUTIVE",
+                    Sensor::Amb => "AMB_LIMITS, LIMIT_CONSECUTIVE",
+                }
+            }
+            (FaultCode::UnderTemperature | FaultCode::OverTemperature, _) => {
+                "PLA_LIMITS, TCA_LIMITS, AMB_LIMITS"
+            }
+            (FaultCode::HeaterNotHeating, _) => "HEATING_CHECK_S, HEATING_MIN_FRACTION",
+            (FaultCode::StaleSensor, _) => "STALE_AFTER_MS",
+            (FaultCode::SupplyOutOfRange, _) => "SUPPLY_MIN_V, SUPPLY_MAX_V",
+            (FaultCode::PhaseTimeout, Subject::Phase(phase)) => match phase {
+                Phase::Soften => "SOFTEN_TIMEOUT_S",
+                Phase::Bend => "BEND_TIMEOUT_S",
+                Phase::Lock => "LOCK_TIMEOUT_S",
+                _ => "RELEASE_TIMEOUT_S",
+            },
+            (FaultCode::PhaseTimeout, _) => "SOFTEN_TIMEOUT_S",
+        }
+    }
+}
+
 /// Allowed temperature range of one sensor, °C.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Limits {

@@ -4,7 +4,24 @@
 //! Interpolation is linear in curvature (1/radius), which the model makes nearly linear in
 //! power, between rows that are monotone by construction (checked by a test).
 
+use crate::heater::HeaterConfig;
 use crate::link::{Row, TABLE};
+
+/// The largest TCA power of the table, W.
+pub const MAX_POWER_W: f32 = {
+    let mut max = 0.0f32;
+    let mut i = 0;
+    while i < TABLE.len() {
+        if TABLE[i].power_w > max {
+            max = TABLE[i].power_w;
+        }
+        i += 1;
+    }
+    max
+};
+// Every power the table asks of the TCA is one its heater delivers (gated and paper drive the
+// table's power through lock, plus the lock compensation, which the heater's cap then bounds).
+const _: () = assert!(MAX_POWER_W <= HeaterConfig::TCA.max_power_w);
 
 /// Reachable radii of the table, mm: `(min, max)`.
 pub fn range_mm() -> (f32, f32) {
