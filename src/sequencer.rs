@@ -131,12 +131,6 @@ impl Sequencer {
         }
     }
 
-    /// The strategy a morph in `mode` runs (`auto` resolved to
-    /// [`crate::strategy::AUTO_STRATEGY`]).
-    pub fn strategy_of(mode: Mode) -> Mode {
-        AnyStrategy::resolve(mode)
-    }
-
     /// Tells the sequencer the measured heater supply, V, so the model strategies know what
     /// power the heaters can actually deliver. Call before [`Sequencer::step`].
     pub fn set_supply_v(&mut self, supply_v: f32) {
@@ -312,9 +306,20 @@ mod tests {
             self.start_from(now_ms, radius_mm, tca_power_w, mode, &m, emit);
         }
 
+        /// The strategy a morph in `mode` runs (`auto` resolved to [`AUTO_STRATEGY`]).
+        fn strategy_of(mode: Mode) -> Mode {
+            AnyStrategy::resolve(mode)
+        }
+
         /// Strategy of the running or last morph (never `Auto`).
         fn strategy(&self) -> Mode {
-            self.strategy.map_or(Mode::Auto, |s| s.get().mode())
+            match self.strategy {
+                None => Mode::Auto,
+                Some(AnyStrategy::Paper(_)) => Mode::Paper,
+                Some(AnyStrategy::Gated(_)) => Mode::Gated,
+                Some(AnyStrategy::Boost(_)) => Mode::Boost,
+                Some(AnyStrategy::Closed(_)) => Mode::Closed,
+            }
         }
 
         /// TCA temperature the `boost` or `closed` morph aims at, °C (NaN for the others).

@@ -158,12 +158,6 @@ pub struct Powers {
 }
 
 impl Powers {
-    /// Both heaters off.
-    pub const OFF: Powers = Powers {
-        pla_w: 0.0,
-        tca_w: 0.0,
-    };
-
     /// The power of one heater, W.
     pub fn of(&self, h: Heater) -> f32 {
         match h {

@@ -5,7 +5,6 @@
 use super::model::observer::HeatedNode;
 use super::model::{target, ModelDrive};
 use super::{Start, Strategy, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
-use crate::protocol::Mode;
 use crate::vocab::{Measurements, Phase, Powers};
 
 /// The `boost` strategy.
@@ -25,10 +24,6 @@ impl Boost {
 }
 
 impl Strategy for Boost {
-    fn mode(&self) -> Mode {
-        Mode::Boost
-    }
-
     fn enter(&mut self, _phase: Phase, _now_ms: u64) {
         self.drive.enter();
     }

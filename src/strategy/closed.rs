@@ -5,7 +5,6 @@
 use super::model::observer::{HeatedNode, LEARN_MAX_RATE_K_PER_S, SENSOR_TAU_S};
 use super::model::{target, ModelDrive};
 use super::{Start, Strategy, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
-use crate::protocol::Mode;
 use crate::vocab::{Measurements, Phase, Powers};
 
 /// `closed` ends lock when the observer's PLA estimate and the PLA thermistor corrected for its
@@ -63,10 +62,6 @@ impl Closed {
 }
 
 impl Strategy for Closed {
-    fn mode(&self) -> Mode {
-        Mode::Closed
-    }
-
     fn enter(&mut self, _phase: Phase, _now_ms: u64) {
         self.drive.enter();
     }

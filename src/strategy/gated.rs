@@ -5,7 +5,6 @@
 use super::paper::table_powers;
 use super::{Start, Strategy, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
 use crate::link::{HOLD_POWER_W, R_TP_K_PER_W, R_TT_K_PER_W};
-use crate::protocol::Mode;
 use crate::table;
 use crate::vocab::{Measurements, Phase, Powers};
 
@@ -39,7 +38,7 @@ impl Gated {
     /// TCA power during lock, W: the bend power plus what replaces the heat the PLA heater
     /// stops giving the TCA (`R_tp / R_tt · hold power`), so the TCA stays at its bend
     /// temperature while the PLA freezes the shape.
-    pub fn lock_tca_power_w(&self) -> f32 {
+    fn lock_tca_power_w(&self) -> f32 {
         self.tca_power_w + R_TP_K_PER_W / R_TT_K_PER_W * HOLD_POWER_W
     }
 
@@ -61,10 +60,6 @@ impl Gated {
 }
 
 impl Strategy for Gated {
-    fn mode(&self) -> Mode {
-        Mode::Gated
-    }
-
     fn enter(&mut self, _phase: Phase, now_ms: u64) {
         self.window_ms = now_ms;
         self.window_temp_c = f32::NAN;

@@ -65,8 +65,6 @@ pub struct Tick<'a> {
 /// [`Strategy::enter`] (after bend, [`Strategy::radius_estimate_mm`] first), then
 /// [`Strategy::powers`] for the phase now current.
 pub trait Strategy {
-    /// The mode this strategy answers to (never `auto`).
-    fn mode(&self) -> Mode;
     /// A new phase began at `now_ms`: reset whatever the strategy judges per phase.
     fn enter(&mut self, phase: Phase, now_ms: u64);
     /// This strategy's own timeout of `phase`, s, or `None` for the sequencer's default.
@@ -147,7 +145,8 @@ impl AnyStrategy {
     }
 
     /// The thermal model of a `boost` or `closed` morph.
-    pub fn model(&self) -> Option<&model::ModelDrive> {
+    #[cfg(test)]
+    pub(crate) fn model(&self) -> Option<&model::ModelDrive> {
         match self {
             AnyStrategy::Boost(s) => Some(&s.drive),
             AnyStrategy::Closed(s) => Some(&s.drive),

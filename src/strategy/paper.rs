@@ -5,7 +5,6 @@
 use super::{Start, Strategy, Tick, RELEASE_S};
 use crate::heater::HeaterConfig;
 use crate::link::HOLD_POWER_W;
-use crate::protocol::Mode;
 use crate::table;
 use crate::vocab::{Measurements, Phase, Powers};
 
@@ -61,10 +60,6 @@ impl Paper {
 }
 
 impl Strategy for Paper {
-    fn mode(&self) -> Mode {
-        Mode::Paper
-    }
-
     fn enter(&mut self, _phase: Phase, _now_ms: u64) {}
 
     fn timeout_s(&self, phase: Phase) -> Option<f32> {

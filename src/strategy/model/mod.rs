@@ -98,7 +98,8 @@ impl ModelDrive {
     }
 
     /// TCA temperature the morph aims at, °C.
-    pub fn tca_target_c(&self) -> f32 {
+    #[cfg(test)]
+    pub(crate) fn tca_target_c(&self) -> f32 {
         self.tca_target_c
     }
 
