@@ -142,6 +142,8 @@ pub const SUPPLY_MAX_V: f32 = 15.0;
 pub const STALE_AFTER_MS: u64 = 1000;
 /// Consecutive out-of-limit readings before a temperature trip (Klipper: 4 samples).
 pub const LIMIT_CONSECUTIVE: u8 = 4;
+// The same 4-sample rule for open/short (thermistor::RangeCheck) and for the limits.
+const _: () = assert!(LIMIT_CONSECUTIVE == RangeCheck::DEFAULT_CONSECUTIVE);
 /// Heater-not-heating: the heater must have been on this long before it is judged, s.
 /// Klipper's check_gain_time is 20 s for hot ends; the TCA's thermal time constants are a few
 /// seconds (its steady rise is half reached in about 6–10 s under water), so 10 s.

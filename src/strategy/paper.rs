@@ -20,12 +20,12 @@ pub const PAPER_HOLD_END_S: f32 = 70.0;
 /// See [`PAPER_SOFTEN_END_S`].
 pub const PAPER_TCA_END_S: f32 = 120.0;
 const _: () = assert!(PAPER_SOFTEN_END_S < PAPER_HOLD_END_S && PAPER_HOLD_END_S < PAPER_TCA_END_S);
-/// Slack of each fixed phase's timeout over its planned length, s: one missed tick or a slow
-/// host never trips, a stuck sequence does.
+/// Slack of each fixed phase's timeout over its planned length, s: the phases end on the clock,
+/// so only a stuck sequence reaches it.
 pub const PAPER_TIMEOUT_SLACK_S: f32 = 5.0;
 
-/// The powers of the table strategies (`paper`, `gated`) in soften and bend: the paper's 4 W,
-/// then the hold power with the TCA at the table's power.
+/// The powers of the table strategies (`paper`, `gated`): the paper's 4 W in soften, the hold
+/// power with the TCA at the table's power in bend, the PLA off and the TCA at `lock_tca_w` in lock.
 pub(super) fn table_powers(phase: Phase, tca_power_w: f32, lock_tca_w: f32) -> Powers {
     match phase {
         Phase::Soften => Powers {
