@@ -10,7 +10,7 @@ use morphlink_sim::{LinkSetup, Rig};
 fn rig_in_bend() -> Rig {
     let mut rig = Rig::new(LinkSetup::NOMINAL);
     rig.handle_line("MORPH 38", &mut |_| {});
-    while rig.ctrl.phase() != morphlink::sequencer::Phase::Bend {
+    while rig.ctrl.phase() != morphlink::vocab::Phase::Bend {
         rig.tick();
     }
     rig

@@ -9,7 +9,7 @@
 //! run the same board model. Built with the `sim` feature; `no_std` and allocation-free.
 
 use crate::controller::{Config, Inputs, Outputs};
-use crate::protocol::{format_error, reply, Medium, OutLine, Sensor, SimCommand, SimFault};
+use crate::protocol::{format_error, reply, Medium, OutLine, SimCommand, SimFault};
 use morphlink_plant::{Duties, LumpedSpec, Plant, Setting};
 
 /// Highest supply `SIM SUPPLY` accepts, V (the supervisor's limit is lower, so faults can be tried).
@@ -143,7 +143,8 @@ impl<P: Plant> Bench<P> {
         }
     }
 
-    /// Injects a fault on a sensor (0 PLA, 1 TCA, 2 ambient) or a heater (0 PLA, 1 TCA).
+    /// Injects a fault on the sensor with [`crate::vocab::Sensor::index`] `index`, or on the heater of that
+    /// index (an ambient target counts as the TCA heater).
     pub fn inject(&mut self, fault: SimFault, index: usize) {
         match fault {
             SimFault::ThermistorOpen | SimFault::ThermistorShort => {
@@ -189,12 +190,7 @@ impl<P: Plant> Bench<P> {
                 reply::sim_state(&mut l, t.time_s as f32, radius_mm, t.pla_c as f32, t.tca_c as f32);
             }
             SimCommand::Fault(kind, target) => {
-                let index = match target {
-                    Sensor::Pla => 0,
-                    Sensor::Tca => 1,
-                    Sensor::Amb => 2,
-                };
-                self.inject(kind, index);
+                self.inject(kind, target.index());
                 reply::sim_fault(&mut l, kind, target);
             }
             SimCommand::Supply(v) => {

@@ -7,11 +7,12 @@
 
 use crate::heater::HeaterConfig;
 use crate::protocol::{self, reply, Command, Mode, OutLine, SimCommand};
-use crate::sequencer::{Phase, Powers, SeqEvent, Sequencer};
+use crate::sequencer::{SeqEvent, Sequencer};
 use crate::stats::LoopTiming;
-use crate::supervisor::{Fault, FaultCode, Frame, Subject, Supervisor};
+use crate::supervisor::{Fault, Frame, Supervisor};
 use crate::table;
 use crate::thermistor::ThermistorConfig;
+use crate::vocab::{Phase, Powers};
 use heapless::Deque;
 
 /// Control rate, Hz. The fastest thermal part (the TCA, about 1 s) is sampled ten times per
@@ -19,6 +20,13 @@ use heapless::Deque;
 pub const CONTROL_HZ: u32 = 10;
 /// Control period, ms.
 pub const TICK_MS: u64 = 1000 / CONTROL_HZ as u64;
+// The tick divides the second exactly (timestamps and timeouts count whole ticks).
+const _: () = assert!(TICK_MS * CONTROL_HZ as u64 == 1000);
+// A stale frame is 10 ticks old (supervisor::STALE_AFTER_MS), and the heater command watchdog
+// outlasts the same 10 missed ticks (heater::CommandWatchdog::DEFAULT_MAX_AGE_MS): one late
+// tick never trips either.
+const _: () = assert!(crate::supervisor::STALE_AFTER_MS >= 10 * TICK_MS);
+const _: () = assert!(crate::heater::CommandWatchdog::DEFAULT_MAX_AGE_MS >= 10 * TICK_MS);
 /// ADC samples summed per reading (16 × 12-bit: 1 °C steps become about 0.03 °C, and mains
 /// noise averages out over the 16 ms burst).
 pub const OVERSAMPLE: u32 = 16;
@@ -89,7 +97,8 @@ impl Config {
 /// One tick's raw inputs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Inputs {
-    /// Summed ADC counts of the PLA, TCA and ambient thermistors.
+    /// Summed ADC counts of the thermistors, in [`crate::vocab::Sensor::index`] order (PLA,
+    /// TCA, ambient).
     pub thermistor_counts: [u32; 3],
     /// Summed ADC counts of the supply sense.
     pub supply_counts: u32,
@@ -128,7 +137,6 @@ pub struct Controller {
     cfg: Config,
     seq: Sequencer,
     sup: Supervisor,
-    fault: Option<Fault>,
     frame: Option<Frame>,
     powers: Powers,
     outputs: Outputs,
@@ -137,8 +145,8 @@ pub struct Controller {
     timing: Option<LoopTiming>,
 }
 
-/// Firmware version reported by VERSION.
-pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+/// Firmware version reported by VERSION (defined in [`crate::vocab`]; here for the firmware).
+pub use crate::vocab::VERSION;
 
 impl Controller {
     /// A controller at rest (heaters off) with the given board settings.
@@ -147,7 +155,6 @@ impl Controller {
             cfg,
             seq: Sequencer::new(),
             sup: Supervisor::new(),
-            fault: None,
             frame: None,
             powers: Powers::default(),
             outputs: Outputs::default(),
@@ -171,23 +178,14 @@ impl Controller {
         }
     }
 
-    /// The control-loop timing, if this build records it.
-    pub fn timing(&self) -> Option<&LoopTiming> {
-        self.timing.as_ref()
-    }
-
     /// Current phase (Fault while a fault is latched).
     pub fn phase(&self) -> Phase {
-        if self.fault.is_some() {
-            Phase::Fault
-        } else {
-            self.seq.phase()
-        }
+        self.seq.phase()
     }
 
-    /// The latched fault, if any.
+    /// The latched fault, if any (the sequencer holds it: see [`Sequencer::fault`]).
     pub fn fault(&self) -> Option<Fault> {
-        self.fault
+        self.seq.fault()
     }
 
     /// Duties to apply now (also right after a command: ABORT zeroes them at once).
@@ -207,7 +205,7 @@ impl Controller {
 
     /// True while a morph is under way (not idle, not faulted).
     pub fn busy(&self) -> bool {
-        self.fault.is_none() && self.seq.busy()
+        self.seq.busy()
     }
 
     fn push(&mut self, e: Event) {
@@ -232,8 +230,7 @@ impl Controller {
     }
 
     fn trip(&mut self, fault: Fault) {
-        self.seq.fault();
-        self.fault = Some(fault);
+        self.seq.latch(fault);
         self.powers = Powers::default();
         self.outputs = Outputs::default();
         self.push(Event::Alarm(fault));
@@ -244,7 +241,7 @@ impl Controller {
         let frame = self.frame_of(inputs);
         self.frame = Some(frame);
         self.supply_v = frame.supply_v;
-        if self.fault.is_some() {
+        if self.fault().is_some() {
             self.powers = Powers::default();
             self.outputs = Outputs::default();
             return self.outputs;
@@ -273,11 +270,12 @@ impl Controller {
                     tca_duty: self.cfg.tca_heater.duty(p.tca_w, v),
                 };
             }
-            Err(timeout) => self.trip(Fault {
-                code: FaultCode::PhaseTimeout,
-                subject: Subject::Phase(timeout.0),
-                value: f32::NAN,
-            }),
+            // The sequencer has latched the timeout; report it and turn the heaters off.
+            Err(_) => {
+                if let Some(f) = self.seq.fault() {
+                    self.trip(f);
+                }
+            }
         }
         self.outputs
     }
@@ -315,7 +313,7 @@ impl Controller {
                 out(&l);
             }
             Command::Abort => {
-                if self.fault.is_none() {
+                if self.fault().is_none() {
                     self.seq.abort();
                 }
                 self.powers = Powers::default();
@@ -361,7 +359,7 @@ impl Controller {
 
     fn morph(&mut self, now_ms: u64, radius_mm: f32, mode: Mode, out: &mut impl FnMut(&str)) {
         let mut l = OutLine::new();
-        if let Some(f) = self.fault {
+        if let Some(f) = self.fault() {
             reply::fault_latched(&mut l, f.code);
             return out(&l);
         }
@@ -395,7 +393,7 @@ impl Controller {
 
     fn reset(&mut self, now_ms: u64, out: &mut impl FnMut(&str)) {
         let mut l = OutLine::new();
-        let Some(latched) = self.fault else {
+        let Some(latched) = self.fault() else {
             reply::reset_nothing(&mut l);
             return out(&l);
         };
@@ -405,7 +403,6 @@ impl Controller {
         };
         match check {
             Ok(()) => {
-                self.fault = None;
                 self.seq.clear_fault();
                 self.sup.rearm();
                 reply::reset_cleared(&mut l, latched.code);
@@ -429,7 +426,7 @@ impl Controller {
             p_pla_w: self.powers.pla_w,
             p_tca_w: self.powers.tca_w,
             supply_v: self.supply_v,
-            fault: self.fault.map(|f| f.code),
+            fault: self.fault().map(|f| f.code),
         };
         reply::status(l, &status);
     }

@@ -69,7 +69,7 @@ impl ResetCause {
 /// Writes the line the firmware sends once at boot:
 /// `event: boot reset=<cause> board=<name> version=<v>`.
 pub fn write_boot_line(l: &mut OutLine, cause: ResetCause, board: &str) {
-    reply::boot(l, cause, board, crate::controller::VERSION);
+    reply::boot(l, cause, board, crate::vocab::VERSION);
 }
 
 /// Timing of the control loop, from cycle-counter readings. All durations are µs.
@@ -140,16 +140,6 @@ impl LoopTiming {
         self.ticks = self.ticks.wrapping_add(1);
     }
 
-    /// Ticks recorded since boot.
-    pub fn ticks(&self) -> u32 {
-        self.ticks
-    }
-
-    /// Longest step (ADC end → duties applied) since boot, µs.
-    pub fn step_max_us(&self) -> u32 {
-        self.step_max_us
-    }
-
     /// Largest deviation of a tick period from nominal since boot, µs (0 before two ticks).
     pub fn jitter_max_us(&self) -> u32 {
         if self.period_max_us == 0 {
@@ -186,6 +176,19 @@ impl LoopTiming {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Only the tests need this (the firmware never reads it back).
+    impl LoopTiming {
+        /// Ticks recorded since boot.
+        fn ticks(&self) -> u32 {
+            self.ticks
+        }
+
+        /// Longest step (ADC end → duties applied) since boot, µs.
+        fn step_max_us(&self) -> u32 {
+            self.step_max_us
+        }
+    }
 
     const MHZ84: u32 = 84_000_000;
 
@@ -283,7 +286,7 @@ mod tests {
         let rest = l
             .strip_prefix("event: boot reset=software board=nucleo-f401re version=")
             .unwrap();
-        assert_eq!(rest, crate::controller::VERSION);
+        assert_eq!(rest, crate::vocab::VERSION);
     }
 
     #[test]

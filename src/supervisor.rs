@@ -7,9 +7,8 @@
 //! [`Fault`]; the controller turns both heaters off in the same tick and latches it.
 
 use crate::link::{R_PP_K_PER_W, R_TT_K_PER_W};
-use crate::protocol::{Heater, Sensor};
-use crate::sequencer::{Measurements, Phase, Powers};
 use crate::thermistor::{RangeCheck, Reading};
+use crate::vocab::{Heater, Measurements, Phase, Powers, Sensor};
 
 /// What tripped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -74,6 +73,40 @@ pub struct Fault {
     pub value: f32,
 }
 
+/// The README section that explains every check and its setting; alarm lines point to it.
+pub const SAFETY_README_SECTION: &str = "Safety defaults";
+
+impl Fault {
+    /// The named settings that govern this trip, as they are spelled in the source and in the
+    /// README's [`SAFETY_README_SECTION`] table (alarm lines name them).
+    pub fn settings(&self) -> &'static str {
+        match (self.code, self.subject) {
+            (FaultCode::ThermistorOpen, _) => "DEFAULT_MAX_FRACTION",
+            (FaultCode::ThermistorShort, _) => "DEFAULT_MIN_FRACTION",
+            (FaultCode::UnderTemperature | FaultCode::OverTemperature, Subject::Sensor(sensor)) => {
+                match sensor {
+                    Sensor::Pla => "PLA_LIMITS, LIMIT_CONSECUTIVE",
+                    Sensor::Tca => "TCA_LIMITS, LIMIT_CONSECUTIVE",
+                    Sensor::Amb => "AMB_LIMITS, LIMIT_CONSECUTIVE",
+                }
+            }
+            (FaultCode::UnderTemperature | FaultCode::OverTemperature, _) => {
+                "PLA_LIMITS, TCA_LIMITS, AMB_LIMITS"
+            }
+            (FaultCode::HeaterNotHeating, _) => "HEATING_CHECK_S, HEATING_MIN_FRACTION",
+            (FaultCode::StaleSensor, _) => "STALE_AFTER_MS",
+            (FaultCode::SupplyOutOfRange, _) => "SUPPLY_MIN_V, SUPPLY_MAX_V",
+            (FaultCode::PhaseTimeout, Subject::Phase(phase)) => match phase {
+                Phase::Soften => "SOFTEN_TIMEOUT_S",
+                Phase::Bend => "BEND_TIMEOUT_S",
+                Phase::Lock => "LOCK_TIMEOUT_S",
+                _ => "RELEASE_TIMEOUT_S",
+            },
+            (FaultCode::PhaseTimeout, _) => "SOFTEN_TIMEOUT_S",
+        }
+    }
+}
+
 /// Allowed temperature range of one sensor, °C.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Limits {
@@ -109,6 +142,8 @@ pub const SUPPLY_MAX_V: f32 = 15.0;
 pub const STALE_AFTER_MS: u64 = 1000;
 /// Consecutive out-of-limit readings before a temperature trip (Klipper: 4 samples).
 pub const LIMIT_CONSECUTIVE: u8 = 4;
+// The same 4-sample rule for open/short (thermistor::RangeCheck) and for the limits.
+const _: () = assert!(LIMIT_CONSECUTIVE == RangeCheck::DEFAULT_CONSECUTIVE);
 /// Heater-not-heating: the heater must have been on this long before it is judged, s.
 /// Klipper's check_gain_time is 20 s for hot ends; the TCA's thermal time constants are a few
 /// seconds (its steady rise is half reached in about 6–10 s under water), so 10 s.
@@ -128,7 +163,7 @@ pub const HEATING_MIN_RISE_C: f32 = 4.0;
 /// One sensor frame as the supervisor sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frame {
-    /// Classified readings of the PLA, TCA and ambient thermistors.
+    /// Classified readings of the thermistors, in [`Sensor::index`] order.
     pub readings: [Reading; 3],
     /// Measured heater supply, V.
     pub supply_v: f32,
@@ -136,8 +171,14 @@ pub struct Frame {
     pub sample_ms: u64,
 }
 
-const SENSORS: [Sensor; 3] = [Sensor::Pla, Sensor::Tca, Sensor::Amb];
-const LIMITS: [Limits; 3] = [PLA_LIMITS, TCA_LIMITS, AMB_LIMITS];
+/// The limits of a sensor.
+pub const fn limits(s: Sensor) -> Limits {
+    match s {
+        Sensor::Pla => PLA_LIMITS,
+        Sensor::Tca => TCA_LIMITS,
+        Sensor::Amb => AMB_LIMITS,
+    }
+}
 
 #[derive(Clone, Copy, Debug, Default)]
 struct HeatWatch {
@@ -175,11 +216,7 @@ impl Supervisor {
 
     /// Last good temperatures, °C (NaN before the first good reading).
     pub fn measurements(&self) -> Measurements {
-        Measurements {
-            t_pla_c: self.last_c[0],
-            t_tca_c: self.last_c[1],
-            t_amb_c: self.last_c[2],
-        }
+        Measurements::from_array(self.last_c)
     }
 
     /// Checks one frame with the powers commanded in the previous tick. Returns the
@@ -191,18 +228,19 @@ impl Supervisor {
         commanded: Powers,
     ) -> Result<Measurements, Fault> {
         fresh(now_ms, frame)?;
-        for i in 0..3 {
+        for sensor in Sensor::ALL {
+            let i = sensor.index();
             let reading = frame.readings[i];
             // Open/short: latched once the ADC range check has seen it often enough in a row.
             if let Some(r) = self.range[i].update(reading) {
-                return Err(reading_fault(i, r).unwrap_or(Fault {
+                return Err(reading_fault(sensor, r).unwrap_or(Fault {
                     code: FaultCode::ThermistorOpen,
-                    subject: Subject::Sensor(SENSORS[i]),
+                    subject: Subject::Sensor(sensor),
                     value: f32::NAN,
                 }));
             }
             if let Reading::Ok(t) = reading {
-                match reading_fault(i, reading) {
+                match reading_fault(sensor, reading) {
                     Some(f) => {
                         self.limit_count[i] = self.limit_count[i].saturating_add(1);
                         if self.limit_count[i] >= LIMIT_CONSECUTIVE {
@@ -223,13 +261,15 @@ impl Supervisor {
 
     fn check_heating(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
         let m = self.measurements();
-        // (heater, own power, own sensor, own resistance)
-        let heaters = [
-            (Heater::Pla, cmd.pla_w, m.t_pla_c, R_PP_K_PER_W),
-            (Heater::Tca, cmd.tca_w, m.t_tca_c, R_TT_K_PER_W),
-        ];
-        for (i, (heater, own_w, temp_c, r_self)) in heaters.into_iter().enumerate() {
-            let w = &mut self.watch[i];
+        for heater in Heater::ALL {
+            // Own power, own sensor, own thermal resistance.
+            let own_w = cmd.of(heater);
+            let temp_c = m.of(heater.sensor());
+            let r_self = match heater {
+                Heater::Pla => R_PP_K_PER_W,
+                Heater::Tca => R_TT_K_PER_W,
+            };
+            let w = &mut self.watch[heater.index()];
             // One watch per on-period: it starts when the heater is switched on and judges the
             // rise since then against the lowest power of the period.
             if !(own_w > 0.0) {
@@ -269,8 +309,8 @@ impl Supervisor {
     /// the fault that is still present. Sensor checks need a good reading now, not four.
     pub fn condition_clear(&self, now_ms: u64, frame: &Frame) -> Result<(), Fault> {
         fresh(now_ms, frame)?;
-        for (i, r) in frame.readings.iter().enumerate() {
-            if let Some(f) = reading_fault(i, *r) {
+        for sensor in Sensor::ALL {
+            if let Some(f) = reading_fault(sensor, frame.readings[sensor.index()]) {
                 return Err(f);
             }
         }
@@ -310,14 +350,15 @@ fn supply_ok(frame: &Frame) -> Result<(), Fault> {
     Ok(())
 }
 
-/// What one reading of sensor `i` says is wrong, if anything: open, short, or outside limits.
-fn reading_fault(i: usize, reading: Reading) -> Option<Fault> {
-    let subject = Subject::Sensor(SENSORS[i]);
+/// What one reading of `sensor` says is wrong, if anything: open, short, or outside limits.
+fn reading_fault(sensor: Sensor, reading: Reading) -> Option<Fault> {
+    let subject = Subject::Sensor(sensor);
+    let lim = limits(sensor);
     let (code, value) = match reading {
         Reading::Open => (FaultCode::ThermistorOpen, f32::NAN),
         Reading::Short => (FaultCode::ThermistorShort, f32::NAN),
-        Reading::Ok(t) if t > LIMITS[i].max_c => (FaultCode::OverTemperature, t),
-        Reading::Ok(t) if t < LIMITS[i].min_c => (FaultCode::UnderTemperature, t),
+        Reading::Ok(t) if t > lim.max_c => (FaultCode::OverTemperature, t),
+        Reading::Ok(t) if t < lim.min_c => (FaultCode::UnderTemperature, t),
         Reading::Ok(_) => return None,
     };
     Some(Fault {

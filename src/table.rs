@@ -4,7 +4,24 @@
 //! Interpolation is linear in curvature (1/radius), which the model makes nearly linear in
 //! power, between rows that are monotone by construction (checked by a test).
 
+use crate::heater::HeaterConfig;
 use crate::link::{Row, TABLE};
+
+/// The largest TCA power of the table, W.
+pub const MAX_POWER_W: f32 = {
+    let mut max = 0.0f32;
+    let mut i = 0;
+    while i < TABLE.len() {
+        if TABLE[i].power_w > max {
+            max = TABLE[i].power_w;
+        }
+        i += 1;
+    }
+    max
+};
+// Every power the table asks of the TCA is one its heater delivers (gated and paper drive the
+// table's power through lock, plus the lock compensation, which the heater's cap then bounds).
+const _: () = assert!(MAX_POWER_W <= HeaterConfig::TCA.max_power_w);
 
 /// Reachable radii of the table, mm: `(min, max)`.
 pub fn range_mm() -> (f32, f32) {
@@ -52,12 +69,6 @@ pub fn power_for_radius_w(radius_mm: f32) -> Result<f32, OutOfRange> {
     ))
 }
 
-/// Radius the table predicts for a TCA power, mm (clamped to the table's ends).
-pub fn radius_for_power_mm(power_w: f32) -> f32 {
-    let p = power_w.clamp(TABLE[0].power_w, TABLE[TABLE.len() - 1].power_w);
-    1.0 / interpolate(&TABLE, p, |r| r.power_w, |r| 1.0 / r.radius_mm)
-}
-
 /// Radius for a measured steady TCA rise above ambient with the PLA at hold power, mm
 /// (clamped to the table's ends).
 pub fn radius_for_tca_rise_mm(rise_k: f32) -> f32 {
@@ -75,6 +86,12 @@ pub fn radius_for_tca_rise_mm(rise_k: f32) -> f32 {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// Radius the table predicts for a TCA power, mm (clamped to the table's ends).
+    pub fn radius_for_power_mm(power_w: f32) -> f32 {
+        let p = power_w.clamp(TABLE[0].power_w, TABLE[TABLE.len() - 1].power_w);
+        1.0 / interpolate(&TABLE, p, |r| r.power_w, |r| 1.0 / r.radius_mm)
+    }
 
     #[test]
     fn table_is_monotone_and_small() {

@@ -95,7 +95,7 @@ pub struct ThermistorConfig {
     /// Pull-up resistor from the ADC reference to the NTC, in ohms.
     pub pullup_ohm: f32,
     /// Count of a full-scale reading, after any oversampling (e.g. 16 · 4095 for 16 summed
-    /// 12-bit samples, see [`oversample`]).
+    /// 12-bit samples).
     pub adc_full_scale: u32,
     /// Fractions of full scale below this read as [`Reading::Short`].
     pub min_fraction: f32,
@@ -129,7 +129,7 @@ impl ThermistorConfig {
         max_fraction: DEFAULT_MAX_FRACTION,
     };
 
-    /// The same channel read with a different full scale (e.g. after [`oversample`]).
+    /// The same channel read with a different full scale (e.g. for oversampled, summed readings).
     pub const fn with_full_scale(self, adc_full_scale: u32) -> Self {
         ThermistorConfig {
             adc_full_scale,
@@ -197,17 +197,6 @@ impl ThermistorConfig {
             Reading::Open
         }
     }
-}
-
-/// Sums oversampled ADC conversions into one reading (saturating).
-///
-/// Summing instead of averaging keeps the extra resolution that noise dithering gives and
-/// needs no division: N summed 12-bit samples have full scale N · [`ADC_12BIT_MAX`], which is
-/// set with [`ThermistorConfig::with_full_scale`]; all conversions work with any full scale.
-pub fn oversample(samples: &[u16]) -> u32 {
-    samples
-        .iter()
-        .fold(0u32, |sum, &s| sum.saturating_add(s as u32))
 }
 
 /// Which out-of-range class the last samples were in.
@@ -476,6 +465,64 @@ mod tests {
         assert_eq!(cfg.counts_for_temp(5000.0), 0);
         assert!(cfg.counts_for_temp(-150.0) >= ADC_12BIT_MAX - 1);
         assert!((2047..=2048).contains(&cfg.counts_for_temp(25.0))); // R = R_pullup: half scale
+    }
+
+    /// Sums oversampled ADC conversions into one reading (saturating), as the boards do.
+    fn oversample(samples: &[u16]) -> u32 {
+        samples
+            .iter()
+            .fold(0u32, |sum, &s| sum.saturating_add(s as u32))
+    }
+
+    /// The thermistor budget of the temperature conversion's maths, °C, over [`BUDGET_RANGE_C`].
+    const BUDGET_C: f64 = 0.2;
+    /// Where the budget holds, °C.
+    const BUDGET_RANGE_C: (f64, f64) = (0.0, 150.0);
+
+    /// Largest error, °C, over 0–150 °C of the default Beta curve computed in `f32` with the
+    /// given `ln` and `exp`: (counts → °C: the NTC's exact resistance through `ln`; °C → counts:
+    /// the resistance from `exp`, read back exactly).
+    fn conversion_error_c(ln: impl Fn(f32) -> f32, exp: impl Fn(f32) -> f32) -> (f64, f64) {
+        let Curve::Beta { r25_ohm, beta_k } = ThermistorConfig::DEFAULT.curve else {
+            unreachable!()
+        };
+        let (r25, beta, t25) = (r25_ohm as f64, beta_k as f64, T25_K as f64);
+        let k0 = KELVIN_OFFSET as f64;
+        let (mut to_c, mut from_c) = (0.0f64, 0.0f64);
+        let steps = 30_000;
+        for i in 0..=steps {
+            let t_c =
+                BUDGET_RANGE_C.0 + (BUDGET_RANGE_C.1 - BUDGET_RANGE_C.0) * i as f64 / steps as f64;
+            let r = r25 * (beta * (1.0 / (t_c + k0) - 1.0 / t25)).exp();
+            // counts → °C, as `Curve::temp_c` computes it.
+            let inv_t = 1.0 / T25_K + ln(r as f32 / r25_ohm) / beta_k;
+            let got_c = (1.0 / inv_t - KELVIN_OFFSET) as f64;
+            to_c = to_c.max((got_c - t_c).abs());
+            // °C → counts, as `Curve::resistance_ohm` computes it, read back exactly.
+            let inv_t = 1.0 / (t_c as f32 + KELVIN_OFFSET);
+            let r_got = (r25_ohm * exp(beta_k * (inv_t - 1.0 / T25_K))) as f64;
+            let back_c = 1.0 / (1.0 / t25 + (r_got / r25).ln() / beta) - k0;
+            from_c = from_c.max((back_c - t_c).abs());
+        }
+        (to_c, from_c)
+    }
+
+    /// The numbers of docs/firmware.md ("Maths: why not micromath"): the hand-written
+    /// `mathf` and libm keep the conversion far inside the ±0.2 °C budget; micromath's
+    /// `ln`/`exp` exceed it, which is why the firmware does not use them.
+    #[test]
+    fn micromath_exceeds_the_thermistor_budget_and_mathf_does_not() {
+        use micromath::F32Ext;
+        let ours = conversion_error_c(crate::mathf::ln, crate::mathf::exp);
+        let libm = conversion_error_c(libm::logf, libm::expf);
+        let micro = conversion_error_c(F32Ext::ln, F32Ext::exp);
+        println!(
+            "max error over 0-150 C (counts->C, C->counts): mathf {ours:?}, libm {libm:?}, \
+             micromath {micro:?}"
+        );
+        assert!(ours.0 < 0.01 && ours.1 < 0.01, "mathf {ours:?}");
+        assert!(libm.0 < 0.01 && libm.1 < 0.01, "libm {libm:?}");
+        assert!(micro.0 > BUDGET_C, "micromath ln {micro:?}");
     }
 
     #[test]

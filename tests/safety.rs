@@ -5,7 +5,7 @@ mod common;
 use common::Bench;
 use morphlink::controller::Outputs;
 use morphlink::protocol::{classify, LineKind};
-use morphlink::sequencer::Phase;
+use morphlink::vocab::Phase;
 
 const ZERO: Outputs = Outputs {
     pla_duty: 0.0,

@@ -36,7 +36,7 @@ pub const MAX_LINE: usize = 64;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Mode {
     /// The default: whichever strategy the strategy chart picked
-    /// ([`crate::sequencer::AUTO_STRATEGY`]).
+    /// ([`crate::strategy::AUTO_STRATEGY`]).
     Auto,
     /// The paper's fixed timing: PLA 4 W 0–20 s, 1.5 W 20–70 s; TCA 20–120 s.
     Paper,
@@ -51,25 +51,7 @@ pub enum Mode {
     Closed,
 }
 
-/// One of the three thermistors.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Sensor {
-    /// On the PLA rod.
-    Pla,
-    /// Beside the TCA.
-    Tca,
-    /// In the surrounding medium.
-    Amb,
-}
-
-/// One of the two heaters.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Heater {
-    /// Nichrome wrap on the PLA rod.
-    Pla,
-    /// The twisted-and-coiled actuator itself (Joule heated).
-    Tca,
-}
+pub use crate::vocab::{Heater, Sensor};
 
 /// Surrounding medium of the simulated link.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -198,27 +180,6 @@ impl Mode {
             Mode::Gated => "gated",
             Mode::Boost => "boost",
             Mode::Closed => "closed",
-        }
-    }
-}
-
-impl Sensor {
-    /// The lowercase wire word (`pla`, `tca`, `amb`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Sensor::Pla => "pla",
-            Sensor::Tca => "tca",
-            Sensor::Amb => "amb",
-        }
-    }
-}
-
-impl Heater {
-    /// The lowercase wire word (`pla`, `tca`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Heater::Pla => "pla",
-            Heater::Tca => "tca",
         }
     }
 }

@@ -9,9 +9,11 @@ use super::{
     EVENT_TAG, OK, PROTOCOL_VERSION,
 };
 use crate::fixed::Fixed;
-use crate::sequencer::Phase;
+use crate::vocab::Phase;
 use crate::stats::ResetCause;
-use crate::supervisor::{Fault, FaultCode, Subject, SUPPLY_MAX_V, SUPPLY_MIN_V};
+use crate::supervisor::{
+    Fault, FaultCode, Subject, SAFETY_README_SECTION, SUPPLY_MAX_V, SUPPLY_MIN_V,
+};
 use core::fmt::{self, Write};
 
 /// HELP text, one `data:` line each.
@@ -215,12 +217,16 @@ pub fn done_event(l: &mut OutLine, t_s: f32, radius_mm: f32) {
     );
 }
 
-/// `alarm: <code> <sentence>; heaters off, RESET when cleared`.
+/// The alarm line of a trip: `alarm: <code> <sentence>; heaters off, RESET when cleared
+/// (<settings>; see README "<section>")`, naming the settings that govern it and the README
+/// section that explains them (Klipper's habit).
 pub fn alarm(l: &mut OutLine, f: &Fault) {
     let _ = write!(
         l,
-        "{ALARM_TAG} {}; heaters off, RESET when cleared",
-        FaultText(f)
+        "{ALARM_TAG} {}; heaters off, RESET when cleared ({}; see README \"{}\")",
+        FaultText(f),
+        f.settings(),
+        SAFETY_README_SECTION
     );
 }
 
@@ -469,5 +475,80 @@ mod tests {
         let l = line(|l| version(l, "0.1.0"));
         assert_eq!(l, "ok version=0.1.0 protocol=1");
         assert_eq!(PROTOCOL_VERSION, 1);
+    }
+}
+
+#[cfg(test)]
+mod alarm_tests {
+    use super::*;
+    use crate::supervisor::{Fault, FaultCode, Subject};
+    use crate::vocab::Phase;
+    use crate::vocab::{Heater, Sensor};
+    extern crate std;
+    use std::format;
+    use std::vec::Vec;
+
+    const README: &str = include_str!("../../README.md");
+
+    /// Every kind of trip, with every subject it can have.
+    fn every_fault() -> Vec<Fault> {
+        let sensors = Sensor::ALL.map(Subject::Sensor);
+        let phases = [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release].map(Subject::Phase);
+        let heaters = Heater::ALL.map(Subject::Heater);
+        let cases: [(FaultCode, &[Subject]); 8] = [
+            (FaultCode::ThermistorOpen, &sensors),
+            (FaultCode::ThermistorShort, &sensors),
+            (FaultCode::UnderTemperature, &sensors),
+            (FaultCode::OverTemperature, &sensors),
+            (FaultCode::HeaterNotHeating, &heaters),
+            (FaultCode::StaleSensor, &[Subject::Frame]),
+            (FaultCode::SupplyOutOfRange, &[Subject::Supply]),
+            (FaultCode::PhaseTimeout, &phases),
+        ];
+        cases
+            .iter()
+            .flat_map(|(code, subjects)| {
+                subjects.iter().map(move |&subject| Fault {
+                    code: *code,
+                    subject,
+                    value: -123.4,
+                })
+            })
+            .collect()
+    }
+
+    /// The README section `heading` (a `## ` heading), up to the next `## ` heading.
+    fn readme_section(heading: &str) -> &'static str {
+        let start = README
+            .find(&format!("\n## {heading}\n"))
+            .unwrap_or_else(|| panic!("README has no \"## {heading}\" heading"));
+        let body = &README[start + 1..];
+        let end = body[3..].find("\n## ").map_or(body.len(), |e| e + 3);
+        &body[..end]
+    }
+
+    #[test]
+    fn every_alarm_names_its_settings_and_a_readme_section_that_explains_them() {
+        let section = readme_section(SAFETY_README_SECTION);
+        for f in every_fault() {
+            let mut l = OutLine::new();
+            alarm(&mut l, &f);
+            assert!(
+                l.starts_with(&format!("alarm: {} ", f.code.as_str())),
+                "{l}"
+            );
+            let tail = format!(
+                "; heaters off, RESET when cleared ({}; see README \"{SAFETY_README_SECTION}\")",
+                f.settings()
+            );
+            // Not truncated: the whole suffix fits the line.
+            assert!(l.ends_with(&tail), "{l}");
+            for setting in f.settings().split(", ") {
+                assert!(
+                    section.contains(&format!("`{setting}`")),
+                    "README \"{SAFETY_README_SECTION}\" does not explain `{setting}` ({l})"
+                );
+            }
+        }
     }
 }

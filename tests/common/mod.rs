@@ -2,7 +2,7 @@
 #![allow(dead_code)]
 
 use morphlink::controller::Outputs;
-use morphlink::sequencer::Phase;
+use morphlink::vocab::Phase;
 use morphlink_sim::{LinkSetup, Rig};
 
 /// A rig plus the lines it has written.

@@ -6,7 +6,7 @@
 
 use indicatif::{ProgressBar, ProgressStyle};
 use morphlink::protocol::Mode;
-use morphlink::sequencer::AUTO_STRATEGY;
+use morphlink::strategy::AUTO_STRATEGY;
 use morphlink::table;
 use morphlink_host::plot::{self, prelude::*};
 use morphlink_sim::ensemble::{
@@ -139,7 +139,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
     match summary.best {
         Some(b) if b == AUTO_STRATEGY => println!("auto = {} (the chart's choice)", b.as_str()),
         Some(b) => println!(
-            "note: the chart picks {} but AUTO_STRATEGY is {}; update src/sequencer.rs",
+            "note: the chart picks {} but AUTO_STRATEGY is {}; update src/strategy/mod.rs",
             b.as_str(),
             AUTO_STRATEGY.as_str()
         ),

@@ -38,28 +38,16 @@ pub const RATE_FILTER_S: (f32, f32) = (0.5, 1.5);
 /// deliver anyway (the heater caps clip it).
 pub const APPROACH_S: f32 = 1.0;
 
-/// The two heated nodes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum HeatedNode {
-    /// The PLA rod (heated by the nichrome wrap).
-    Pla,
-    /// The TCA (Joule heated).
-    Tca,
-}
+/// The two heated nodes: the PLA rod (heated by the nichrome wrap) and the TCA (Joule heated),
+/// named by their heater; [`Heater::index`] indexes the observer's per-node arrays.
+pub use crate::vocab::Heater as HeatedNode;
+use crate::vocab::Heater;
 
-impl HeatedNode {
-    fn index(self) -> usize {
-        match self {
-            HeatedNode::Pla => 0,
-            HeatedNode::Tca => 1,
-        }
-    }
-    fn node(self) -> (usize, usize, usize) {
-        // (node, its shell, conductance index node→shell)
-        match self {
-            HeatedNode::Pla => (node::PLA, node::PLA_SHELL, 2),
-            HeatedNode::Tca => (node::TCA, node::TCA_SHELL, 0),
-        }
+/// A heated node's place in the network: (node, its shell, conductance index node→shell).
+fn model_nodes(n: HeatedNode) -> (usize, usize, usize) {
+    match n {
+        Heater::Pla => (node::PLA, node::PLA_SHELL, 2),
+        Heater::Tca => (node::TCA, node::TCA_SHELL, 0),
     }
 }
 
@@ -129,7 +117,7 @@ impl Observer {
         let keep = lag_remaining(dt, SENSOR_TAU_S as f64);
         for n in [HeatedNode::Pla, HeatedNode::Tca] {
             let i = n.index();
-            let t = self.net.temp_c[n.node().0];
+            let t = self.net.temp_c[model_nodes(n).0];
             self.sensor_c[i] = t + (self.sensor_c[i] - t) * keep;
         }
     }
@@ -170,12 +158,12 @@ impl Observer {
 
     /// The model's temperature of a heated node, °C (feed-forward: no correction).
     pub fn model_c(&self, n: HeatedNode) -> f32 {
-        self.net.temp_c[n.node().0] as f32
+        self.net.temp_c[model_nodes(n).0] as f32
     }
 
     /// The observer's estimate of a heated node's true temperature, °C.
     pub fn estimate_c(&self, n: HeatedNode) -> f32 {
-        (self.net.temp_c[n.node().0] + self.disturbance_k[n.index()]) as f32
+        (self.net.temp_c[model_nodes(n).0] + self.disturbance_k[n.index()]) as f32
     }
 
     /// Current disturbance estimate of a heated node, K (estimate − model).
@@ -188,7 +176,7 @@ impl Observer {
     /// raises the node's own capacity, clamped to `[0, max_w]`. Far below the target this is
     /// `max_w` (overdrive); at the target it is the steady power.
     pub fn power_to_reach_w(&self, n: HeatedNode, target_c: f32, max_w: f32) -> f32 {
-        let (i, shell, g) = n.node();
+        let (i, shell, g) = model_nodes(n);
         let t = self.net.temp_c[i];
         let tgt = target_c as f64;
         let g = self.net.conductance_w_k[g];

@@ -19,6 +19,15 @@ pub const TARGET_MAX_C: f32 = 110.0;
 /// Bisection steps of the inversion: the bracket is under 110 K wide, so 30 steps give better
 /// than 1e-6 K.
 const BISECT_STEPS: usize = 30;
+// 20 K under the supervisor's limit, as claimed above.
+const _: () = assert!(TARGET_MAX_C + 20.0 <= crate::supervisor::TCA_LIMITS.max_c);
+// Above the steady TCA temperature of the table's largest power with the PLA at hold power in
+// 30 °C water (the lumped resistances), so no table radius is out of the targets' reach.
+const _: () = assert!(
+    30.0 + crate::link::R_TT_K_PER_W * crate::table::MAX_POWER_W
+        + crate::link::R_TP_K_PER_W * crate::link::HOLD_POWER_W
+        < TARGET_MAX_C
+);
 
 /// Curvature after release, 1/m, of a link that froze at curvature `lock_per_m` and whose TCA
 /// and PLA have cooled to `ambient_c` (°C).

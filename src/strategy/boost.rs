@@ -1,0 +1,52 @@
+//! `boost`: the controller's thermal model driven open loop (feed-forward) to the target
+//! temperatures with overdrive, then the steady power; soften and lock are gated on the bare
+//! thermistors, bend on the model.
+
+use super::model::observer::HeatedNode;
+use super::model::{target, ModelDrive};
+use super::{Start, Strategy, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
+use crate::vocab::{Measurements, Phase, Powers};
+
+/// The `boost` strategy.
+#[derive(Clone, Copy, Debug)]
+pub struct Boost {
+    /// The model it drives.
+    pub drive: ModelDrive,
+}
+
+impl Boost {
+    /// For a morph starting as `s` says: the TCA aims at the radius's temperature.
+    pub fn new(s: &Start) -> Self {
+        Boost {
+            drive: ModelDrive::new(s, target::tca_temp_for_radius_c(s.radius_mm)),
+        }
+    }
+}
+
+impl Strategy for Boost {
+    fn enter(&mut self, _phase: Phase, _now_ms: u64) {
+        self.drive.enter();
+    }
+
+    fn phase_done(&mut self, t: &Tick) -> bool {
+        self.drive.observe(t.now_ms, t.m);
+        let o = self.drive.observer();
+        let (pla_c, tca_c) = (o.model_c(HeatedNode::Pla), o.model_c(HeatedNode::Tca));
+        match t.phase {
+            Phase::Soften => t.m.t_pla_c >= SOFT_THRESHOLD_C,
+            Phase::Bend => self.drive.bend_done(t, pla_c, tca_c, true),
+            Phase::Lock => t.m.t_pla_c < RIGID_THRESHOLD_C,
+            Phase::Release => t.in_phase_s >= RELEASE_S,
+            Phase::Idle | Phase::Fault => false,
+        }
+    }
+
+    fn radius_estimate_mm(&self, m: &Measurements) -> f32 {
+        let tca_c = self.drive.observer().model_c(HeatedNode::Tca);
+        target::final_radius_mm(tca_c, m.t_amb_c)
+    }
+
+    fn powers(&mut self, phase: Phase, t: &Tick) -> Powers {
+        self.drive.powers(phase, t, 0.0, 0.0)
+    }
+}

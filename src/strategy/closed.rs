@@ -1,0 +1,102 @@
+//! `closed`: temperature control of both heaters on the model corrected by the thermistors (the
+//! observer); every phase is gated on the corrected estimate, and the lock temperature is
+//! compensated for the release spring-back.
+
+use super::model::observer::{HeatedNode, LEARN_MAX_RATE_K_PER_S, SENSOR_TAU_S};
+use super::model::{target, ModelDrive};
+use super::{Start, Strategy, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
+use crate::vocab::{Measurements, Phase, Powers};
+
+/// `closed` ends lock when the observer's PLA estimate and the PLA thermistor corrected for its
+/// lag (reading + assumed lag × its rate, what a first-order sensor trails by) are both below
+/// [`RIGID_THRESHOLD_C`]. Under water this ends lock about 3 s before the bare thermistor would;
+/// a thermistor that stops falling (warm surroundings) holds the lock, whatever the model says.
+pub const CLOSED_RIGID_LEAD_S: f32 = SENSOR_TAU_S;
+/// The lag correction of [`CLOSED_RIGID_LEAD_S`] is used only while the surroundings read at
+/// least this far below [`RIGID_THRESHOLD_C`], K: then the rod keeps cooling after release and a
+/// lock ended a kelvin early freezes the same shape. In surroundings nearer the threshold the
+/// rod may stall just above it, so the bare thermistor decides, as in `gated`.
+pub const CLOSED_LEAD_AMBIENT_MARGIN_K: f32 = 10.0;
+/// Where `closed` counts the PLA as rigid in cool surroundings (see
+/// [`CLOSED_LEAD_AMBIENT_MARGIN_K`]), °C: 12 K below Tg the PLA's modulus is 98 % of the way to
+/// glassy on a log scale (about 1.5 GPa) and its flow time 27 s, growing e-fold with every 3 K it
+/// keeps cooling after release, so the shape is frozen. Waiting for [`RIGID_THRESHOLD_C`] costs
+/// 3–8 s under water with no measurable change of the final radius over the ensemble. In warm
+/// surroundings the rod may stall near these temperatures, so there `closed` waits for
+/// [`RIGID_THRESHOLD_C`] on the bare thermistor, as `gated` does.
+pub const CLOSED_RIGID_COOL_C: f32 = 50.0;
+const _: () =
+    assert!(RIGID_THRESHOLD_C <= CLOSED_RIGID_COOL_C && CLOSED_RIGID_COOL_C < SOFT_THRESHOLD_C);
+
+/// The `closed` strategy.
+#[derive(Clone, Copy, Debug)]
+pub struct Closed {
+    /// The model it corrects and drives.
+    pub drive: ModelDrive,
+}
+
+impl Closed {
+    /// For a morph starting as `s` says: the TCA aims at the lock temperature whose shape after
+    /// release is the target, in the measured surroundings.
+    pub fn new(s: &Start) -> Self {
+        let t = target::lock_temp_for_final_radius_c(s.radius_mm, s.m.t_amb_c);
+        Closed {
+            drive: ModelDrive::new(s, t),
+        }
+    }
+
+    /// Whether the PLA counts as rigid: see [`CLOSED_RIGID_LEAD_S`].
+    fn rigid(&self, m: &Measurements, pla_c: f32) -> bool {
+        let rate = self.drive.observer().measured_rate_k_per_s(HeatedNode::Pla);
+        let cool_surroundings = m.t_amb_c < RIGID_THRESHOLD_C - CLOSED_LEAD_AMBIENT_MARGIN_K;
+        let (lead_c, rigid_c) = if cool_surroundings {
+            (
+                m.t_pla_c + CLOSED_RIGID_LEAD_S * rate.min(0.0),
+                CLOSED_RIGID_COOL_C,
+            )
+        } else {
+            (m.t_pla_c, RIGID_THRESHOLD_C)
+        };
+        pla_c < rigid_c && lead_c < rigid_c
+    }
+}
+
+impl Strategy for Closed {
+    fn enter(&mut self, _phase: Phase, _now_ms: u64) {
+        self.drive.enter();
+    }
+
+    fn phase_done(&mut self, t: &Tick) -> bool {
+        self.drive.observe(t.now_ms, t.m);
+        let o = self.drive.observer();
+        let (pla_c, tca_c) = (o.estimate_c(HeatedNode::Pla), o.estimate_c(HeatedNode::Tca));
+        match t.phase {
+            Phase::Soften => pla_c >= SOFT_THRESHOLD_C,
+            Phase::Bend => {
+                // Also waits for the TCA thermistor to slow down, so the observer has learnt the
+                // model's error before the PLA freezes the shape.
+                let learnt =
+                    o.measured_rate_k_per_s(HeatedNode::Tca).abs() <= LEARN_MAX_RATE_K_PER_S;
+                self.drive.bend_done(t, pla_c, tca_c, learnt)
+            }
+            Phase::Lock => self.rigid(t.m, pla_c),
+            Phase::Release => t.in_phase_s >= RELEASE_S,
+            Phase::Idle | Phase::Fault => false,
+        }
+    }
+
+    fn radius_estimate_mm(&self, m: &Measurements) -> f32 {
+        let tca_c = self.drive.observer().estimate_c(HeatedNode::Tca);
+        target::final_radius_mm(tca_c, m.t_amb_c)
+    }
+
+    fn powers(&mut self, phase: Phase, t: &Tick) -> Powers {
+        // The model is driven to `target − disturbance`, so the estimate meets the target.
+        let o = self.drive.observer();
+        let (d_pla, d_tca) = (
+            o.disturbance_k(HeatedNode::Pla),
+            o.disturbance_k(HeatedNode::Tca),
+        );
+        self.drive.powers(phase, t, d_pla, d_tca)
+    }
+}

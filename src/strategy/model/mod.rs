@@ -1,0 +1,187 @@
+//! What `boost` and `closed` share: both heaters driven through the controller's thermal model
+//! ([`observer`]) to target temperatures (PLA [`PLA_SOFT_TARGET_C`], TCA the radius's
+//! temperature from [`target`]), the TCA from the start of soften on.
+
+pub mod observer;
+pub mod target;
+
+use super::{Start, Tick, SOFT_THRESHOLD_C};
+use crate::heater::HeaterConfig;
+use crate::link::R_TT_K_PER_W;
+use crate::supervisor::{HEATING_CHECK_S, PLA_LIMITS, TCA_LIMITS};
+use crate::vocab::{Measurements, Phase, Powers};
+use observer::{HeatedNode, Observer};
+
+/// PLA temperature the `boost` and `closed` strategies hold while bending, °C: 5 K above the
+/// [`SOFT_THRESHOLD_C`] (so thermistor noise and the observer's error do not drop it below the
+/// threshold) and no hotter, because every kelvin above Tg must be cooled off again in lock.
+pub const PLA_SOFT_TARGET_C: f32 = 75.0;
+const _: () = assert!(PLA_SOFT_TARGET_C >= SOFT_THRESHOLD_C + 5.0);
+/// Largest PLA heater power of the model strategies, W: the heater's cap (5 W, above the
+/// paper's 4 W) is the overdrive.
+pub const PLA_BOOST_MAX_W: f32 = HeaterConfig::PLA.max_power_w;
+/// Largest TCA power of the model strategies, W: the TCA heater's cap (2 W, about 110 °C steady
+/// under water); the target temperature, not this cap, bounds the TCA.
+pub const TCA_BOOST_MAX_W: f32 = HeaterConfig::TCA.max_power_w;
+/// The model strategies count the TCA as at its target once within this band, K: 0.27 mm of
+/// radius per kelvin, so 0.3 K is under 0.1 mm.
+pub const MODEL_SETTLE_BAND_C: f32 = 0.3;
+/// ...for this long, s: a few ticks more than the observer's correction needs to move after a
+/// step, so a passing crossing of the band does not count.
+pub const MODEL_SETTLE_S: f32 = 1.5;
+
+/// Thermistor guard of the model strategies, K: a heater is switched off for the tick while its
+/// thermistor reads more than this above the heater's target temperature. The model assumes
+/// water; in still air the same power heats about five times as much, and the feed-forward
+/// alone would run into the supervisor's 130 °C limit. 10 K is far outside the observer's
+/// normal error (under 2 K) and keeps every target (at most 110 °C) 10 K under the limit.
+pub const MODEL_GUARD_K: f32 = 10.0;
+// The guard trips before the supervisor does, with the margin the comment above claims.
+const _: () = assert!(target::TARGET_MAX_C + MODEL_GUARD_K + 10.0 <= TCA_LIMITS.max_c);
+const _: () = assert!(PLA_SOFT_TARGET_C + MODEL_GUARD_K + 10.0 <= PLA_LIMITS.max_c);
+
+/// Least power the model strategies ask of a heater in a phase that has it on, W. The
+/// supervisor's heater watch starts afresh whenever a heater's command drops to 0 W; restarted
+/// on a hot heater that the controller is letting cool towards its target, it would read the
+/// fall as a dead heater. 0.05 W keeps the watch running and heats the TCA by under 2 K.
+pub const MODEL_KEEP_ALIVE_W: f32 = 0.05;
+const _: () = assert!(MODEL_KEEP_ALIVE_W > 0.0 && MODEL_KEEP_ALIVE_W * R_TT_K_PER_W < 2.0);
+
+/// A TCA at full power whose thermistor rises slower than this has reached as close to its
+/// target as the 2 W cap allows, K/s (strong convection in cold water, a low supply): the model
+/// strategies lock there instead of waiting for the bend timeout. The bulk's 17 s time constant
+/// makes 0.05 K/s about 1 K short of where it would end.
+pub const MODEL_STALL_RATE_K_PER_S: f32 = 0.05;
+/// A stall counts only this long after MORPH, s: after the supervisor's heater-not-heating check
+/// has judged the TCA (on from MORPH, judged after 10 s), so a dead TCA, which does not rise at
+/// all, trips instead of passing for a stalled one.
+pub const STALL_AFTER_S: f32 = HEATING_CHECK_S + MODEL_SETTLE_S;
+const _: () = assert!(STALL_AFTER_S > HEATING_CHECK_S);
+
+/// Power a heater delivers when asked for `w` (W) at the measured supply: capped by the
+/// heater and by full duty (`V²/R`); unknown supply assumes the request is met.
+fn deliverable_w(heater: &HeaterConfig, w: f32, supply_v: f32) -> f32 {
+    let w = w.clamp(0.0, heater.max_power_w);
+    if supply_v.is_finite() && supply_v > 0.0 {
+        w.min(supply_v * supply_v / heater.resistance_ohm)
+    } else {
+        w
+    }
+}
+
+/// The model, the TCA target and the drive state `boost` and `closed` share.
+#[derive(Clone, Copy, Debug)]
+pub struct ModelDrive {
+    observer: Observer,
+    tca_target_c: f32,
+    last_ms: u64,
+    applied: Powers,
+    settled_since_ms: Option<u64>,
+}
+
+impl ModelDrive {
+    /// The model started from the temperatures at MORPH, aiming the TCA at `tca_target_c`.
+    pub fn new(s: &Start, tca_target_c: f32) -> Self {
+        let m = s.m;
+        ModelDrive {
+            observer: Observer::from_measured(m.t_pla_c, m.t_tca_c, m.t_amb_c),
+            tca_target_c,
+            last_ms: s.now_ms,
+            applied: Powers::default(),
+            settled_since_ms: None,
+        }
+    }
+
+    /// The controller's thermal model of the link.
+    pub fn observer(&self) -> &Observer {
+        &self.observer
+    }
+
+    /// TCA temperature the morph aims at, °C.
+    #[cfg(test)]
+    pub(crate) fn tca_target_c(&self) -> f32 {
+        self.tca_target_c
+    }
+
+    /// A new phase: the settle hold starts afresh.
+    pub(crate) fn enter(&mut self) {
+        self.settled_since_ms = None;
+    }
+
+    /// Runs the model over the time since the last tick with the powers the heaters delivered,
+    /// then corrects it with this tick's thermistors.
+    pub(crate) fn observe(&mut self, now_ms: u64, m: &Measurements) {
+        let dt_s = now_ms.saturating_sub(self.last_ms) as f32 / 1000.0;
+        self.last_ms = now_ms;
+        if dt_s > 0.0 {
+            let a = self.applied;
+            self.observer.predict(dt_s, a.pla_w, a.tca_w, m.t_amb_c);
+            self.observer.correct(dt_s, m.t_pla_c, m.t_tca_c);
+        }
+    }
+
+    /// True once `ok` has held for [`MODEL_SETTLE_S`].
+    fn held(&mut self, now_ms: u64, ok: bool) -> bool {
+        if !ok {
+            self.settled_since_ms = None;
+            return false;
+        }
+        let since = *self.settled_since_ms.get_or_insert(now_ms);
+        now_ms.saturating_sub(since) as f32 / 1000.0 >= MODEL_SETTLE_S
+    }
+
+    /// Whether bend is over: the TCA (`tca_c`, the strategy's view of it) at its target or as
+    /// close as the link allows, the PLA (`pla_c`) soft and `learnt`, all for
+    /// [`MODEL_SETTLE_S`].
+    pub(crate) fn bend_done(&mut self, t: &Tick, pla_c: f32, tca_c: f32, learnt: bool) -> bool {
+        // Above the target with the TCA off is as close as the link can get (warm
+        // surroundings and the PLA's heat keep it there): lock as it is.
+        let reached = (tca_c - self.tca_target_c).abs() <= MODEL_SETTLE_BAND_C
+            || (tca_c > self.tca_target_c && self.applied.tca_w <= MODEL_KEEP_ALIVE_W)
+            || (tca_c < self.tca_target_c
+                && self.applied.tca_w
+                    >= deliverable_w(&HeaterConfig::TCA, TCA_BOOST_MAX_W, t.supply_v) - 1e-3
+                && self.observer.measured_rate_k_per_s(HeatedNode::Tca) < MODEL_STALL_RATE_K_PER_S
+                && t.since_start_s > STALL_AFTER_S);
+        let at_target = reached && pla_c >= SOFT_THRESHOLD_C && learnt;
+        self.held(t.now_ms, at_target) && t.in_phase_s >= MODEL_SETTLE_S
+    }
+
+    /// Powers for `phase`: the model driven to `target − offset` for each heater (the offsets
+    /// are `closed`'s disturbance estimates, 0 for `boost`), then the thermistor guard.
+    pub(crate) fn powers(&mut self, phase: Phase, t: &Tick, d_pla: f32, d_tca: f32) -> Powers {
+        let o = &self.observer;
+        let m = t.m;
+        let pla_on = matches!(phase, Phase::Soften | Phase::Bend);
+        let tca_on = matches!(phase, Phase::Soften | Phase::Bend | Phase::Lock);
+        let pla_w = if pla_on {
+            o.power_to_reach_w(HeatedNode::Pla, PLA_SOFT_TARGET_C - d_pla, PLA_BOOST_MAX_W)
+        } else {
+            0.0
+        };
+        let tca_w = if tca_on {
+            o.power_to_reach_w(HeatedNode::Tca, self.tca_target_c - d_tca, TCA_BOOST_MAX_W)
+        } else {
+            0.0
+        };
+        // The guard: whatever the model says, a thermistor well above target turns its heater
+        // down to the keep-alive power.
+        let keep = |on: bool, w: f32, too_hot: bool| {
+            if !on {
+                0.0
+            } else if too_hot {
+                MODEL_KEEP_ALIVE_W
+            } else {
+                w.max(MODEL_KEEP_ALIVE_W)
+            }
+        };
+        let pla_w = keep(pla_on, pla_w, m.t_pla_c > PLA_SOFT_TARGET_C + MODEL_GUARD_K);
+        let tca_w = keep(tca_on, tca_w, m.t_tca_c > self.tca_target_c + MODEL_GUARD_K);
+        let p = Powers { pla_w, tca_w };
+        self.applied = Powers {
+            pla_w: deliverable_w(&HeaterConfig::PLA, p.pla_w, t.supply_v),
+            tca_w: deliverable_w(&HeaterConfig::TCA, p.tca_w, t.supply_v),
+        };
+        p
+    }
+}
