@@ -11,6 +11,9 @@ use std::time::Duration;
 /// Longest wall time for one emulated morph (about 80 s of firmware time at 20×: 4 s).
 const MORPH_WALL: Duration = Duration::from_secs(60);
 const REPLY: Duration = Duration::from_secs(5);
+/// Firmware time a morphed link is left to cool before its radius is read, s (the TCA cools and
+/// springs back within about 20 s under water).
+const COOL_S: f64 = 40.0;
 
 /// QEMU and the image, built once for all tests; `None` when skipping was asked for.
 fn setup() -> Option<(PathBuf, PathBuf)> {
@@ -110,9 +113,22 @@ fn full_morphs_reach_their_targets_with_phases_in_order() {
             phases == ["soften", "bend", "lock", "release"],
             "phases {phases:?}"
         );
-        // Let the TCA cool (firmware time runs 20× faster), then read the simulated truth.
-        std::thread::sleep(Duration::from_secs(2));
-        let state = emu.command("SIM STATE", REPLY).unwrap();
+        // Let the TCA cool for 40 s of firmware time (2 s of wall time at 20×, longer on a
+        // loaded machine), then read the simulated truth.
+        let sim_time = |emu: &mut Emulator| -> (f64, String) {
+            let state = emu.command("SIM STATE", REPLY).unwrap();
+            let line = state.last().unwrap().clone();
+            (field(&line, "time_s").unwrap().parse().unwrap(), line)
+        };
+        let (done_s, _) = sim_time(&mut emu);
+        let cooled = std::time::Instant::now();
+        let state = loop {
+            let (t, line) = sim_time(&mut emu);
+            if t >= done_s + COOL_S || cooled.elapsed() > MORPH_WALL {
+                break vec![line];
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        };
         let radius: f64 = field(state.last().unwrap(), "radius_mm")
             .unwrap()
             .parse()
