@@ -45,7 +45,8 @@ mod firmware {
         format_error, Assembled, LineAssembler, OutLine, SimCommand, ERR_INVALID_LINE,
         ERR_LINE_TOO_LONG,
     };
-    use morphlink::stats::{write_boot_line, LoopTiming, ResetCause};
+    use morphlink::stats::{write_boot_line, LoopTiming};
+    use morphlink::vocab::ResetCause;
     use morphlink_boards::selected as board;
     use morphlink_boards::{AnalogInputs, HeaterOutputs, Input, Watchdog, INPUTS};
 

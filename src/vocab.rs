@@ -1,6 +1,7 @@
 //! The words every part of the core shares: morph phases, heater powers, measured
-//! temperatures, and which sensor or heater a value belongs to. Leaf module: it depends on
-//! nothing else in the crate, so the modules that use it need not depend on each other.
+//! temperatures, which sensor or heater a value belongs to, and why the chip last reset. Leaf
+//! module: it depends on nothing else in the crate, so the modules that use it need not depend
+//! on each other (`tests/layout.rs` holds that).
 
 /// Firmware version reported by VERSION and the boot line.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
@@ -185,5 +186,64 @@ mod tests {
             (m.of(Sensor::Pla), m.of(Sensor::Tca), m.of(Sensor::Amb)),
             (1.0, 2.0, 3.0)
         );
+    }
+}
+
+/// The reset flags a chip reports (STM32 `RCC_CSR`): the board boundary's type.
+pub use morphlink_boards::ResetFlags;
+
+/// Why the chip last reset, decoded from its reset flags by [`ResetCause::from_flags`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ResetCause {
+    /// The independent watchdog expired: the control task stopped feeding it.
+    Watchdog,
+    /// The window watchdog expired (not used by this firmware; reported if it ever fires).
+    WindowWatchdog,
+    /// Software reset: a panic or HardFault handler (heaters were forced off first), or a
+    /// debugger's reset.
+    Software,
+    /// Illegal entry into a low-power mode.
+    LowPower,
+    /// Power came up, or the supply dipped below the brown-out threshold.
+    PowerOn,
+    /// The reset pin: the board's reset button or the ST-LINK.
+    Pin,
+    /// No flag was set.
+    Unknown,
+}
+
+impl ResetCause {
+    /// The cause behind a set of flags. Every internal reset also pulses the reset pin and a
+    /// power-on also sets brown-out, so the most specific flag wins: watchdogs, then software,
+    /// then low power, then power-on, and the pin only when nothing else is set.
+    pub fn from_flags(f: ResetFlags) -> ResetCause {
+        if f.watchdog {
+            ResetCause::Watchdog
+        } else if f.window_watchdog {
+            ResetCause::WindowWatchdog
+        } else if f.software {
+            ResetCause::Software
+        } else if f.low_power {
+            ResetCause::LowPower
+        } else if f.power_on {
+            ResetCause::PowerOn
+        } else if f.pin {
+            ResetCause::Pin
+        } else {
+            ResetCause::Unknown
+        }
+    }
+
+    /// The lowercase wire word.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ResetCause::Watchdog => "watchdog",
+            ResetCause::WindowWatchdog => "window-watchdog",
+            ResetCause::Software => "software",
+            ResetCause::LowPower => "low-power",
+            ResetCause::PowerOn => "power-on",
+            ResetCause::Pin => "pin",
+            ResetCause::Unknown => "unknown",
+        }
     }
 }

@@ -101,3 +101,68 @@ fn the_core_touches_no_hardware() {
         }
     }
 }
+
+/// The core's top-level modules and the other top-level modules each one names
+/// (`crate::<module>`) outside its tests.
+fn core_imports() -> std::collections::BTreeMap<String, std::collections::BTreeSet<String>> {
+    let mut graph = std::collections::BTreeMap::new();
+    for (p, s) in sources("src") {
+        let rel = p.strip_prefix(root().join("src")).unwrap();
+        let top = rel.iter().next().unwrap().to_string_lossy().replace(".rs", "");
+        if ["main", "emulated", "lib"].contains(&top.as_str()) {
+            continue;
+        }
+        let body = code(s.split("#[cfg(test)]").next().unwrap());
+        let deps: &mut std::collections::BTreeSet<String> = graph.entry(top.clone()).or_default();
+        for (i, _) in body.match_indices("crate::") {
+            let name: String = body[i + 7..]
+                .chars()
+                .take_while(|c| c.is_alphanumeric() || *c == '_')
+                .collect();
+            if name != top && !name.is_empty() {
+                deps.insert(name);
+            }
+        }
+    }
+    graph
+}
+
+#[test]
+fn the_core_has_no_import_cycle() {
+    let graph = core_imports();
+    assert!(graph.contains_key("controller") && graph.contains_key("vocab"), "{graph:?}");
+    // Depth-first search for a back edge.
+    fn visit(
+        m: &str,
+        graph: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>,
+        path: &mut Vec<String>,
+        done: &mut std::collections::BTreeSet<String>,
+    ) {
+        if done.contains(m) {
+            return;
+        }
+        if let Some(at) = path.iter().position(|p| p == m) {
+            panic!("import cycle: {} -> {m}", path[at..].join(" -> "));
+        }
+        path.push(m.to_string());
+        for d in graph.get(m).into_iter().flatten() {
+            visit(d, graph, path, done);
+        }
+        path.pop();
+        done.insert(m.to_string());
+    }
+    let mut done = Default::default();
+    for m in graph.keys() {
+        visit(m, &graph, &mut Vec::new(), &mut done);
+    }
+}
+
+#[test]
+fn the_supervisor_imports_no_strategy_and_the_vocabulary_nothing() {
+    let graph = core_imports();
+    let sup = &graph["supervisor"];
+    for m in ["strategy", "sequencer", "controller"] {
+        assert!(!sup.contains(m), "the supervisor imports {m}: {sup:?}");
+    }
+    assert!(graph["vocab"].is_empty(), "vocab imports {:?}", graph["vocab"]);
+}

@@ -10,7 +10,7 @@ use super::{
 };
 use crate::fixed::Fixed;
 use crate::vocab::Phase;
-use crate::stats::ResetCause;
+use crate::vocab::ResetCause;
 use crate::supervisor::{
     Fault, FaultCode, Subject, SAFETY_README_SECTION, SUPPLY_MAX_V, SUPPLY_MIN_V,
 };
