@@ -1,4 +1,4 @@
-//! NTC thermistor conversion, open/short detection and oversampling.
+//! NTC thermistor conversion (of oversampled, summed readings) and open/short detection.
 //!
 //! Circuit: the NTC sits on the low side of a divider with a pull-up resistor to the ADC
 //! reference, so the ADC reads `fraction = R_ntc / (R_ntc + R_pullup)` of full scale. A broken
