@@ -1,5 +1,6 @@
 //! The simulated board around a plant: what stands between a simulated link and the
-//! controller on a real board. The heater output stage (a stuck MOSFET, an open heater), the
+//! controller on a real board. The heater output stage (duties that hold only while the
+//! controller refreshes them, a stuck MOSFET, an open heater), the
 //! thermistor dividers and ADC (with noise, an open or shorted thermistor) and the `SIM`
 //! commands. The plant (`morphlink-plant`) gives bead temperatures, supply and radius; this
 //! module turns them into the ADC frame the controller reads and turns the controller's duties
@@ -9,6 +10,7 @@
 //! run the same board model. Built with the `sim` feature; `no_std` and allocation-free.
 
 use crate::controller::{Config, Inputs, Outputs};
+use crate::heater::CommandWatchdog;
 use crate::protocol::{format_error, reply, Medium, OutLine, SimCommand, SimFault};
 use morphlink_plant::{Duties, LumpedSpec, Plant, Setting};
 
@@ -52,6 +54,7 @@ pub struct Bench<P> {
     thermistor_fault: [Option<SimFault>; 3],
     heater_open: [bool; 2],
     heater_stuck: [bool; 2],
+    output: [CommandWatchdog; 2],
     rng: u64,
 }
 
@@ -65,6 +68,7 @@ impl<P: Plant> Bench<P> {
             thermistor_fault: [None; 3],
             heater_open: [false; 2],
             heater_stuck: [false; 2],
+            output: [CommandWatchdog::default(); 2],
             rng: noise.seed | 1,
         }
     }
@@ -101,8 +105,29 @@ impl<P: Plant> Bench<P> {
         }
     }
 
-    /// Lets the plant run `dt_s` with PWM duties `out` commanded.
-    pub fn advance(&mut self, dt_s: f64, out: Outputs) {
+    /// The controller's duties at `now_ms`: the output stage holds them only while they are
+    /// refreshed (the core's command watchdog, as a board's PWM stage would apply it).
+    pub fn drive(&mut self, now_ms: u64, out: Outputs) {
+        self.output[0].refresh(now_ms, out.pla_duty);
+        self.output[1].refresh(now_ms, out.tca_duty);
+    }
+
+    /// The duties the output stage applies at `now_ms`.
+    pub fn applied(&self, now_ms: u64) -> Outputs {
+        Outputs {
+            pla_duty: self.output[0].duty(now_ms),
+            tca_duty: self.output[1].duty(now_ms),
+        }
+    }
+
+    /// Both outputs off at once, whatever was commanded (the firmware's panic path).
+    pub fn heaters_off(&mut self) {
+        self.output = [CommandWatchdog::default(); 2];
+    }
+
+    /// Lets the plant run `dt_s` from `now_ms` with the duties the output stage applies then.
+    pub fn run(&mut self, now_ms: u64, dt_s: f64) {
+        let out = self.applied(now_ms);
         let duty = Duties {
             pla: self.delivered(0, out.pla_duty),
             tca: self.delivered(1, out.tca_duty),

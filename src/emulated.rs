@@ -13,19 +13,19 @@ use morphlink_boards::emulated::SimulatedLink;
 use morphlink_boards::INPUTS;
 use morphlink_plant::Lumped;
 
-/// The bench with the duties last applied and the time it was last advanced to.
+/// The bench and the time it was last advanced to.
 struct State {
     bench: Bench<Lumped>,
-    duties: Outputs,
     last_ms: u64,
 }
 
 impl State {
-    /// Lets the link run from its last time to `now_ms` under the current duties.
+    /// Lets the link run from its last time to `now_ms` under the duties its output stage
+    /// applied then (they expire if the control task stops refreshing them).
     fn advance_to(&mut self, now_ms: u64) {
         if now_ms > self.last_ms {
-            self.bench
-                .advance((now_ms - self.last_ms) as f64 / 1000.0, self.duties);
+            let dt_s = (now_ms - self.last_ms) as f64 / 1000.0;
+            self.bench.run(self.last_ms, dt_s);
             self.last_ms = now_ms;
         }
     }
@@ -57,7 +57,7 @@ impl SimulatedLink for Link {
     fn apply(&self, now_ms: u64, pla_duty: f32, tca_duty: f32) {
         with_state(|s| {
             s.advance_to(now_ms);
-            s.duties = Outputs { pla_duty, tca_duty };
+            s.bench.drive(now_ms, Outputs { pla_duty, tca_duty });
         });
     }
 
@@ -65,7 +65,7 @@ impl SimulatedLink for Link {
         STATE.lock(|s| {
             if let Ok(mut s) = s.try_borrow_mut() {
                 if let Some(s) = s.as_mut() {
-                    s.duties = Outputs::default();
+                    s.bench.heaters_off();
                 }
             }
         });
@@ -78,7 +78,6 @@ pub fn init() -> &'static Link {
     STATE.lock(|s| {
         *s.borrow_mut() = Some(State {
             bench: Bench::new(Lumped::new(NOMINAL_LINK), Config::DEFAULT, Noise::NOMINAL),
-            duties: Outputs::default(),
             last_ms: 0,
         })
     });

@@ -4,7 +4,6 @@
 
 use morphlink::bench::{Bench, Noise, NOMINAL_LINK};
 use morphlink::controller::{Config, Controller, Inputs, Outputs, TICK_MS};
-use morphlink::heater::CommandWatchdog;
 use morphlink::protocol::SimCommand;
 use morphlink_plant::{Lumped, LumpedSpec, Plant};
 
@@ -59,11 +58,9 @@ impl LinkSetup {
 pub struct Rig<P = Lumped> {
     /// The controller under test.
     pub ctrl: Controller,
-    /// The plant on its simulated board.
+    /// The plant on its simulated board (its output stage holds the duties only while the
+    /// controller refreshes them).
     pub bench: Bench<P>,
-    /// The heater output stage: PLA and TCA duties hold only while the controller refreshes
-    /// them (the core's command watchdog, as a board's PWM stage would apply it).
-    pwm: [CommandWatchdog; 2],
     now_ms: u64,
 }
 
@@ -82,7 +79,6 @@ impl<P: Plant> Rig<P> {
         let mut rig = Rig {
             ctrl: Controller::new(board),
             bench: Bench::new(plant, board, noise),
-            pwm: [CommandWatchdog::default(); 2],
             now_ms: 0,
         };
         rig.tick();
@@ -132,20 +128,15 @@ impl<P: Plant> Rig<P> {
 
     /// Duties the heaters actually get now.
     pub fn applied(&self) -> Outputs {
-        Outputs {
-            pla_duty: self.pwm[0].duty(self.now_ms),
-            tca_duty: self.pwm[1].duty(self.now_ms),
-        }
+        self.bench.applied(self.now_ms)
     }
 
     fn apply(&mut self, out: Outputs) {
-        self.pwm[0].refresh(self.now_ms, out.pla_duty);
-        self.pwm[1].refresh(self.now_ms, out.tca_duty);
+        self.bench.drive(self.now_ms, out);
     }
 
     fn run_link(&mut self) {
-        let applied = self.applied();
-        self.bench.advance(TICK_MS as f64 / 1000.0, applied);
+        self.bench.run(self.now_ms, TICK_MS as f64 / 1000.0);
         self.now_ms += TICK_MS;
     }
 
