@@ -29,10 +29,7 @@ use crate::stm32 as common;
 use crate::ResetFlags;
 use embassy_stm32::adc::vals::{Rovsm, Trovs};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, SampleTime};
-use embassy_stm32::gpio::OutputType;
 use embassy_stm32::peripherals::LPUART1;
-use embassy_stm32::timer::low_level::CountingMode;
-use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::{bind_interrupts, pac};
 
@@ -91,15 +88,7 @@ pub fn init() -> Parts {
     }
     let p = embassy_stm32::init(config);
 
-    let pwm = SimplePwm::new(
-        p.TIM3,
-        Some(PwmPin::new(p.PA6, OutputType::PushPull)),
-        Some(PwmPin::new(p.PA7, OutputType::PushPull)),
-        None,
-        None,
-        common::PWM_FREQUENCY,
-        CountingMode::EdgeAlignedUp,
-    );
+    let pwm = common::heater_pwm(p.TIM3, p.PA6, p.PA7);
 
     let sensors = Sensors::new(
         Adc::new(

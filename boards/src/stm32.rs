@@ -4,9 +4,11 @@
 
 use crate::{AnalogInputs, HeaterOutputs, Parts, ResetFlags, Watchdog, INPUTS};
 use embassy_stm32::adc::{Adc, AnyAdcChannel, SampleTime};
-use embassy_stm32::peripherals::{ADC1, IWDG, TIM3};
+use embassy_stm32::gpio::OutputType;
+use embassy_stm32::peripherals::{ADC1, IWDG, PA6, PA7, TIM3};
+use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::time::Hertz;
-use embassy_stm32::timer::simple_pwm::{SimplePwm, SimplePwmChannel, SimplePwmChannels};
+use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel, SimplePwmChannels};
 use embassy_stm32::timer::{Channel, GeneralInstance4Channel};
 use embassy_stm32::usart::{self, BufferedUart, BufferedUartRx, BufferedUartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
@@ -86,6 +88,24 @@ pub fn uart_config() -> usart::Config {
     let mut c = usart::Config::default();
     c.baudrate = crate::BAUD;
     c
+}
+
+/// The heater timer with the PLA gate (PA6) on channel 1 and the TCA gate (PA7) on channel 2,
+/// push-pull, at [`PWM_FREQUENCY`]; both at 0 % duty.
+pub fn heater_pwm(
+    tim: Peri<'static, HeaterTimer>,
+    pla: Peri<'static, PA6>,
+    tca: Peri<'static, PA7>,
+) -> SimplePwm<'static, HeaterTimer> {
+    SimplePwm::new(
+        tim,
+        Some(PwmPin::new(pla, OutputType::PushPull)),
+        Some(PwmPin::new(tca, OutputType::PushPull)),
+        None,
+        None,
+        PWM_FREQUENCY,
+        CountingMode::EdgeAlignedUp,
+    )
 }
 
 /// Both heater channels of one PWM timer.
