@@ -21,12 +21,13 @@
 //!
 //! ```text
 //! > hello protocol=1 tick_s=0.1
-//! < ok t_pla_c=22 t_tca_c=22 t_amb_c=22 supply_v=12 radius_mm=46.46
-//! > step dt_s=0.1 pla_duty=0.83 tca_duty=0
-//! < ok t_pla_c=22.013 t_tca_c=22.001 t_amb_c=22 supply_v=12 radius_mm=46.46
+//! < ok t_pla_c=22 t_tca_c=22 t_amb_c=22 supply_v=12 radius_mm=53.065346621112695
+//! > step dt_s=0.1 pla_duty=0.8333333333333334 tca_duty=0
+//! < ok t_pla_c=22.072693128353844 t_tca_c=22 t_amb_c=22 supply_v=12 radius_mm=53.06534662111271
 //! > set medium=air
 //! < error: unsupported medium
 //! ```
+//! (the lumped plant, `morph-plant`; the last reply is a plant that cannot change its medium).
 //!
 //! Numbers are written with Rust's shortest round-trip form, so a value crosses the pipe
 //! exactly. Formatting goes into any [`core::fmt::Write`] and parsing reads a `&str`: the codec
