@@ -9,8 +9,8 @@
 //! run the same board model. Built with the `sim` feature; `no_std` and allocation-free.
 
 use crate::controller::{Config, Inputs, Outputs};
-use crate::protocol::{format_error, reply, Medium, OutLine, Sensor, SimCommand, SimFault};
 use crate::protocol::reply::SimSetting;
+use crate::protocol::{format_error, reply, Medium, OutLine, Sensor, SimCommand, SimFault};
 use morphlink_plant::{Duties, LumpedSpec, Plant, SetError, Setting};
 
 /// Highest supply `SIM SUPPLY` accepts, V (the supervisor's limit is lower, so faults can be tried).
@@ -233,14 +233,12 @@ impl<P: Plant> Bench<P> {
                     }
                 }
             }
-            SimCommand::Medium(m) => {
-                match self.set_medium(m) {
-                    Ok(()) => reply::sim_medium(&mut l, m),
-                    Err(SetError::Unsupported) => {
-                        reply::sim_setting_unsupported(&mut l, SimSetting::Medium)
-                    }
+            SimCommand::Medium(m) => match self.set_medium(m) {
+                Ok(()) => reply::sim_medium(&mut l, m),
+                Err(SetError::Unsupported) => {
+                    reply::sim_setting_unsupported(&mut l, SimSetting::Medium)
                 }
-            }
+            },
             SimCommand::Panic => {
                 l = format_error(&reply::ERR_SIM_PANIC_UNSUPPORTED);
             }

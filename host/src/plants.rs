@@ -37,7 +37,9 @@ mod tests {
     fn lumped_is_built_in_and_hifi_says_it_is_not() {
         let p = in_process(PlantKind::Lumped, &LinkSetup::NOMINAL).unwrap();
         assert_eq!(p.sample(), LinkSetup::NOMINAL.lumped().sample());
-        let e = in_process(PlantKind::Hifi, &LinkSetup::NOMINAL).err().unwrap();
+        let e = in_process(PlantKind::Hifi, &LinkSetup::NOMINAL)
+            .err()
+            .unwrap();
         assert!(e.starts_with("the hifi plant is not built in"), "{e}");
     }
 }

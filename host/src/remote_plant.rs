@@ -9,7 +9,8 @@
 //! a step) or garbage, or is silent that long has failed: [`Plant::step`] returns nothing, so
 //! the failure is recorded, named by the plant's command, and given by [`Plant::failure`];
 //! the shell checks it after each tick and ends the run. After a failure the plant is not
-//! spoken to again and keeps its last sample.
+//! spoken to again and keeps its last sample. Dropped, it closes the plant's input (end of
+//! input: the plant exits) and after half a second kills the plant's process group.
 //!
 //! What the protocol does not carry, [`Plant::truth`] cannot give: its temperatures are the
 //! bead temperatures of the last reply (not the rod means an in-process plant reports) and its
@@ -18,6 +19,7 @@
 use morphlink_plant::wire::{self, Reply, Request};
 use morphlink_plant::{Duties, Plant, Sample, SetError, Setting, Truth};
 use std::io::{BufRead, BufReader, Write};
+use std::os::unix::process::CommandExt;
 use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
@@ -60,6 +62,8 @@ impl RemotePlant {
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
+            // Its own process group, so that a hung plant is ended with whatever it started.
+            .process_group(0)
             .spawn()
             .map_err(|e| format!("plant `{cmd}` could not be started with sh -c: {e}"))?;
         let stdout = child.stdout.take().expect("piped stdout");
@@ -127,9 +131,7 @@ impl RemotePlant {
     fn exchange(&mut self, req: &Request) -> Result<Answer, String> {
         let line = request_line(req);
         let sent = match self.stdin.as_mut() {
-            Some(stdin) => {
-                writeln!(stdin, "{line}").and_then(|()| stdin.flush())
-            }
+            Some(stdin) => writeln!(stdin, "{line}").and_then(|()| stdin.flush()),
             None => Err(std::io::ErrorKind::BrokenPipe.into()),
         };
         if sent.is_err() {
@@ -269,6 +271,13 @@ impl Drop for RemotePlant {
             }
             std::thread::sleep(Duration::from_millis(5));
         }
+        // The group's id is the shell's pid (`process_group(0)`): end the shell and its children.
+        if let Ok(pid) = i32::try_from(self.child.id()) {
+            // SAFETY: kill(2) takes no pointers; a stale group id at worst fails with ESRCH.
+            unsafe {
+                libc::kill(-pid, libc::SIGKILL);
+            }
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
@@ -307,15 +316,24 @@ mod tests {
         let mut p = RemotePlant::spawn(&echo_plant("error: boom"), 0.1, REPLY_TIMEOUT).unwrap();
         assert_eq!(p.set(Setting::AmbientC(30.0)), Err(SetError::Unsupported));
         let why = p.failure().unwrap();
-        assert!(why.contains("answered `error: boom` to `set ambient_c=30`"), "{why}");
+        assert!(
+            why.contains("answered `error: boom` to `set ambient_c=30`"),
+            "{why}"
+        );
     }
 
     #[test]
     fn failures_name_the_plant() {
         let cases = [
             ("exit 3", "exited (exit status: 3)"),
-            ("read l; echo garbage", "answered garbage to `hello protocol=1 tick_s=0.1`"),
-            ("read l; echo 'error: boom'", "answered `error: boom` to `hello"),
+            (
+                "read l; echo garbage",
+                "answered garbage to `hello protocol=1 tick_s=0.1`",
+            ),
+            (
+                "read l; echo 'error: boom'",
+                "answered `error: boom` to `hello",
+            ),
             ("sleep 5", "was silent for 0.3 s"),
         ];
         for (cmd, what) in cases {
@@ -335,7 +353,10 @@ mod tests {
         assert!(p.failure().is_none());
         p.step(0.1, Duties::default());
         let why = p.failure().unwrap().to_string();
-        assert!(why.contains("exited (exit status: 0) instead of answering `step"), "{why}");
+        assert!(
+            why.contains("exited (exit status: 0) instead of answering `step"),
+            "{why}"
+        );
         p.step(0.1, Duties::default());
         assert_eq!(p.failure(), Some(why.as_str()), "the first failure is kept");
         assert_eq!(p.sample().radius_mm, 46.0);

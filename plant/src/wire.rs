@@ -282,7 +282,9 @@ pub fn answer<P: Plant + ?Sized>(plant: &mut P, line: &str, w: &mut impl Write) 
     match parse_request(line) {
         Ok(Request::Hello { protocol, .. }) if protocol != PROTOCOL => write_error(
             w,
-            format_args!("{UNSUPPORTED} protocol={protocol}, this plant speaks protocol={PROTOCOL}"),
+            format_args!(
+                "{UNSUPPORTED} protocol={protocol}, this plant speaks protocol={PROTOCOL}"
+            ),
         ),
         Ok(Request::Hello { .. }) => write_ok(w, &plant.sample()),
         Ok(Request::Step { dt_s, duty }) => {
@@ -388,7 +390,10 @@ mod tests {
             }),
             "step dt_s=0.1 pla_duty=0.5 tca_duty=0"
         );
-        assert_eq!(request(&Request::Set(Setting::Medium(Medium::Air))), "set medium=air");
+        assert_eq!(
+            request(&Request::Set(Setting::Medium(Medium::Air))),
+            "set medium=air"
+        );
     }
 
     #[test]
@@ -407,7 +412,9 @@ mod tests {
         );
         assert_eq!(reply(&Reply::Error("boom")), "error: boom");
         assert_eq!(parse_reply("error: boom\r\n"), Ok(Reply::Error("boom")));
-        assert!(parse_reply("error: unsupported medium").unwrap().is_unsupported());
+        assert!(parse_reply("error: unsupported medium")
+            .unwrap()
+            .is_unsupported());
         assert!(!parse_reply("error: boom").unwrap().is_unsupported());
     }
 
@@ -452,7 +459,10 @@ mod tests {
             ("", Empty),
             ("jump dt_s=1", UnknownVerb),
             ("step dt_s=0.1 pla_duty=0.5", Missing("tca_duty")),
-            ("step dt_s=0.1 pla_duty=1.5 tca_duty=0", BadValue("pla_duty")),
+            (
+                "step dt_s=0.1 pla_duty=1.5 tca_duty=0",
+                BadValue("pla_duty"),
+            ),
             ("step dt_s=-1 pla_duty=0 tca_duty=0", BadValue("dt_s")),
             ("step dt_s=NaN pla_duty=0 tca_duty=0", BadValue("dt_s")),
             ("step dt_s=0.1 pla_duty tca_duty=0", NotKeyValue),
@@ -528,14 +538,20 @@ mod tests {
         let hello = answered(&mut remote, "hello protocol=1 tick_s=0.1");
         assert_eq!(parse_reply(&hello), Ok(Reply::Ok(local.sample())));
         for _ in 0..50 {
-            let duty = Duties { pla: 0.8, tca: 0.05 };
+            let duty = Duties {
+                pla: 0.8,
+                tca: 0.05,
+            };
             local.step(0.1, duty);
             let line = request(&Request::Step { dt_s: 0.1, duty });
             let got = answered(&mut remote, &line);
             assert_eq!(parse_reply(&got), Ok(Reply::Ok(local.sample())), "{got}");
         }
         let got = answered(&mut remote, "set supply_v=9");
-        assert!(matches!(parse_reply(&got), Ok(Reply::Ok(s)) if s.supply_v == 9.0), "{got}");
+        assert!(
+            matches!(parse_reply(&got), Ok(Reply::Ok(s)) if s.supply_v == 9.0),
+            "{got}"
+        );
         assert_eq!(
             answered(&mut remote, "hello protocol=2 tick_s=0.1"),
             "error: unsupported protocol=2, this plant speaks protocol=1"
@@ -544,7 +560,10 @@ mod tests {
             answered(&mut remote, "step dt_s=0.1"),
             "error: missing pla_duty=: `step dt_s=0.1`"
         );
-        assert_eq!(answered(&mut Fixed, "set medium=air"), "error: unsupported medium");
+        assert_eq!(
+            answered(&mut Fixed, "set medium=air"),
+            "error: unsupported medium"
+        );
         assert!(parse_reply(&answered(&mut Fixed, "set supply_v=1"))
             .unwrap()
             .is_unsupported());

@@ -284,7 +284,9 @@ mod tests {
             let got = lines(&mut rig, line);
             assert_eq!(
                 got,
-                [std::format!("error: unsupported SIM {word}: the plant cannot change that")]
+                [std::format!(
+                    "error: unsupported SIM {word}: the plant cannot change that"
+                )]
             );
         }
         // Range checks come first, as before.
