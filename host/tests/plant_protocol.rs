@@ -273,3 +273,25 @@ fn morph_plant_speaks_the_protocol_on_stdin_and_stdout() {
     assert!(lines[2].starts_with("ok t_pla_c="), "{}", lines[2]);
     assert_eq!(lines[3], "error: unknown verb: `fly`");
 }
+
+#[test]
+fn a_plant_that_fails_on_a_setting_ends_the_run_without_a_reply() {
+    let cmd = "while read verb rest; do case $verb in set) echo garbage;; \
+               *) echo 'ok t_pla_c=22 t_tca_c=22 t_amb_c=22 supply_v=12 radius_mm=46';; \
+               esac; done";
+    let run = morph_sim(
+        &["--plant-cmd", cmd],
+        "SIM STATE\nSIM SUPPLY 5\nSIM STATE\n",
+    );
+    let out = text(&run.stdout);
+    let err = text(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{err}");
+    // The first SIM STATE only: no reply to the failed setting, nothing after it.
+    assert_eq!(out.lines().count(), 1, "{out}");
+    assert!(out.starts_with("ok time_s="), "{out}");
+    assert!(
+        err.contains("answered garbage to `set supply_v=5`"),
+        "{err}"
+    );
+    assert!(err.contains("run ended, heaters off"), "{err}");
+}

@@ -182,7 +182,18 @@ impl<P: Plant> Rig<P> {
     fn sim_command(&mut self, cmd: SimCommand, out: &mut impl FnMut(&str)) {
         match cmd {
             SimCommand::Wait(seconds) => self.wait(seconds, out),
-            _ => self.bench.command(cmd, out),
+            _ => {
+                // A plant that fails on a `SIM` setting gets no reply written for it (its
+                // refusal would read as the plant's answer): the shell ends the run instead.
+                let mut reply = OutLine::new();
+                self.bench.command(cmd, &mut |l: &str| {
+                    reply.clear();
+                    let _ = reply.push_str(l);
+                });
+                if self.plant_failure().is_none() {
+                    out(&reply);
+                }
+            }
         }
     }
 
