@@ -11,13 +11,18 @@
 
 use crate::controller::{Config, Inputs, Outputs};
 use crate::heater::CommandWatchdog;
+use crate::protocol::reply::SimSetting;
 use crate::protocol::{format_error, reply, Medium, OutLine, SimCommand, SimFault};
-use morphlink_plant::{Duties, LumpedSpec, Plant, Setting};
+use morphlink_plant::{Duties, LumpedSpec, Plant, SetError, Setting};
 
 /// Highest supply `SIM SUPPLY` accepts, V (the supervisor's limit is lower, so faults can be tried).
 pub const SIM_SUPPLY_MAX_V: f32 = 30.0;
 /// Range `SIM AMBIENT` accepts, °C.
 pub const SIM_AMBIENT_RANGE_C: (f32, f32) = (-10.0, 60.0);
+/// Longest `SIM WAIT`, s: an hour of simulated time (the longest phase timeouts sum to under
+/// 800 s, and `morph-sim` stops at `--max-time-s`, 3600 s by default), a bound on one line's
+/// work.
+pub const SIM_WAIT_MAX_S: f32 = 3600.0;
 
 /// The nominal lumped link: the built-in parameters, nominal heaters (30 Ω wrap, 6.5 Ω TCA)
 /// and a 12 V supply, 3 s thermistor lag. The plant of `morph-sim` and the emulated image.
@@ -187,25 +192,31 @@ impl<P: Plant> Bench<P> {
         self.heater_stuck = [false; 2];
     }
 
-    /// Sets the true supply voltage, V.
-    pub fn set_supply_v(&mut self, v: f64) {
-        let _ = self.plant.set(Setting::SupplyV(v));
+    /// Sets the true supply voltage, V; the plant may refuse.
+    pub fn set_supply_v(&mut self, v: f64) -> Result<(), SetError> {
+        self.plant.set(Setting::SupplyV(v))
     }
 
-    /// Sets the medium's temperature, °C.
-    pub fn set_ambient_c(&mut self, c: f64) {
-        let _ = self.plant.set(Setting::AmbientC(c));
+    /// Sets the medium's temperature, °C; the plant may refuse.
+    pub fn set_ambient_c(&mut self, c: f64) -> Result<(), SetError> {
+        self.plant.set(Setting::AmbientC(c))
     }
 
-    /// Sets the medium (its convection coefficient).
-    pub fn set_medium(&mut self, m: Medium) {
-        let _ = self.plant.set(Setting::Medium(match m {
+    /// Sets the medium (its convection coefficient); the plant may refuse.
+    pub fn set_medium(&mut self, m: Medium) -> Result<(), SetError> {
+        self.plant.set(Setting::Medium(match m {
             Medium::Water => morphlink_plant::Medium::Water,
             Medium::Air => morphlink_plant::Medium::Air,
-        }));
+        }))
     }
 
     /// Carries out a `SIM` command and writes its one reply line through `out`.
+    ///
+    /// `SIM STATE` reports the plant's [`Plant::truth`] time and temperatures and its radius;
+    /// a remote plant's truth is what the plant protocol gives (bead temperatures). A setting
+    /// the plant refuses answers `error: unsupported SIM <WORD> ...`. `SIM WAIT` needs a rig
+    /// that owns the clock (`morphlink-sim`'s `Rig` answers it before it gets here); here,
+    /// as in the emulated image, it is `error: unsupported`.
     pub fn command(&mut self, cmd: SimCommand, out: &mut impl FnMut(&str)) {
         let mut l = OutLine::new();
         match cmd {
@@ -222,8 +233,12 @@ impl<P: Plant> Bench<P> {
                 if !(0.0..=SIM_SUPPLY_MAX_V).contains(&v) {
                     reply::sim_supply_out_of_range(&mut l, SIM_SUPPLY_MAX_V);
                 } else {
-                    self.set_supply_v(v as f64);
-                    reply::sim_supply(&mut l, v);
+                    match self.set_supply_v(v as f64) {
+                        Ok(()) => reply::sim_supply(&mut l, v),
+                        Err(SetError::Unsupported) => {
+                            reply::sim_setting_unsupported(&mut l, SimSetting::Supply)
+                        }
+                    }
                 }
             }
             SimCommand::Ambient(c) => {
@@ -231,16 +246,25 @@ impl<P: Plant> Bench<P> {
                 if !(lo..=hi).contains(&c) {
                     reply::sim_ambient_out_of_range(&mut l, lo, hi);
                 } else {
-                    self.set_ambient_c(c as f64);
-                    reply::sim_ambient(&mut l, c);
+                    match self.set_ambient_c(c as f64) {
+                        Ok(()) => reply::sim_ambient(&mut l, c),
+                        Err(SetError::Unsupported) => {
+                            reply::sim_setting_unsupported(&mut l, SimSetting::Ambient)
+                        }
+                    }
                 }
             }
-            SimCommand::Medium(m) => {
-                self.set_medium(m);
-                reply::sim_medium(&mut l, m);
-            }
+            SimCommand::Medium(m) => match self.set_medium(m) {
+                Ok(()) => reply::sim_medium(&mut l, m),
+                Err(SetError::Unsupported) => {
+                    reply::sim_setting_unsupported(&mut l, SimSetting::Medium)
+                }
+            },
             SimCommand::Panic => {
                 l = format_error(&reply::ERR_SIM_PANIC_UNSUPPORTED);
+            }
+            SimCommand::Wait(_) => {
+                l = format_error(&reply::ERR_SIM_WAIT_UNSUPPORTED);
             }
             SimCommand::Clear => {
                 self.clear_faults();

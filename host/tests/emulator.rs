@@ -91,6 +91,13 @@ fn boots_and_answers_version_status_and_range() {
     );
     let r = emu.command("RANGE", REPLY).unwrap();
     check!(emu, field(r.last().unwrap(), "min_mm").is_some(), "{r:?}");
+    // Firmware time cannot be skipped: SIM WAIT is morph-sim's alone.
+    let w = emu.command("SIM WAIT 5", REPLY).unwrap();
+    check!(
+        emu,
+        w.last().unwrap().starts_with("error: unsupported SIM WAIT"),
+        "{w:?}"
+    );
 }
 
 #[test]

@@ -8,13 +8,16 @@
 //! the workspace holds that (`tests/layout.rs`).
 //!
 //! The same seam is the plant protocol's: any model that answers [`Plant`]'s questions can
-//! drive the real controller tick by tick. `no_std` and allocation-free, so the emulated
-//! firmware image runs the very same plant as the host tools.
-#![cfg_attr(not(test), no_std)]
+//! drive the real controller tick by tick: [`wire`] is that protocol (plant protocol 1), with
+//! [`wire::serve`] (feature `std`) answering any [`Plant`] over it. `no_std` and
+//! allocation-free without `std`, so the emulated firmware image runs the very same plant as
+//! the host tools.
+#![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![deny(missing_docs)]
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod lumped;
+pub mod wire;
 
 pub use lumped::{Lumped, LumpedSpec};
 
@@ -95,4 +98,30 @@ pub trait Plant {
     fn truth(&self) -> Truth;
     /// Changes the surroundings or the supply from now on.
     fn set(&mut self, setting: Setting) -> Result<(), SetError>;
+    /// Why the plant can no longer answer (a remote plant that exited, timed out or refused a
+    /// step), naming it; `None` while it works. The rig's shell checks it after each tick and
+    /// ends the run. In-process plants never fail.
+    fn failure(&self) -> Option<&str> {
+        None
+    }
+}
+
+/// A boxed plant is a plant: shells pick one at run time (`Rig<Box<dyn Plant>>`).
+#[cfg(any(test, feature = "std"))]
+impl<P: Plant + ?Sized> Plant for std::boxed::Box<P> {
+    fn step(&mut self, dt_s: f64, duty: Duties) {
+        (**self).step(dt_s, duty)
+    }
+    fn sample(&self) -> Sample {
+        (**self).sample()
+    }
+    fn truth(&self) -> Truth {
+        (**self).truth()
+    }
+    fn set(&mut self, setting: Setting) -> Result<(), SetError> {
+        (**self).set(setting)
+    }
+    fn failure(&self) -> Option<&str> {
+        (**self).failure()
+    }
 }

@@ -2,9 +2,9 @@
 //! with the simulator-only `SIM` commands. `morph-sim`, the tests and the ensemble use it; the
 //! emulated image runs the same [`Bench`] with the firmware's own tasks instead.
 
-use morphlink::bench::{Bench, Noise, NOMINAL_LINK};
+use morphlink::bench::{Bench, Noise, NOMINAL_LINK, SIM_WAIT_MAX_S};
 use morphlink::controller::{Config, Controller, Inputs, Outputs, TICK_MS};
-use morphlink::protocol::SimCommand;
+use morphlink::protocol::{reply, OutLine, SimCommand};
 use morphlink_plant::{Lumped, LumpedSpec, Plant};
 
 /// A lumped link as the rig builds it: the plant's true values and the board's thermistor noise.
@@ -62,6 +62,7 @@ pub struct Rig<P = Lumped> {
     /// controller refreshes them).
     pub bench: Bench<P>,
     now_ms: u64,
+    waited_ms: u64,
 }
 
 impl Rig<Lumped> {
@@ -80,6 +81,7 @@ impl<P: Plant> Rig<P> {
             ctrl: Controller::new(board),
             bench: Bench::new(plant, board, noise),
             now_ms: 0,
+            waited_ms: 0,
         };
         rig.tick();
         rig
@@ -88,6 +90,17 @@ impl<P: Plant> Rig<P> {
     /// Rig time, ms.
     pub fn now_ms(&self) -> u64 {
         self.now_ms
+    }
+
+    /// Rig time spent in `SIM WAIT`, ms: a shell pacing the rig against a wall clock leaves
+    /// it out (that time was asked to pass at once).
+    pub fn waited_ms(&self) -> u64 {
+        self.waited_ms
+    }
+
+    /// Why the plant can no longer answer ([`Plant::failure`]); the shell ends the run.
+    pub fn plant_failure(&self) -> Option<&str> {
+        self.bench.plant().failure()
     }
 
     /// The plant.
@@ -158,6 +171,148 @@ impl<P: Plant> Rig<P> {
     }
 
     fn sim_command(&mut self, cmd: SimCommand, out: &mut impl FnMut(&str)) {
-        self.bench.command(cmd, out);
+        match cmd {
+            SimCommand::Wait(seconds) => self.wait(seconds, out),
+            _ => {
+                // A plant that fails on a `SIM` setting gets no reply written for it (its
+                // refusal would read as the plant's answer): the shell ends the run instead.
+                let mut reply = OutLine::new();
+                self.bench.command(cmd, &mut |l: &str| {
+                    reply.clear();
+                    let _ = reply.push_str(l);
+                });
+                if self.plant_failure().is_none() {
+                    out(&reply);
+                }
+            }
+        }
+    }
+
+    /// `SIM WAIT <s>`: runs the controller and the plant for `seconds` of rig time at the
+    /// control rate, writing events as they come, then `ok`. Refuses a negative, NaN or longer
+    /// than [`SIM_WAIT_MAX_S`] wait with `out-of-range`. If the plant fails on the way, it
+    /// stops there without a reply: the shell sees [`Rig::plant_failure`] and ends the run.
+    fn wait(&mut self, seconds: f32, out: &mut impl FnMut(&str)) {
+        let mut l = OutLine::new();
+        if !(0.0..=SIM_WAIT_MAX_S).contains(&seconds) {
+            reply::sim_wait_out_of_range(&mut l, SIM_WAIT_MAX_S);
+            out(&l);
+            return;
+        }
+        // Non-negative, so adding a half and truncating rounds to the nearest tick.
+        let ticks = (seconds as f64 * 1000.0 / TICK_MS as f64 + 0.5) as u64;
+        for _ in 0..ticks {
+            self.tick();
+            self.waited_ms += TICK_MS;
+            self.drain_events(out);
+            if self.plant_failure().is_some() {
+                return;
+            }
+        }
+        reply::ok(&mut l);
+        out(&l);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use morphlink_plant::{Duties, Sample, SetError, Setting, Truth};
+    use std::string::{String, ToString};
+    use std::vec::Vec;
+
+    fn lines(rig: &mut Rig<impl Plant>, line: &str) -> Vec<String> {
+        let mut got = Vec::new();
+        rig.handle_line(line, &mut |l: &str| got.push(l.to_string()));
+        got
+    }
+
+    #[test]
+    fn sim_wait_runs_the_rig_at_the_control_rate_and_emits_events() {
+        let mut rig = Rig::new(LinkSetup::NOMINAL);
+        let t0 = rig.now_ms();
+        assert_eq!(lines(&mut rig, "SIM WAIT 2.5"), ["ok"]);
+        assert_eq!(rig.now_ms() - t0, 2500);
+        assert_eq!(rig.waited_ms(), 2500);
+        assert_eq!(lines(&mut rig, "MORPH 38"), ["ok"]);
+        let got = lines(&mut rig, "SIM WAIT 120");
+        assert_eq!(got.last().map(String::as_str), Some("ok"), "{got:?}");
+        assert!(got[0].starts_with("event: phase soften"), "{got:?}");
+        assert!(got.iter().any(|l| l.starts_with("event: done")), "{got:?}");
+        assert!(!rig.ctrl.busy());
+        assert!((rig.radius_mm() - 38.0).abs() < 0.5, "{}", rig.radius_mm());
+    }
+
+    #[test]
+    fn sim_wait_is_bounded() {
+        let mut rig = Rig::new(LinkSetup::NOMINAL);
+        let t0 = rig.now_ms();
+        for bad in ["SIM WAIT -1", "SIM WAIT 3600.5", "SIM WAIT 100000"] {
+            assert_eq!(
+                lines(&mut rig, bad),
+                ["error: out-of-range wait must be 0..3600 s"],
+                "{bad}"
+            );
+        }
+        assert_eq!(lines(&mut rig, "SIM WAIT 0"), ["ok"]);
+        assert_eq!(rig.now_ms(), t0);
+    }
+
+    /// A plant that changes nothing it is asked to.
+    struct Stubborn(Lumped);
+    impl Plant for Stubborn {
+        fn step(&mut self, dt_s: f64, duty: Duties) {
+            self.0.step(dt_s, duty)
+        }
+        fn sample(&self) -> Sample {
+            self.0.sample()
+        }
+        fn truth(&self) -> Truth {
+            self.0.truth()
+        }
+        fn set(&mut self, _: Setting) -> Result<(), SetError> {
+            Err(SetError::Unsupported)
+        }
+    }
+
+    #[test]
+    fn sim_settings_a_plant_refuses_answer_unsupported() {
+        let mut rig = Rig::with_plant(Stubborn(LinkSetup::NOMINAL.lumped()), Noise::NOMINAL);
+        for (line, word) in [
+            ("SIM SUPPLY 5", "SUPPLY"),
+            ("SIM AMBIENT 30", "AMBIENT"),
+            ("SIM MEDIUM air", "MEDIUM"),
+        ] {
+            let got = lines(&mut rig, line);
+            assert_eq!(
+                got,
+                [std::format!(
+                    "error: unsupported SIM {word}: the plant cannot change that"
+                )]
+            );
+        }
+        // Range checks come first, as before.
+        assert_eq!(
+            lines(&mut rig, "SIM SUPPLY 99"),
+            ["error: out-of-range supply must be 0..30 V"]
+        );
+        let mut lumped = Rig::new(LinkSetup::NOMINAL);
+        assert_eq!(lines(&mut lumped, "SIM SUPPLY 11"), ["ok supply_v=11.00"]);
+    }
+
+    #[test]
+    fn a_rig_runs_a_boxed_plant() {
+        let plant: std::boxed::Box<dyn Plant> = std::boxed::Box::new(LinkSetup::NOMINAL.lumped());
+        let mut boxed = Rig::with_plant(plant, Noise::NOMINAL);
+        let mut plain = Rig::new(LinkSetup::NOMINAL);
+        for rig_lines in [lines(&mut boxed, "MORPH 38"), lines(&mut plain, "MORPH 38")] {
+            assert_eq!(rig_lines, ["ok"]);
+        }
+        for _ in 0..300 {
+            boxed.tick();
+            plain.tick();
+        }
+        assert_eq!(boxed.radius_mm(), plain.radius_mm());
+        assert!(boxed.plant_failure().is_none());
     }
 }

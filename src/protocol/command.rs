@@ -114,7 +114,8 @@ fn parse_morph<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<Command, P
 
 /// `SIM <subcommand> ...` after the command word.
 fn parse_sim<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<SimCommand, ProtoError> {
-    const NEEDS_SUB: &str = "SIM needs STATE, FAULT, SUPPLY, AMBIENT, MEDIUM, CLEAR or PANIC.";
+    const NEEDS_SUB: &str =
+        "SIM needs STATE, FAULT, SUPPLY, AMBIENT, MEDIUM, WAIT, CLEAR or PANIC.";
     let sub = args.next().ok_or(bad(NEEDS_SUB))?;
     let is = |word: &str| sub.eq_ignore_ascii_case(word);
     let sim = if is("STATE") {
@@ -137,6 +138,12 @@ fn parse_sim<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<SimCommand, 
             "SIM AMBIENT needs a temperature in degrees C, e.g. SIM AMBIENT 25.",
         )?;
         SimCommand::Ambient(temp_c)
+    } else if is("WAIT") {
+        let seconds = number(
+            args.next(),
+            "SIM WAIT needs a duration in s, e.g. SIM WAIT 60.",
+        )?;
+        SimCommand::Wait(seconds)
     } else if is("MEDIUM") {
         let medium = args
             .next()
@@ -154,6 +161,7 @@ fn parse_sim<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<SimCommand, 
         SimCommand::Supply(_) => "SIM SUPPLY takes one voltage.",
         SimCommand::Ambient(_) => "SIM AMBIENT takes one temperature.",
         SimCommand::Medium(_) => "SIM MEDIUM takes one medium.",
+        SimCommand::Wait(_) => "SIM WAIT takes one duration in s.",
     };
     no_more(args, extra)?;
     Ok(sim)

@@ -90,6 +90,11 @@ pub enum SimCommand {
     Medium(Medium),
     /// `SIM CLEAR`: remove every injected fault.
     Clear,
+    /// `SIM WAIT <s>`: the rig runs the controller and the plant for that much simulated time
+    /// at the normal control rate (events as usual), then answers `ok`; bounded by
+    /// `morphlink::bench::SIM_WAIT_MAX_S`. Only a rig that owns the clock (`morph-sim`) can;
+    /// the emulated image answers `error: unsupported` (firmware time cannot be skipped).
+    Wait(f32),
     /// `SIM PANIC`: the emulated image panics on purpose, to prove the panic path (heaters
     /// off, failing exit); the host simulator refuses it.
     Panic,
@@ -422,6 +427,10 @@ mod tests {
         assert_eq!(sim("SIM AMBIENT -5"), SimCommand::Ambient(-5.0));
         assert_eq!(sim("SIM MEDIUM air"), SimCommand::Medium(Medium::Air));
         assert_eq!(sim("SIM MEDIUM WATER"), SimCommand::Medium(Medium::Water));
+        assert_eq!(sim("SIM WAIT 60"), SimCommand::Wait(60.0));
+        assert_eq!(sim("sim wait 0.5"), SimCommand::Wait(0.5));
+        // The range (negative, too long) is the rig's to refuse, with out-of-range.
+        assert_eq!(sim("SIM WAIT -1"), SimCommand::Wait(-1.0));
         for bad in [
             "SIM",
             "SIM NOTHING",
@@ -440,6 +449,10 @@ mod tests {
             "SIM MEDIUM",
             "SIM MEDIUM oil",
             "SIM MEDIUM air water",
+            "SIM WAIT",
+            "SIM WAIT soon",
+            "SIM WAIT nan",
+            "SIM WAIT 1 s",
         ] {
             assert_eq!(code(bad), Some(ErrorCode::BadArgument), "{bad}");
         }
@@ -484,6 +497,8 @@ mod tests {
             "SIM AMBIENT 1 x",
             "SIM MEDIUM",
             "SIM MEDIUM air x",
+            "SIM WAIT",
+            "SIM WAIT 1 x",
         ];
         let errors = lines
             .iter()

@@ -17,7 +17,7 @@ use crate::supervisor::{
 use core::fmt::{self, Write};
 
 /// HELP text, one `data:` line each.
-pub const HELP: [&str; 10] = [
+pub const HELP: [&str; 11] = [
     "MORPH <radius_mm> [auto|paper|gated|boost|closed]  morph to a radius (see RANGE)",
     "STATUS                          phase, temperatures, powers, supply, fault",
     "ABORT                           both heaters off at once, phase idle",
@@ -27,7 +27,8 @@ pub const HELP: [&str; 10] = [
     "VERSION                         firmware and protocol version",
     "HELP                            this list",
     "STATS                           control-loop timing (us) and reset cause; hardware only",
-    "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|CLEAR|PANIC  simulated builds only",
+    "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|WAIT|CLEAR|PANIC  simulated builds only",
+    "SIM WAIT <s>                    run <s> of simulated time, then ok; morph-sim only",
 ];
 
 /// `STATS` on a build that does not time its control loop.
@@ -46,6 +47,12 @@ pub const ERR_SIM_UNSUPPORTED: ProtoError = ProtoError {
 pub const ERR_SIM_PANIC_UNSUPPORTED: ProtoError = ProtoError {
     code: ErrorCode::Unsupported,
     text: "SIM PANIC exists only in the emulated image",
+};
+
+/// `SIM WAIT` where the clock cannot be skipped (the emulated image runs at firmware time).
+pub const ERR_SIM_WAIT_UNSUPPORTED: ProtoError = ProtoError {
+    code: ErrorCode::Unsupported,
+    text: "SIM WAIT needs a simulator that owns its clock (morph-sim); firmware time cannot be skipped",
 };
 
 /// `error: <code> <detail>`.
@@ -341,6 +348,47 @@ pub fn sim_medium(l: &mut OutLine, m: Medium) {
     ok_with(l, format_args!("medium={}", m.as_str()));
 }
 
+/// `SIM WAIT` refused: `error: out-of-range wait must be 0..<max> s`.
+pub fn sim_wait_out_of_range(l: &mut OutLine, max_s: f32) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!("wait must be 0..{} s", Fixed(max_s, 0)),
+    );
+}
+
+/// A `SIM` setting the plant refused (`SIM SUPPLY`, `SIM AMBIENT`, `SIM MEDIUM` on a plant
+/// that cannot change it): `error: unsupported SIM <WORD>: the plant cannot change that`.
+pub fn sim_setting_unsupported(l: &mut OutLine, setting: SimSetting) {
+    error(
+        l,
+        ErrorCode::Unsupported,
+        format_args!("SIM {}: the plant cannot change that", setting.as_str()),
+    );
+}
+
+/// A `SIM` command that changes the plant (for [`sim_setting_unsupported`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SimSetting {
+    /// `SIM SUPPLY`.
+    Supply,
+    /// `SIM AMBIENT`.
+    Ambient,
+    /// `SIM MEDIUM`.
+    Medium,
+}
+
+impl SimSetting {
+    /// The command's word.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SimSetting::Supply => "SUPPLY",
+            SimSetting::Ambient => "AMBIENT",
+            SimSetting::Medium => "MEDIUM",
+        }
+    }
+}
+
 /// The word of a fault's subject.
 fn subject_str(s: &Subject) -> &'static str {
     match s {
@@ -422,6 +470,19 @@ mod tests {
             "error: out-of-range ambient must be -10..60 C"
         );
         assert_eq!(line(|l| sim_medium(l, Medium::Air)), "ok medium=air");
+        assert_eq!(
+            line(|l| sim_wait_out_of_range(l, 3600.0)),
+            "error: out-of-range wait must be 0..3600 s"
+        );
+        assert_eq!(
+            line(|l| sim_setting_unsupported(l, SimSetting::Medium)),
+            "error: unsupported SIM MEDIUM: the plant cannot change that"
+        );
+        assert_eq!(
+            format_error(&ERR_SIM_WAIT_UNSUPPORTED),
+            "error: unsupported SIM WAIT needs a simulator that owns its clock (morph-sim); \
+             firmware time cannot be skipped"
+        );
         assert_eq!(line(ok), "ok");
         assert_eq!(
             format_error(&ERR_SIM_PANIC_UNSUPPORTED),

@@ -1,9 +1,18 @@
-//! `morph-sim`: the controller core driving the simulated link, speaking protocol v1 on
+//! `morph-sim`: the controller core driving a simulated link, speaking protocol v1 on
 //! stdin/stdout. At end of input it keeps simulating until the controller is idle or faulted.
+//!
+//! The link is an in-process plant (`--plant lumped`, the default) or another process over
+//! the plant protocol (`--plant-cmd "<shell command>"`, see `morphlink_plant::wire`). A remote
+//! plant that fails (exits, answers `error:` or garbage, is silent for `--plant-timeout-s`)
+//! ends the run: a message naming the plant on stderr and exit code 1.
 use clap::Parser;
+use morphlink::controller::TICK_MS;
 use morphlink::protocol::{
     format_error, Assembled, LineAssembler, ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
 };
+use morphlink_host::plants::{self, PlantKind};
+use morphlink_host::remote_plant::RemotePlant;
+use morphlink_plant::Plant;
 use morphlink_sim::{LinkSetup, Rig};
 use std::io::{Read, Write};
 use std::sync::mpsc::{self, TryRecvError};
@@ -25,7 +34,27 @@ struct Cli {
     /// Stop after this much simulated time even if the controller is still busy, s.
     #[arg(long, default_value_t = 3600.0)]
     max_time_s: f64,
+    /// The in-process plant (the simulated link).
+    #[arg(long, value_enum, default_value_t = PlantKind::Lumped)]
+    plant: PlantKind,
+    /// Run the plant as this shell command (`sh -c`), spoken to over plant protocol 1 on its
+    /// stdin/stdout, instead of an in-process plant.
+    #[arg(long, value_name = "SHELL COMMAND", conflicts_with = "plant")]
+    plant_cmd: Option<String>,
+    /// How long to wait for each reply of a `--plant-cmd` plant, s.
+    #[arg(long, default_value_t = morphlink_host::remote_plant::REPLY_TIMEOUT.as_secs_f64(),
+          value_parser = parse_timeout)]
+    plant_timeout_s: f64,
 }
+
+fn parse_timeout(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(t) if t > 0.0 && t <= 86_400.0 => Ok(t),
+        _ => Err(format!("a timeout must be 0..86400 s, got `{s}`")),
+    }
+}
+
+type SimRig = Rig<Box<dyn Plant>>;
 
 #[derive(Clone, Copy)]
 enum Speed {
@@ -46,8 +75,12 @@ fn parse_speed(s: &str) -> Result<Speed, String> {
 }
 
 /// Feeds received bytes through the protocol's bounded line assembler into the rig.
-fn feed(rig: &mut Rig, asm: &mut LineAssembler, bytes: &[u8], emit: &mut impl FnMut(&str)) {
+/// Stops at a failed plant (the caller ends the run).
+fn feed(rig: &mut SimRig, asm: &mut LineAssembler, bytes: &[u8], emit: &mut impl FnMut(&str)) {
     for &b in bytes {
+        if rig.plant_failure().is_some() {
+            return;
+        }
         match asm.push(b) {
             Some(Assembled::Line(line)) => rig.handle_line(line, emit),
             Some(Assembled::TooLong) => emit(&format_error(&ERR_LINE_TOO_LONG)),
@@ -57,13 +90,49 @@ fn feed(rig: &mut Rig, asm: &mut LineAssembler, bytes: &[u8], emit: &mut impl Fn
     }
 }
 
+/// The plant the command line asks for.
+fn plant(cli: &Cli, setup: &LinkSetup) -> Result<Box<dyn Plant>, Stop> {
+    match &cli.plant_cmd {
+        Some(cmd) => {
+            let tick_s = TICK_MS as f64 / 1000.0;
+            let timeout = Duration::from_secs_f64(cli.plant_timeout_s);
+            let remote = RemotePlant::spawn(cmd, tick_s, timeout).map_err(Stop::PlantFailed)?;
+            Ok(Box::new(remote))
+        }
+        None => plants::in_process(cli.plant, setup).map_err(Stop::Unavailable),
+    }
+}
+
 fn main() {
     let cli = Cli::parse();
-    let plant = LinkSetup {
+    match run(&cli) {
+        Ok(()) => {}
+        Err(Stop::Unavailable(why)) => {
+            eprintln!("morph-sim: {why}");
+            std::process::exit(2);
+        }
+        Err(Stop::PlantFailed(why)) => {
+            eprintln!("morph-sim: {why}; run ended, heaters off");
+            std::process::exit(1);
+        }
+    }
+}
+
+/// Why a run stopped early.
+enum Stop {
+    /// The in-process plant asked for is not in this build.
+    Unavailable(String),
+    /// The remote plant failed (its message names it).
+    PlantFailed(String),
+}
+
+/// The run; `Err` names a plant that failed (the rig, and with it the plant, is dropped first).
+fn run(cli: &Cli) -> Result<(), Stop> {
+    let setup = LinkSetup {
         seed: cli.seed,
         ..LinkSetup::NOMINAL
     };
-    let mut rig = Rig::new(plant);
+    let mut rig: SimRig = Rig::with_plant(plant(cli, &setup)?, setup.noise());
     let (tx, rx) = mpsc::channel::<Vec<u8>>();
     std::thread::spawn(move || {
         let mut stdin = std::io::stdin().lock();
@@ -97,8 +166,14 @@ fn main() {
                 Err(TryRecvError::Disconnected) => input_open = false,
             }
         }
+        if let Some(why) = rig.plant_failure() {
+            return Err(Stop::PlantFailed(why.to_string()));
+        }
         rig.tick();
         rig.drain_events(&mut emit);
+        if let Some(why) = rig.plant_failure() {
+            return Err(Stop::PlantFailed(why.to_string()));
+        }
         let sim_s = rig.now_ms() as f64 / 1000.0;
         if !input_open && !rig.ctrl.busy() {
             break;
@@ -119,7 +194,9 @@ fn main() {
             }
             Speed::Max => {}
             Speed::Factor(f) => {
-                let due = Duration::from_secs_f64(sim_s / f);
+                // Time run by SIM WAIT was asked to pass at once: pace only the rest.
+                let paced_s = sim_s - rig.waited_ms() as f64 / 1000.0;
+                let due = Duration::from_secs_f64(paced_s / f);
                 if let Some(wait) = due.checked_sub(start.elapsed()) {
                     std::thread::sleep(wait);
                 }
@@ -132,4 +209,5 @@ fn main() {
         rig.now_ms() as f64 / 1000.0,
         rig.radius_mm()
     );
+    Ok(())
 }
