@@ -5,7 +5,7 @@
 //! Every range is a named default with the reason for it.
 
 use crate::rig::{LinkSetup, Rig};
-use morphlink_plant::Plant as _;
+use morphlink_plant::Plant;
 use morphlink::controller::{Outputs, TICK_MS};
 use morphlink::protocol::{Command, Mode};
 use morphlink::supervisor::FaultCode;
@@ -182,15 +182,25 @@ pub struct RunResult {
     pub max_true_c: [f64; 2],
 }
 
-/// Runs one morph to `target_mm` in `mode` on `plant`, calling `trace` every tick from MORPH to
-/// the radius measurement, and measures it.
+/// Runs one morph to `target_mm` in `mode` on the lumped link `plant`, calling `trace` every
+/// tick from MORPH to the radius measurement, and measures it.
 pub fn run_morph_traced(
     plant: LinkSetup,
     target_mm: f32,
     mode: Mode,
     trace: &mut impl FnMut(&TracePoint),
 ) -> RunResult {
-    let mut rig = Rig::new(plant);
+    run_morph_on(Rig::new(plant), target_mm, mode, trace)
+}
+
+/// Runs one morph to `target_mm` in `mode` on whatever plant `rig` holds (see
+/// [`run_morph_traced`]).
+pub fn run_morph_on<P: Plant>(
+    mut rig: Rig<P>,
+    target_mm: f32,
+    mode: Mode,
+    trace: &mut impl FnMut(&TracePoint),
+) -> RunResult {
     let t0 = rig.now_ms();
     rig.ctrl.handle(
         t0,
