@@ -9,6 +9,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod ensemble;
+pub mod oracle;
 pub mod rig;
 
 pub use rig::{LinkSetup, Rig};
