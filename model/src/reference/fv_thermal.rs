@@ -14,6 +14,11 @@
 //! error, never a NaN). Transients `C dT/dt = −A T + q` are stepped by backward Euler
 //! (unconditionally stable, same factorisation with `C/Δt` added) or explicit Euler, whose
 //! stability limit `Δt < 2/λmax(C⁻¹A)` is computed and enforced.
+//!
+//! For plants that step the section with powers that change every step, [`CrossSection::stepper`]
+//! factorises once for a step `Δt` and [`Stepper::step`] advances an absolute temperature field
+//! against an ambient that may change between steps. [`PlaHeat::Surface`] releases the nichrome's
+//! heat in the rod's boundary cells (those the rod's surface cuts) instead of through the rod.
 
 use super::ReferenceError;
 use crate::params::LinkParams;
@@ -55,8 +60,29 @@ pub struct CrossSection {
     tca_area: Vec<f64>,
     /// Heated area of the PLA in each cell, m².
     pla_area: Vec<f64>,
+    /// PLA area of the cells the rod's surface cuts (partly PLA), m²; zero elsewhere.
+    pla_surface_area: Vec<f64>,
+    /// Where the PLA heater's power goes.
+    pla_heat: PlaHeat,
+    /// Half-cell conduction resistance of each outer-ring cell to the rim, per metre, m K/W
+    /// (`dr / (2 k)` over the rim arc), so the rim conductance can follow a new `h`.
+    rim_half_r: Vec<f64>,
+    /// Disk radius, m.
+    radius_m: f64,
+    /// Rim heat-transfer coefficient, W/(m² K).
+    h_w_m2k: f64,
     /// Link length, m (to turn per-metre conductances into K/W).
     length_m: f64,
+}
+
+/// Where the PLA heater (the nichrome wrap) releases its power.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlaHeat {
+    /// Uniformly through the rod (`q̇ = P/V`, the paper's Eq. 2 form).
+    Volume,
+    /// In the rod's boundary cells, in proportion to their PLA area: the wire lies on the
+    /// rod's surface.
+    Surface,
 }
 
 /// Material of one sub-sample point.
@@ -258,9 +284,23 @@ impl CrossSection {
                 pla_area[c] = ps / ws * area;
             }
         }
+        let pla_surface_area: Vec<f64> = (0..n)
+            .map(|c| {
+                let (i, _) = (c / nt, c % nt);
+                let (r0, r1) = (i as f64 * dr, (i + 1) as f64 * dr);
+                let area = 0.5 * dth * (r1 * r1 - r0 * r0);
+                let frac = pla_area[c] / area;
+                if frac > 0.0 && frac < 1.0 - 1e-9 {
+                    pla_area[c]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let mut g_out = vec![0.0; n];
         let mut g_side = vec![0.0; n];
         let mut g_rim = vec![0.0; nt];
+        let mut rim_half_r = vec![0.0; nt];
         for i in 0..nr {
             let rc = (i as f64 + 0.5) * dr;
             let rf = (i + 1) as f64 * dr;
@@ -272,6 +312,7 @@ impl CrossSection {
                     let up = c + nt;
                     g_out[c] = rf * dth / (0.5 * dr * (1.0 / k[c] + 1.0 / k[up]));
                 } else {
+                    rim_half_r[j] = 0.5 * dr / k[c];
                     g_rim[j] = a * dth / (0.5 * dr / k[c] + 1.0 / layout.h_w_m2k);
                 }
             }
@@ -288,7 +329,152 @@ impl CrossSection {
             capacity,
             tca_area,
             pla_area,
+            pla_surface_area,
+            pla_heat: PlaHeat::Volume,
+            rim_half_r,
+            radius_m: a,
+            h_w_m2k: layout.h_w_m2k,
             length_m: layout.length_m,
+        })
+    }
+
+    /// The same section with the PLA heater's power released as `heat` says.
+    pub fn with_pla_heat(mut self, heat: PlaHeat) -> Self {
+        if heat == PlaHeat::Surface && self.pla_surface_area.iter().sum::<f64>() <= 0.0 {
+            // A grid so coarse that every rod cell is whole cannot say where the surface is:
+            // fall back to the volume (never reached for grids that resolve the rod).
+            return self;
+        }
+        self.pla_heat = heat;
+        self
+    }
+
+    /// Where the PLA heater's power goes.
+    pub fn pla_heat(&self) -> PlaHeat {
+        self.pla_heat
+    }
+
+    /// A new rim heat-transfer coefficient, W/(m² K) (e.g. another medium). A [`Stepper`] made
+    /// before must be made again.
+    pub fn set_h(&mut self, h_w_m2k: f64) {
+        let (a, dth) = (self.radius_m, 2.0 * PI / self.nt as f64);
+        for j in 0..self.nt {
+            self.g_rim[j] = a * dth / (self.rim_half_r[j] + 1.0 / h_w_m2k);
+        }
+        self.h_w_m2k = h_w_m2k;
+    }
+
+    /// Rim heat-transfer coefficient, W/(m² K).
+    pub fn h_w_m2k(&self) -> f64 {
+        self.h_w_m2k
+    }
+
+    /// Link length, m.
+    pub fn length_m(&self) -> f64 {
+        self.length_m
+    }
+
+    /// Ring width and sector angle, (m, rad).
+    fn spacing(&self) -> (f64, f64) {
+        (self.radius_m / self.nr as f64, 2.0 * PI / self.nt as f64)
+    }
+
+    /// Centre of cell `c` (ring-major), (x, y) in m; the TCA lies on +x, the PLA on −x.
+    pub fn cell_centre_m(&self, c: usize) -> (f64, f64) {
+        let (dr, dth) = self.spacing();
+        let (i, j) = (c / self.nt, c % self.nt);
+        let r = (i as f64 + 0.5) * dr;
+        let th = (j as f64 + 0.5) * dth;
+        (r * libm::cos(th), r * libm::sin(th))
+    }
+
+    /// PLA area of cell `c`, m².
+    pub fn pla_area_m2(&self, c: usize) -> f64 {
+        self.pla_area[c]
+    }
+
+    /// TCA tube area of cell `c`, m².
+    pub fn tca_area_m2(&self, c: usize) -> f64 {
+        self.tca_area[c]
+    }
+
+    /// PLA area of cell `c` if the rod's surface cuts it, else 0, m².
+    pub fn pla_surface_area_m2(&self, c: usize) -> f64 {
+        self.pla_surface_area[c]
+    }
+
+    /// Heat capacity of cell `c` per metre of link, J/(m K).
+    pub fn capacity_j_mk(&self, c: usize) -> f64 {
+        self.capacity[c]
+    }
+
+    /// Temperature of field `t` at the point (x, y), m: bilinear in ring and sector between
+    /// cell centres (periodic in angle, held flat inside the first and outside the last ring
+    /// centre).
+    pub fn value_at(&self, t: &[f64], x_m: f64, y_m: f64) -> f64 {
+        let (dr, dth) = self.spacing();
+        let (nr, nt) = (self.nr, self.nt);
+        let r = libm::hypot(x_m, y_m);
+        let mut th = libm::atan2(y_m, x_m);
+        if th < 0.0 {
+            th += 2.0 * PI;
+        }
+        let u = (r / dr - 0.5).clamp(0.0, (nr - 1) as f64);
+        let i0 = (u.floor() as usize).min(nr - 1);
+        let i1 = (i0 + 1).min(nr - 1);
+        let fu = u - i0 as f64;
+        let v = th / dth - 0.5;
+        let vf = v.floor();
+        let fv = v - vf;
+        let j0 = ((vf as i64).rem_euclid(nt as i64)) as usize;
+        let j1 = (j0 + 1) % nt;
+        let at = |i: usize, j: usize| t[i * nt + j];
+        let a = at(i0, j0) * (1.0 - fv) + at(i0, j1) * fv;
+        let b = at(i1, j0) * (1.0 - fv) + at(i1, j1) * fv;
+        a * (1.0 - fu) + b * fu
+    }
+
+    /// Heat the rim gives the medium at `ambient_c` from the absolute field `t_c`, W (whole
+    /// link).
+    pub fn rim_power_w(&self, t_c: &[f64], ambient_c: f64) -> f64 {
+        let base = (self.nr - 1) * self.nt;
+        (0..self.nt)
+            .map(|j| self.g_rim[j] * (t_c[base + j] - ambient_c))
+            .sum::<f64>()
+            * self.length_m
+    }
+
+    /// Heat stored in the absolute field `t_c` above `reference_c`, J (whole link).
+    pub fn stored_j(&self, t_c: &[f64], reference_c: f64) -> f64 {
+        t_c.iter()
+            .zip(&self.capacity)
+            .map(|(t, c)| c * (t - reference_c))
+            .sum::<f64>()
+            * self.length_m
+    }
+
+    /// A backward-Euler stepper for steps of `dt_s`: one factorisation of `A + C/Δt`.
+    pub fn stepper(&self, dt_s: f64) -> Result<Stepper, ReferenceError> {
+        if !(dt_s > 0.0) || !dt_s.is_finite() {
+            return Err(ReferenceError::BadStep { dt_s });
+        }
+        let shift: Vec<f64> = self.capacity.iter().map(|c| c / dt_s).collect();
+        let factor = self.factor(&shift)?;
+        let l = self.length_m;
+        let ta: f64 = self.tca_area.iter().sum();
+        let pla_w = match self.pla_heat {
+            PlaHeat::Volume => &self.pla_area,
+            PlaHeat::Surface => &self.pla_surface_area,
+        };
+        let pa: f64 = pla_w.iter().sum();
+        Ok(Stepper {
+            dt_s,
+            shift,
+            factor,
+            tca_per_w: self.tca_area.iter().map(|a| a / ta / l).collect(),
+            pla_per_w: pla_w.iter().map(|a| a / pa / l).collect(),
+            rim: self.g_rim.clone(),
+            rim_base: (self.nr - 1) * self.nt,
         })
     }
 
@@ -384,10 +570,14 @@ impl CrossSection {
     /// Source vector for `p_tca_w` and `p_pla_w` (whole-link watts), W per metre per cell.
     fn sources(&self, p_tca_w: f64, p_pla_w: f64) -> Vec<f64> {
         let ta: f64 = self.tca_area.iter().sum();
-        let pa: f64 = self.pla_area.iter().sum();
+        let pla_w = match self.pla_heat {
+            PlaHeat::Volume => &self.pla_area,
+            PlaHeat::Surface => &self.pla_surface_area,
+        };
+        let pa: f64 = pla_w.iter().sum();
         let l = self.length_m;
         (0..self.cells())
-            .map(|c| p_tca_w / l * self.tca_area[c] / ta + p_pla_w / l * self.pla_area[c] / pa)
+            .map(|c| p_tca_w / l * self.tca_area[c] / ta + p_pla_w / l * pla_w[c] / pa)
             .collect()
     }
 
@@ -578,6 +768,38 @@ impl CrossSection {
             out.push(self.heater_means_k(&t));
         }
         Ok(out)
+    }
+}
+
+/// Backward-Euler stepping of an absolute temperature field with powers and ambient that may
+/// change every step: `(C/Δt + A) Tⁿ⁺¹ = C/Δt Tⁿ + q + g_rim T∞`.
+pub struct Stepper {
+    dt_s: f64,
+    shift: Vec<f64>,
+    factor: Banded,
+    tca_per_w: Vec<f64>,
+    pla_per_w: Vec<f64>,
+    rim: Vec<f64>,
+    rim_base: usize,
+}
+
+impl Stepper {
+    /// The step it was made for, s.
+    pub fn dt_s(&self) -> f64 {
+        self.dt_s
+    }
+
+    /// Advances `t_c` (°C, ring-major, one per cell) by one step with whole-link heater powers
+    /// `p_tca_w`, `p_pla_w` and the medium at `ambient_c`.
+    pub fn step(&self, t_c: &mut [f64], p_tca_w: f64, p_pla_w: f64, ambient_c: f64) {
+        for c in 0..t_c.len() {
+            t_c[c] =
+                self.shift[c] * t_c[c] + p_tca_w * self.tca_per_w[c] + p_pla_w * self.pla_per_w[c];
+        }
+        for (j, g) in self.rim.iter().enumerate() {
+            t_c[self.rim_base + j] += g * ambient_c;
+        }
+        self.factor.solve(t_c);
     }
 }
 
@@ -856,6 +1078,46 @@ mod tests {
         let auto = x.transient(1.0, 0.5, above, n, Stepping::Auto).unwrap();
         assert_eq!(auto.method, Stepping::Implicit);
         assert!(auto.tca_rise_k.iter().all(|v| v.is_finite() && *v >= 0.0));
+    }
+
+    #[test]
+    fn surface_heat_makes_the_rod_rim_hotter_than_its_core_and_steps_balance_energy() {
+        let p = LinkParams::DEFAULT;
+        let vol = CrossSection::of_link(&p, 12).unwrap();
+        let surf = vol.clone().with_pla_heat(PlaHeat::Surface);
+        assert_eq!(surf.pla_heat(), PlaHeat::Surface);
+        let centre = (-p.geometry.pla_offset_m, 0.0);
+        let rim_pt = (-p.geometry.pla_offset_m - 0.8e-3, 0.0);
+        let dip = |x: &CrossSection| {
+            let f = x.steady(0.0, 1.0).unwrap().rise_k;
+            x.value_at(&f, rim_pt.0, rim_pt.1) - x.value_at(&f, centre.0, centre.1)
+        };
+        // Volume heat peaks at the rod's centre; surface heat leaves the centre cooler than
+        // its rim's cells (or at most level with them).
+        assert!(dip(&vol) < 0.0, "volume {}", dip(&vol));
+        assert!(
+            dip(&surf) > dip(&vol) + 0.05,
+            "surface {} volume {}",
+            dip(&surf),
+            dip(&vol)
+        );
+        // The stepper reaches the steady field and its rim gives off what goes in.
+        let st = surf.stepper(5.0).unwrap();
+        let amb = 22.0;
+        let mut t = vec![amb; surf.cells()];
+        for _ in 0..400 {
+            st.step(&mut t, 0.3, 1.0, amb);
+        }
+        let out = surf.rim_power_w(&t, amb);
+        assert!((out - 1.3).abs() < 1e-6, "rim {out} W");
+        let steady = surf.steady(0.3, 1.0).unwrap();
+        let (mt, mp) = surf.heater_means_k(&t);
+        assert!((mt - amb - steady.tca_rise_k).abs() < 1e-6 * steady.tca_rise_k);
+        assert!((mp - amb - steady.pla_rise_k).abs() < 1e-6 * steady.pla_rise_k);
+        // A new h changes the rim: air keeps the section hotter.
+        let mut air = surf.clone();
+        air.set_h(20.0);
+        assert!(air.steady(0.3, 1.0).unwrap().tca_rise_k > 2.0 * steady.tca_rise_k);
     }
 
     #[test]
