@@ -10,10 +10,16 @@
 //! The same seam is the plant protocol's: any model that answers [`Plant`]'s questions can
 //! drive the real controller tick by tick. `no_std` and allocation-free, so the emulated
 //! firmware image runs the very same plant as the host tools.
-#![cfg_attr(not(test), no_std)]
+//!
+//! With the `hifi` feature (host only, `std`), [`hifi`] is a high-fidelity plant structurally
+//! different from the controller's model: the 2-D finite-volume cross-section, beads beside the
+//! heaters, a viscoelastic PLA over its temperature field, a hysteretic, creeping TCA.
+#![cfg_attr(not(any(test, feature = "hifi")), no_std)]
 #![deny(missing_docs)]
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+#[cfg(feature = "hifi")]
+pub mod hifi;
 pub mod lumped;
 
 pub use lumped::{Lumped, LumpedSpec};
