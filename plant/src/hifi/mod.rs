@@ -32,9 +32,9 @@ pub mod bead;
 pub mod pla;
 pub mod spec;
 pub mod tca;
-pub mod thermal;
 #[cfg(test)]
 mod tests;
+pub mod thermal;
 
 pub use spec::{BeadSpec, Grid, HifiSpec, PlaSpec, TcaSpec};
 
@@ -133,8 +133,11 @@ impl Hifi {
     pub fn tca_push_n(&self) -> f64 {
         let g = &self.spec.params.geometry;
         let (t_tca, _) = self.section.means_c();
-        self.tca
-            .push_n(&self.spec.tca, t_tca, g.tca_offset_m * g.length_m * self.kappa_per_m)
+        self.tca.push_n(
+            &self.spec.tca,
+            t_tca,
+            g.tca_offset_m * g.length_m * self.kappa_per_m,
+        )
     }
 
     /// Equilibrium curvature for the present field, TCA and rod (`with_pla` false: the PLA
@@ -151,11 +154,16 @@ impl Hifi {
         } else {
             (0.0, 0.0)
         };
-        (r * k * s + b_sil * self.spec.silicone_rest_per_m + m_pla) / (b_sil + b_pla + r * r * l * k)
+        (r * k * s + b_sil * self.spec.silicone_rest_per_m + m_pla)
+            / (b_sil + b_pla + r * r * l * k)
     }
 
     fn supply_power_w(&self, ohm: f64, duty: f64) -> f64 {
-        let d = if duty.is_finite() { duty.clamp(0.0, 1.0) } else { 0.0 };
+        let d = if duty.is_finite() {
+            duty.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         d * self.spec.supply_v * self.spec.supply_v / ohm
     }
 }
@@ -177,8 +185,12 @@ impl Plant for Hifi {
         let (t_tca, _) = self.section.means_c();
         self.tca.update(&self.spec.tca, t_tca, dt_s);
         self.kappa_per_m = self.balance_per_m(true);
-        self.rod
-            .relax(&self.spec.pla, self.section.field_c(), self.kappa_per_m, dt_s);
+        self.rod.relax(
+            &self.spec.pla,
+            self.section.field_c(),
+            self.kappa_per_m,
+            dt_s,
+        );
         for (b, s) in self.beads.iter_mut().zip(&self.spec.beads) {
             let local = match s.position_m {
                 Some(pos) => self.section.at_c(pos),

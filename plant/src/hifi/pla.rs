@@ -83,7 +83,10 @@ impl Rod {
 
     /// Modulus of each rod cell in the field `t_c`, Pa.
     pub fn moduli_pa(&self, s: &PlaSpec, t_c: &[f64]) -> Vec<f64> {
-        self.cells.iter().map(|c| modulus_pa(s, t_c[c.cell])).collect()
+        self.cells
+            .iter()
+            .map(|c| modulus_pa(s, t_c[c.cell]))
+            .collect()
     }
 
     /// Bending stiffness about the axis and the moment term `Σ E A x² κ0`, (N m², N m).

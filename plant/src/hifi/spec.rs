@@ -127,12 +127,40 @@ pub const BEAD_BETA_K: f64 = 3950.0;
 pub const DIVIDER_PULLUP_OHM: f64 = 10_000.0;
 /// Divider bias, V (the ADC reference the pull-up goes to).
 pub const DIVIDER_BIAS_V: f64 = 3.3;
-/// Rings of the full grid: converged within 0.5 % in the heater means (fv_thermal's study).
-pub const FULL_RINGS: usize = 24;
-/// Rings of the reduced grid: the same solver, coarse enough for ensembles.
-pub const REDUCED_RINGS: usize = 12;
+/// Rings of the full grid (100 sectors, 3200 cells): heater means and bead temperatures within
+/// about 1 % of a 24-ring grid over a morph-like transient, so converged for these purposes.
+pub const FULL_RINGS: usize = 32;
+/// Rings of the reduced grid (76 sectors, 1824 cells): the same solver on a coarser grid, within
+/// 2 % of the full one in beads and heater means (tested), about a third of its cost. Coarser
+/// still (12 rings) misplaces the rod's boundary cells: its heater means are 5–8 % off.
+pub const REDUCED_RINGS: usize = 24;
 /// Step the thermal stepper is factorised for, s (the controller's tick).
 pub const DEFAULT_STEP_S: f64 = 0.1;
+
+/// Reference temperature of the TCA's stroke polynomial, °C (the physics law's 20 °C).
+pub const STROKE_REF_C: f64 = 20.0;
+
+/// Solves a 3×3 system by Cramer's rule; `None` if it is singular.
+fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
+    let det = |m: [[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(a);
+    if !(d.abs() > 0.0) || !d.is_finite() {
+        return None;
+    }
+    let mut x = [0.0; 3];
+    for (k, xk) in x.iter_mut().enumerate() {
+        let mut m = a;
+        for i in 0..3 {
+            m[i][k] = b[i];
+        }
+        *xk = det(m) / d;
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
 
 /// The grid a plant solves its cross-section on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -177,11 +205,21 @@ pub struct PlaSpec {
     pub creep_activation_j_mol: f64,
 }
 
-/// TCA: resistance, hysteresis, creep (the force law is [`PhysicsLaw`], identified per link).
+/// TCA: force law, resistance, hysteresis, creep.
+///
+/// The push is `k(T) (S(T*) − creep − δ)`: `k(T)` the helical spring rate of [`PhysicsLaw`]
+/// (`G(T) d⁴/(8 D³ n)`) at the tube's temperature, `S` the free stroke at the play's
+/// temperature `T*`. The physics law's stroke `x_pre + R l_f γ τ_b ε_th(T)` with
+/// `ε_th = ∫ α dT` and `α` linear in T is a quadratic in `u = T − 20 °C`; its three
+/// coefficients (preload, `γ α₀`, `γ α₁` in effect) are identified per link
+/// ([`HifiSpec::identify`]), because the thread's expansion and untwist are what a calibration
+/// measures.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TcaSpec {
-    /// Force law: fibre untwist with thermal expansion, coil as a helical spring.
+    /// Spring rate source: the helical-spring law of the coil.
     pub law: PhysicsLaw,
+    /// Free stroke `a + b u + c u²`, `u = T − STROKE_REF_C`: (m, m/K, m/K²).
+    pub stroke_coeffs: [f64; 3],
     /// Resistance at [`TCA_R_REF_C`], Ω.
     pub r_ref_ohm: f64,
     /// Temperature coefficient of resistance, 1/K.
@@ -282,6 +320,7 @@ impl HifiSpec {
             pla_heater_ohm: HEATER_OHM_NOMINAL[0],
             tca: TcaSpec {
                 law: PhysicsLaw::identified(&params, 100.0),
+                stroke_coeffs: [0.0; 3],
                 r_ref_ohm: HEATER_OHM_NOMINAL[1],
                 tcr_per_k: TCA_TCR_PER_K,
                 hysteresis_half_k: TCA_HYSTERESIS_HALF_K,
@@ -416,7 +455,7 @@ impl HifiSpec {
         radius_mm(p, p_tca_w) * (1.0 + off + slope * (p_tca_w / span - 0.5))
     }
 
-    /// Fits the TCA law's preload and untwist coefficient so the link's steady curvature on
+    /// Fits the TCA's stroke polynomial so the link's steady curvature on
     /// this grid, with the PLA at the hold power, at the calibration conditions (the model's
     /// surroundings), through the TCA's heating branch and its creep at equilibrium, matches
     /// [`Self::calibrated_radius_mm`] at the table's powers (least squares). This is the
@@ -427,35 +466,30 @@ impl HifiSpec {
         let g = &p.geometry;
         let (r, l) = (g.tca_offset_m, g.length_m);
         let b_sil = self.silicone_stiffness_nm2();
-        let mut unit = self.tca.law;
-        unit.preload_m = 0.0;
-        unit.untwist_per_strain = 1.0;
         let resistance = section.resistance_matrix()?;
-        let (mut saa, mut sab, mut sa, mut sb, mut n) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        // Normal equations of the least-squares fit of S(T) = a + b u + c u², u = T − 20 °C.
+        let mut ata = [[0.0f64; 3]; 3];
+        let mut atb = [0.0f64; 3];
         for i in 0..p.table_entries {
             let pw = power_of_entry_w(&p, i);
             let rise = resistance.rises_k(pw, p.pla_hold_power_w).0;
             let t = p.surroundings.ambient_c + rise;
-            let t_eff = t - self.tca.hysteresis_half_k;
-            let k = unit.spring_rate_n_per_m(t);
-            let stroke = unit.at(t_eff).push_n / unit.spring_rate_n_per_m(t_eff);
+            let u = t - self.tca.hysteresis_half_k - STROKE_REF_C;
+            let k = self.tca.law.spring_rate_n_per_m(t);
             let kappa = 1e3 / self.calibrated_radius_mm(pw);
-            let need = (kappa * (b_sil + r * r * l * k) - b_sil * self.silicone_rest_per_m) / (r * k);
-            saa += stroke * stroke;
-            sab += stroke * need;
-            sa += stroke;
-            sb += need;
-            n += 1.0;
+            let need =
+                (kappa * (b_sil + r * r * l * k) - b_sil * self.silicone_rest_per_m) / (r * k);
+            let row = [1.0, u, u * u];
+            for a in 0..3 {
+                for b in 0..3 {
+                    ata[a][b] += row[a] * row[b];
+                }
+                atb[a] += row[a] * need;
+            }
         }
-        let det = n * saa - sa * sa;
-        let gamma = (n * sab - sa * sb) / det;
-        let pre = (sb - gamma * sa) / n;
+        let c = solve3(ata, atb).ok_or(ReferenceError::NonFinite("TCA law identification"))?;
         let keep = 1.0 - self.tca.creep_fraction;
-        self.tca.law.untwist_per_strain = gamma / keep;
-        self.tca.law.preload_m = pre / keep;
-        if !(gamma.is_finite() && pre.is_finite()) {
-            return Err(ReferenceError::NonFinite("TCA law identification"));
-        }
+        self.tca.stroke_coeffs = [c[0] / keep, c[1] / keep, c[2] / keep];
         Ok(())
     }
 

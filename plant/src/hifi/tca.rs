@@ -1,8 +1,8 @@
 //! The TCA: resistance that follows its temperature, a force law (fibre untwist with thermal
-//! expansion, coil as a helical spring: `tca_physics::PhysicsLaw`) driven through a play of a
+//! expansion, coil as a helical spring: see [`TcaSpec`]) driven through a play of a
 //! few kelvin (force–temperature hysteresis) and a slow creep of the loaded coil.
 
-use super::spec::{TcaSpec, TCA_R_REF_C};
+use super::spec::{TcaSpec, STROKE_REF_C, TCA_R_REF_C};
 
 /// The TCA's state: the temperature its untwist follows (after the play) and its creep.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -13,11 +13,11 @@ pub struct Tca {
     pub creep_m: f64,
 }
 
-/// Free stroke of the law at `temp_c` (preload included), m: the push at zero extension over
-/// the spring rate.
+/// Free stroke at `temp_c` (preload included), m.
 pub fn free_stroke_m(spec: &TcaSpec, temp_c: f64) -> f64 {
-    let law = &spec.law;
-    law.at(temp_c).push_n / law.spring_rate_n_per_m(temp_c)
+    let u = temp_c - STROKE_REF_C;
+    let [a, b, c] = spec.stroke_coeffs;
+    a + b * u + c * u * u
 }
 
 /// Resistance at `temp_c`, Ω.

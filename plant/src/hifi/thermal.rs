@@ -22,8 +22,8 @@ impl Section {
         let mut layout = Layout::of_link(&spec.params);
         layout.h_w_m2k = h_w_m2k;
         let rings = spec.grid.rings();
-        let cs = CrossSection::new(&layout, rings, sectors_for(rings))?
-            .with_pla_heat(PlaHeat::Surface);
+        let cs =
+            CrossSection::new(&layout, rings, sectors_for(rings))?.with_pla_heat(PlaHeat::Surface);
         let stepper = cs.stepper(DEFAULT_STEP_S)?;
         let t_c = vec![spec.ambient_c; cs.cells()];
         Ok(Section { cs, stepper, t_c })
@@ -56,7 +56,8 @@ impl Section {
         if (self.stepper.dt_s() - dt_s).abs() > 1e-12 * dt_s.abs().max(1.0) {
             self.stepper = self.cs.stepper(dt_s)?;
         }
-        self.stepper.step(&mut self.t_c, p_tca_w, p_pla_w, ambient_c);
+        self.stepper
+            .step(&mut self.t_c, p_tca_w, p_pla_w, ambient_c);
         Ok(())
     }
 
