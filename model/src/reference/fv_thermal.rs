@@ -215,33 +215,49 @@ pub struct SteadyField {
     pub pla_rise_k: f64,
 }
 
-/// Banded Cholesky factor (lower band, `bw` below the diagonal).
+/// Banded Cholesky factor (lower band, `bw` below the diagonal), stored twice: by rows of `L`
+/// (`l[i (bw+1) + (i − j)] = L[i][j]`) for the forward pass and by columns
+/// (`u[j (bw+1) + (i − j)] = L[i][j]`) for the backward pass, so both inner loops run over
+/// contiguous memory.
 struct Banded {
     n: usize,
     bw: usize,
     l: Vec<f64>,
+    u: Vec<f64>,
 }
 
 impl Banded {
-    fn at(&self, i: usize, j: usize) -> f64 {
-        self.l[i * (self.bw + 1) + (i - j)]
+    fn new(n: usize, bw: usize, l: Vec<f64>) -> Self {
+        let w = bw + 1;
+        let mut u = vec![0.0; n * w];
+        for i in 0..n {
+            for d in 0..=bw.min(i) {
+                u[(i - d) * w + d] = l[i * w + d];
+            }
+        }
+        Banded { n, bw, l, u }
     }
 
     fn solve(&self, b: &mut [f64]) {
         let (n, bw) = (self.n, self.bw);
+        let w = bw + 1;
         for i in 0..n {
+            let row = &self.l[i * w..(i + 1) * w];
+            let m = bw.min(i);
             let mut s = b[i];
-            for j in i.saturating_sub(bw)..i {
-                s -= self.at(i, j) * b[j];
+            for (d, lij) in row[1..=m].iter().enumerate() {
+                s -= lij * b[i - 1 - d];
             }
-            b[i] = s / self.at(i, i);
+            b[i] = s / row[0];
         }
         for i in (0..n).rev() {
+            let col = &self.u[i * w..(i + 1) * w];
+            let m = bw.min(n - 1 - i);
             let mut s = b[i];
-            for j in i + 1..(i + bw + 1).min(n) {
-                s -= self.at(j, i) * b[j];
+            for (lji, bj) in col[1..=m].iter().zip(&b[i + 1..=i + m]) {
+                s -= lji * bj;
             }
-            b[i] = s / self.at(i, i);
+            b[i] = s / col[0];
         }
     }
 }
@@ -564,7 +580,7 @@ impl CrossSection {
                 }
             }
         }
-        Ok(Banded { n, bw, l })
+        Ok(Banded::new(n, bw, l))
     }
 
     /// Source vector for `p_tca_w` and `p_pla_w` (whole-link watts), W per metre per cell.
