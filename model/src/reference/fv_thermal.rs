@@ -428,6 +428,11 @@ impl CrossSection {
     /// cell centres (periodic in angle, held flat inside the first and outside the last ring
     /// centre).
     pub fn value_at(&self, t: &[f64], x_m: f64, y_m: f64) -> f64 {
+        self.stencil(x_m, y_m).iter().map(|(c, w)| w * t[*c]).sum()
+    }
+
+    /// The four cells and weights [`Self::value_at`] interpolates the point (x, y) from.
+    pub fn stencil(&self, x_m: f64, y_m: f64) -> [(usize, f64); 4] {
         let (dr, dth) = self.spacing();
         let (nr, nt) = (self.nr, self.nt);
         let r = libm::hypot(x_m, y_m);
@@ -444,10 +449,12 @@ impl CrossSection {
         let fv = v - vf;
         let j0 = ((vf as i64).rem_euclid(nt as i64)) as usize;
         let j1 = (j0 + 1) % nt;
-        let at = |i: usize, j: usize| t[i * nt + j];
-        let a = at(i0, j0) * (1.0 - fv) + at(i0, j1) * fv;
-        let b = at(i1, j0) * (1.0 - fv) + at(i1, j1) * fv;
-        a * (1.0 - fu) + b * fu
+        [
+            (i0 * nt + j0, (1.0 - fu) * (1.0 - fv)),
+            (i0 * nt + j1, (1.0 - fu) * fv),
+            (i1 * nt + j0, fu * (1.0 - fv)),
+            (i1 * nt + j1, fu * fv),
+        ]
     }
 
     /// Heat the rim gives the medium at `ambient_c` from the absolute field `t_c`, W (whole
@@ -467,6 +474,128 @@ impl CrossSection {
             .map(|(t, c)| c * (t - reference_c))
             .sum::<f64>()
             * self.length_m
+    }
+
+    /// Source vectors per metre: TCA per whole-link watt, PLA per watt (as released), and the
+    /// rim's coupling to the ambient per kelvin.
+    fn input_vectors(&self) -> [Vec<f64>; 3] {
+        let n = self.cells();
+        let l = self.length_m;
+        let ta: f64 = self.tca_area.iter().sum();
+        let pla_w = match self.pla_heat {
+            PlaHeat::Volume => &self.pla_area,
+            PlaHeat::Surface => &self.pla_surface_area,
+        };
+        let pa: f64 = pla_w.iter().sum();
+        let mut amb = vec![0.0; n];
+        let base = (self.nr - 1) * self.nt;
+        amb[base..].copy_from_slice(&self.g_rim);
+        [
+            self.tca_area.iter().map(|a| a / ta / l).collect(),
+            pla_w.iter().map(|a| a / pa / l).collect(),
+            amb,
+        ]
+    }
+
+    /// A reduced-order model of this section by rational-Krylov (moment-matching) projection:
+    /// the basis spans `(A + σC)⁻¹ b` for each shift σ (1/s) and each input b (TCA power, PLA
+    /// power, ambient), `C`-orthonormalised; the Galerkin projection keeps the reduced system
+    /// symmetric positive definite (stable) and, with σ = 0 among the shifts, exact at steady
+    /// state. Stepped by backward Euler with step `dt_s`.
+    pub fn rom(&self, shifts_per_s: &[f64], dt_s: f64) -> Result<Rom, ReferenceError> {
+        if !(dt_s > 0.0) || !dt_s.is_finite() {
+            return Err(ReferenceError::BadStep { dt_s });
+        }
+        let n = self.cells();
+        let inputs = self.input_vectors();
+        let dot_c = |x: &[f64], y: &[f64]| -> f64 {
+            x.iter()
+                .zip(y)
+                .zip(&self.capacity)
+                .map(|((a, b), c)| a * b * c)
+                .sum()
+        };
+        let mut basis: Vec<Vec<f64>> = Vec::new();
+        for &sigma in shifts_per_s {
+            let shift: Vec<f64> = self.capacity.iter().map(|c| c * sigma).collect();
+            let f = self.factor(&shift)?;
+            for b in &inputs {
+                let mut x = b.clone();
+                f.solve(&mut x);
+                let before = libm::sqrt(dot_c(&x, &x));
+                for _ in 0..2 {
+                    for v in &basis {
+                        let h = dot_c(v, &x);
+                        for (xi, vi) in x.iter_mut().zip(v) {
+                            *xi -= h * vi;
+                        }
+                    }
+                }
+                let after = libm::sqrt(dot_c(&x, &x));
+                if after > 1e-9 * before && after.is_finite() {
+                    x.iter_mut().for_each(|v| *v /= after);
+                    basis.push(x);
+                }
+            }
+        }
+        let q = basis.len();
+        let mut av = vec![0.0; n];
+        let mut a_r = vec![0.0; q * q];
+        for j in 0..q {
+            self.apply(&basis[j], &mut av);
+            for i in 0..q {
+                a_r[i * q + j] = basis[i].iter().zip(&av).map(|(a, b)| a * b).sum();
+            }
+        }
+        // Symmetrise against rounding.
+        for i in 0..q {
+            for j in 0..i {
+                let m = 0.5 * (a_r[i * q + j] + a_r[j * q + i]);
+                a_r[i * q + j] = m;
+                a_r[j * q + i] = m;
+            }
+        }
+        let b_r: Vec<[f64; 3]> = basis
+            .iter()
+            .map(|v| {
+                let mut r = [0.0; 3];
+                for (k, b) in inputs.iter().enumerate() {
+                    r[k] = v.iter().zip(b).map(|(a, b)| a * b).sum();
+                }
+                r
+            })
+            .collect();
+        let ta: f64 = self.tca_area.iter().sum();
+        let pa: f64 = self.pla_area.iter().sum();
+        let means: Vec<[f64; 2]> = basis
+            .iter()
+            .map(|v| {
+                let t: f64 = v.iter().zip(&self.tca_area).map(|(a, w)| a * w).sum();
+                let p: f64 = v.iter().zip(&self.pla_area).map(|(a, w)| a * w).sum();
+                [t / ta, p / pa]
+            })
+            .collect();
+        // Column-major basis: cell c of mode k at v[c * q + k] (a cell's row is contiguous).
+        let mut v = vec![0.0; n * q];
+        for (k, col) in basis.iter().enumerate() {
+            for c in 0..n {
+                v[c * q + k] = col[c];
+            }
+        }
+        let mut rom = Rom {
+            n,
+            q,
+            v,
+            capacity: self.capacity.clone(),
+            a_r,
+            b_r,
+            means,
+            m: Vec::new(),
+            dt_s,
+            z: vec![0.0; q],
+        };
+        rom.set_dt(dt_s)?;
+        Ok(rom)
     }
 
     /// A backward-Euler stepper for steps of `dt_s`: one factorisation of `A + C/Δt`.
@@ -785,6 +914,147 @@ impl CrossSection {
         }
         Ok(out)
     }
+}
+
+/// A reduced-order model of a [`CrossSection`] ([`CrossSection::rom`]): `q` modes `z`, the
+/// field `T = V z`.
+#[derive(Clone, Debug)]
+pub struct Rom {
+    n: usize,
+    q: usize,
+    /// Basis, cell-major: `v[c q + k]`.
+    v: Vec<f64>,
+    capacity: Vec<f64>,
+    a_r: Vec<f64>,
+    b_r: Vec<[f64; 3]>,
+    means: Vec<[f64; 2]>,
+    /// `(I/Δt + A_r)⁻¹`.
+    m: Vec<f64>,
+    dt_s: f64,
+    z: Vec<f64>,
+}
+
+impl Rom {
+    /// Number of modes.
+    pub fn order(&self) -> usize {
+        self.q
+    }
+
+    /// The step it is set up for, s.
+    pub fn dt_s(&self) -> f64 {
+        self.dt_s
+    }
+
+    /// A new step length (inverts the small reduced matrix again).
+    pub fn set_dt(&mut self, dt_s: f64) -> Result<(), ReferenceError> {
+        if !(dt_s > 0.0) || !dt_s.is_finite() {
+            return Err(ReferenceError::BadStep { dt_s });
+        }
+        let q = self.q;
+        let mut a = self.a_r.clone();
+        for i in 0..q {
+            a[i * q + i] += 1.0 / dt_s;
+        }
+        self.m = invert(&a, q).ok_or(ReferenceError::NotPositiveDefinite { row: 0 })?;
+        self.dt_s = dt_s;
+        Ok(())
+    }
+
+    /// Sets the state to the projection of the field `t_c` (exact for a field in the basis,
+    /// such as a uniform one when σ = 0 was a shift).
+    pub fn set_field(&mut self, t_c: &[f64]) {
+        let q = self.q;
+        for k in 0..q {
+            self.z[k] = (0..self.n)
+                .map(|c| self.v[c * q + k] * self.capacity[c] * t_c[c])
+                .sum();
+        }
+    }
+
+    /// One backward-Euler step with whole-link powers and the medium at `ambient_c`.
+    pub fn step(&mut self, p_tca_w: f64, p_pla_w: f64, ambient_c: f64) {
+        let q = self.q;
+        let rhs: Vec<f64> = (0..q)
+            .map(|k| {
+                let b = self.b_r[k];
+                self.z[k] / self.dt_s + b[0] * p_tca_w + b[1] * p_pla_w + b[2] * ambient_c
+            })
+            .collect();
+        for i in 0..q {
+            self.z[i] = self.m[i * q..(i + 1) * q]
+                .iter()
+                .zip(&rhs)
+                .map(|(a, b)| a * b)
+                .sum();
+        }
+    }
+
+    /// Temperature of cell `c`, °C.
+    pub fn cell_c(&self, c: usize) -> f64 {
+        let q = self.q;
+        self.v[c * q..(c + 1) * q]
+            .iter()
+            .zip(&self.z)
+            .map(|(a, b)| a * b)
+            .sum()
+    }
+
+    /// The whole field, °C.
+    pub fn field_c(&self) -> Vec<f64> {
+        (0..self.n).map(|c| self.cell_c(c)).collect()
+    }
+
+    /// Area means of the TCA tube and the PLA rod, °C.
+    pub fn heater_means_c(&self) -> (f64, f64) {
+        let (mut t, mut p) = (0.0, 0.0);
+        for (m, z) in self.means.iter().zip(&self.z) {
+            t += m[0] * z;
+            p += m[1] * z;
+        }
+        (t, p)
+    }
+}
+
+/// Inverse of the `q × q` row-major matrix `a` by Gauss–Jordan with partial pivoting; `None`
+/// if singular.
+fn invert(a: &[f64], q: usize) -> Option<Vec<f64>> {
+    let mut m = a.to_vec();
+    let mut inv = vec![0.0; q * q];
+    for i in 0..q {
+        inv[i * q + i] = 1.0;
+    }
+    for col in 0..q {
+        let piv = (col..q).max_by(|&x, &y| {
+            m[x * q + col]
+                .abs()
+                .partial_cmp(&m[y * q + col].abs())
+                .unwrap_or(core::cmp::Ordering::Equal)
+        })?;
+        let p = m[piv * q + col];
+        if !(p.abs() > 1e-300) || !p.is_finite() {
+            return None;
+        }
+        for k in 0..q {
+            m.swap(col * q + k, piv * q + k);
+            inv.swap(col * q + k, piv * q + k);
+        }
+        for k in 0..q {
+            m[col * q + k] /= p;
+            inv[col * q + k] /= p;
+        }
+        for r in 0..q {
+            if r != col {
+                let f = m[r * q + col];
+                if f != 0.0 {
+                    for k in 0..q {
+                        m[r * q + k] -= f * m[col * q + k];
+                        inv[r * q + k] -= f * inv[col * q + k];
+                    }
+                }
+            }
+        }
+    }
+    Some(inv)
 }
 
 /// Backward-Euler stepping of an absolute temperature field with powers and ambient that may
@@ -1134,6 +1404,54 @@ mod tests {
         let mut air = surf.clone();
         air.set_h(20.0);
         assert!(air.steady(0.3, 1.0).unwrap().tca_rise_k > 2.0 * steady.tca_rise_k);
+    }
+
+    #[test]
+    fn reduced_order_model_follows_the_grid_through_heating_and_cooling() {
+        let p = LinkParams::DEFAULT;
+        let x = CrossSection::of_link(&p, 12)
+            .unwrap()
+            .with_pla_heat(PlaHeat::Surface);
+        let shifts = [0.0, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0];
+        let dt = 0.1;
+        let mut rom = x.rom(&shifts, dt).unwrap();
+        assert!(
+            rom.order() <= 27 && rom.order() >= 12,
+            "order {}",
+            rom.order()
+        );
+        let st = x.stepper(dt).unwrap();
+        let amb = 22.0;
+        let mut t = vec![amb; x.cells()];
+        rom.set_field(&t);
+        assert!((rom.cell_c(5) - amb).abs() < 1e-9);
+        let mut worst: f64 = 0.0;
+        for k in 0..600 {
+            let (pt, pp, a) = if k < 300 {
+                (1.0, 3.0, amb)
+            } else {
+                (0.0, 0.0, amb + 3.0)
+            };
+            st.step(&mut t, pt, pp, a);
+            rom.step(pt, pp, a);
+            let (ft, fp) = x.heater_means_k(&t);
+            let (rt, rp) = rom.heater_means_c();
+            worst = worst.max((ft - rt).abs() / (ft - amb).abs().max(5.0));
+            worst = worst.max((fp - rp).abs() / (fp - amb).abs().max(5.0));
+            let c = x.cells() / 2 + 3;
+            worst = worst.max((t[c] - rom.cell_c(c)).abs() / (t[c] - amb).abs().max(5.0));
+        }
+        assert!(worst < 0.01, "worst {worst}");
+        // Steady state is exact.
+        let mut rom = x.rom(&shifts, 1e4).unwrap();
+        rom.set_field(&vec![amb; x.cells()]);
+        for _ in 0..50 {
+            rom.step(0.5, 1.0, amb);
+        }
+        let s = x.steady(0.5, 1.0).unwrap();
+        let (rt, rp) = rom.heater_means_c();
+        assert!((rt - amb - s.tca_rise_k).abs() < 1e-6 * s.tca_rise_k);
+        assert!((rp - amb - s.pla_rise_k).abs() < 1e-6 * s.pla_rise_k);
     }
 
     #[test]
