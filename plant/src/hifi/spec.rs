@@ -6,7 +6,7 @@
 //! seed `s` is the same link whatever else was drawn.
 
 use super::tca::Tca;
-use super::thermal::Section;
+use super::thermal::cross_section;
 use crate::Medium;
 use morphlink_model::mechanics::radius_mm;
 use morphlink_model::params::{H_AIR_W_M2K, H_WATER_W_M2K};
@@ -127,13 +127,13 @@ pub const BEAD_BETA_K: f64 = 3950.0;
 pub const DIVIDER_PULLUP_OHM: f64 = 10_000.0;
 /// Divider bias, V (the ADC reference the pull-up goes to).
 pub const DIVIDER_BIAS_V: f64 = 3.3;
-/// Rings of the full grid (100 sectors, 3200 cells): heater means and bead temperatures within
+/// Rings of the full grid (100 sectors, 3328 cells): heater means and bead temperatures within
 /// about 1 % of a 24-ring grid over a morph-like transient, so converged for these purposes.
 pub const FULL_RINGS: usize = 32;
-/// Rings of the reduced grid (76 sectors, 1824 cells): the same solver on a coarser grid, within
-/// 2 % of the full one in beads and heater means (tested), about a third of its cost. Coarser
-/// still (12 rings) misplaces the rod's boundary cells: its heater means are 5–8 % off.
-pub const REDUCED_RINGS: usize = 24;
+/// Shifts of the reduced-order model's rational-Krylov basis, 1/s: σ = 0 makes steady states
+/// exact; the rest span the section's time constants from the whole link's (minutes) to the
+/// TCA tube's (a tenth of a second), three per decade. Up to 27 modes.
+pub const ROM_SHIFTS_PER_S: [f64; 9] = [0.0, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0];
 /// Step the thermal stepper is factorised for, s (the controller's tick).
 pub const DEFAULT_STEP_S: f64 = 0.1;
 
@@ -162,24 +162,25 @@ fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
-/// The grid a plant solves its cross-section on.
+/// The grid a plant solves its cross-section on, and how.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Grid {
-    /// [`FULL_RINGS`] rings.
+    /// [`FULL_RINGS`] rings, every cell stepped.
     Full,
-    /// [`REDUCED_RINGS`] rings: the reduced-order form of the same grid.
+    /// The reduced-order model ([`ROM_SHIFTS_PER_S`]) of the full grid: for ensembles.
     Reduced,
-    /// Any number of rings (tests).
+    /// Any number of rings, every cell stepped (tests).
     Rings(usize),
+    /// The reduced-order model of a grid of that many rings (tests).
+    ReducedRings(usize),
 }
 
 impl Grid {
     /// Number of rings.
     pub fn rings(self) -> usize {
         match self {
-            Grid::Full => FULL_RINGS,
-            Grid::Reduced => REDUCED_RINGS,
-            Grid::Rings(n) => n,
+            Grid::Full | Grid::Reduced => FULL_RINGS,
+            Grid::Rings(n) | Grid::ReducedRings(n) => n,
         }
     }
 }
@@ -462,11 +463,10 @@ impl HifiSpec {
     /// link's own calibration, done once per link: the table is the controller's.
     pub fn identify(&mut self) -> Result<(), ReferenceError> {
         let p = self.params;
-        let section = Section::new(self, p.surroundings.h_w_m2k)?;
+        let resistance = cross_section(self, p.surroundings.h_w_m2k)?.resistance_matrix()?;
         let g = &p.geometry;
         let (r, l) = (g.tca_offset_m, g.length_m);
         let b_sil = self.silicone_stiffness_nm2();
-        let resistance = section.resistance_matrix()?;
         // Normal equations of the least-squares fit of S(T) = a + b u + c u², u = T − 20 °C.
         let mut ata = [[0.0f64; 3]; 3];
         let mut atb = [0.0f64; 3];
@@ -499,8 +499,7 @@ impl HifiSpec {
     /// [`Self::identify`]'s fit: the tests measure the table's miss with it.
     pub fn steady_radii_mm(&self, powers_w: &[f64]) -> Result<Vec<f64>, ReferenceError> {
         let p = &self.params;
-        let section = Section::new(self, p.surroundings.h_w_m2k)?;
-        let res = section.resistance_matrix()?;
+        let res = cross_section(self, p.surroundings.h_w_m2k)?.resistance_matrix()?;
         let g = &p.geometry;
         let (r, l) = (g.tca_offset_m, g.length_m);
         let b_sil = self.silicone_stiffness_nm2();

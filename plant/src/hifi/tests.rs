@@ -57,7 +57,13 @@ fn morph(h: &mut Hifi, tca_w: f64, rest_s: f64) {
 
 #[test]
 fn at_steady_state_the_power_in_leaves_through_the_rim_and_transients_conserve_heat() {
-    let mut h = link(8);
+    for grid in [Grid::Rings(8), Grid::ReducedRings(8)] {
+        energy_balance(grid);
+    }
+}
+
+fn energy_balance(grid: Grid) {
+    let mut h = Hifi::new(HifiSpec::nominal(LinkParams::DEFAULT, grid).unwrap()).unwrap();
     let amb = h.spec().ambient_c;
     let duty = Duties {
         pla: pla_duty(1.5),
@@ -406,6 +412,12 @@ fn reduced_and_full_grids_agree_over_heating_and_cooling() {
         worst = worst.max(diff / peak);
     }
     assert!(worst < 0.02, "worst relative difference {worst}");
+    assert!(red.section().rom_order().is_some() && full.section().rom_order().is_none());
+    // And a whole morph lands at the same radius.
+    morph(&mut full, 1.0, 10.0);
+    morph(&mut red, 1.0, 10.0);
+    let (a, b) = (full.sample().radius_mm, red.sample().radius_mm);
+    assert!((a - b).abs() < 0.005 * a, "full {a} mm reduced {b} mm");
 }
 
 #[test]
