@@ -219,6 +219,7 @@ pub struct SteadyField {
 /// (`l[i (bw+1) + (i − j)] = L[i][j]`) for the forward pass and by columns
 /// (`u[j (bw+1) + (i − j)] = L[i][j]`) for the backward pass, so both inner loops run over
 /// contiguous memory.
+#[derive(Clone, Debug)]
 struct Banded {
     n: usize,
     bw: usize,
@@ -1059,6 +1060,7 @@ fn invert(a: &[f64], q: usize) -> Option<Vec<f64>> {
 
 /// Backward-Euler stepping of an absolute temperature field with powers and ambient that may
 /// change every step: `(C/Δt + A) Tⁿ⁺¹ = C/Δt Tⁿ + q + g_rim T∞`.
+#[derive(Clone, Debug)]
 pub struct Stepper {
     dt_s: f64,
     shift: Vec<f64>,

@@ -46,6 +46,7 @@ use tca::Tca;
 use thermal::Section;
 
 /// A high-fidelity link's state.
+#[derive(Clone, Debug)]
 pub struct Hifi {
     spec: HifiSpec,
     section: Section,

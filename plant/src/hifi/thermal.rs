@@ -18,6 +18,7 @@ pub fn cross_section(spec: &HifiSpec, h_w_m2k: f64) -> Result<CrossSection, Refe
     Ok(CrossSection::new(&layout, rings, sectors_for(rings))?.with_pla_heat(PlaHeat::Surface))
 }
 
+#[derive(Clone, Debug)]
 enum Solver {
     /// Banded backward Euler on every cell.
     Grid(Stepper),
@@ -26,6 +27,7 @@ enum Solver {
 }
 
 /// The section's grid, its temperature field and its time stepping.
+#[derive(Clone, Debug)]
 pub struct Section {
     cs: CrossSection,
     solver: Solver,
