@@ -303,6 +303,13 @@ fn beside(x: f64, r: f64, gap: f64, angle: f64) -> (f64, f64) {
 impl HifiSpec {
     /// The nominal link of `params` (the controller's link), identified on `grid`.
     pub fn nominal(params: LinkParams, grid: Grid) -> Result<Self, ReferenceError> {
+        let mut spec = Self::unidentified(params, grid);
+        spec.identify()?;
+        Ok(spec)
+    }
+
+    /// The nominal values, the TCA's stroke not yet identified.
+    fn unidentified(params: LinkParams, grid: Grid) -> Self {
         let g = &params.geometry;
         let embedded = |pos| BeadSpec {
             position_m: Some(pos),
@@ -311,7 +318,7 @@ impl HifiSpec {
             r25_ohm: BEAD_R25_OHM,
             beta_k: BEAD_BETA_K,
         };
-        let mut spec = HifiSpec {
+        HifiSpec {
             params,
             grid,
             medium: Medium::Water,
@@ -362,9 +369,7 @@ impl HifiSpec {
                 },
             ],
             calibration_miss: (0.0, 0.0),
-        };
-        spec.identify()?;
-        Ok(spec)
+        }
     }
 
     /// Draw number `index` of the ensemble with seed `seed` around the link of `params`:
@@ -378,7 +383,7 @@ impl HifiSpec {
     ) -> Result<Self, ReferenceError> {
         let mut s = seed ^ index.wrapping_mul(0xd1b5_4a32_d192_ed03);
         splitmix(&mut s);
-        let mut spec = Self::nominal(params, grid)?;
+        let mut spec = Self::unidentified(params, grid);
         let g = params.geometry;
         let air = uniform(&mut s, (0.0, 1.0)) < AIR_SHARE;
         spec.medium = if air { Medium::Air } else { Medium::Water };
