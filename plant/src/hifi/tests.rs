@@ -232,6 +232,10 @@ fn a_morph_leaves_a_persistent_new_radius_after_release() {
     let r0 = h.sample().radius_mm;
     morph(&mut h, 1.0, 60.0);
     let r1 = h.sample().radius_mm;
+    eprintln!(
+        "paper morph at 1 W: {r0:.2} mm -> {r1:.2} mm (table: {:.2} mm)",
+        radius_mm(&LinkParams::DEFAULT, 1.0)
+    );
     assert!(r1 < 0.9 * r0, "start {r0} after morph {r1}");
     run(&mut h, 60.0, Duties::default());
     let r2 = h.sample().radius_mm;
@@ -491,9 +495,15 @@ fn cost_per_simulated_second() {
         let t0 = std::time::Instant::now();
         let mut h = Hifi::new(HifiSpec::nominal(p, grid).unwrap()).unwrap();
         let build = t0.elapsed().as_secs_f64();
+        let r0 = h.sample().radius_mm;
         let t1 = std::time::Instant::now();
         morph(&mut h, 1.0, 60.0);
         let run = t1.elapsed().as_secs_f64();
+        println!(
+            "{grid:?}: paper morph at 1 W from {r0:.2} mm to {:.2} mm (table {:.2} mm)",
+            h.sample().radius_mm,
+            radius_mm(&p, 1.0)
+        );
         println!(
             "{grid:?}: {} rings, {} cells: build {:.1} ms, {:.2} ms per simulated s, a 180 s morph {:.0} ms",
             grid.rings(),
