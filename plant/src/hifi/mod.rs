@@ -18,8 +18,9 @@
 //! * **PLA**: modulus on a tanh glass transition (1046 → 1.2 MPa, Tg 62–65 °C) cell by cell over
 //!   the rod's non-uniform field, about the link's axis; each cell's frozen curvature relaxes
 //!   with WLF time above Tg and Arrhenius below (slow creep at room temperature).
-//! * **TCA**: the physics-based law (`tca_physics::PhysicsLaw`, helical spring, untwist with
-//!   thermal strain) through a play of ±1.5 K (hysteresis) with slow creep of the coil.
+//! * **TCA**: the helical spring rate of `tca_physics::PhysicsLaw` times the physics law's free
+//!   stroke (untwist with thermal strain, a quadratic in temperature identified per link),
+//!   through a play of ±1.5 K (hysteresis), less a slow creep of the coil.
 //! * **Mechanics** (shared with the controller's model): quasi-static constant-curvature
 //!   bending, the TCA's extension `δ = r L κ` and moment `r F`, bending about the link's axis.
 //!   Not shared: the thermal model, the force law and its hysteresis and creep, the silicone's
