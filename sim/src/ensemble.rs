@@ -5,11 +5,11 @@
 //! Every range is a named default with the reason for it.
 
 use crate::rig::{LinkSetup, Rig};
-use morphlink_plant::Plant as _;
 use morphlink::controller::{Outputs, TICK_MS};
 use morphlink::protocol::{Command, Mode};
 use morphlink::supervisor::FaultCode;
 use morphlink_model::params::{H_AIR_W_M2K, H_WATER_W_M2K};
+use morphlink_plant::Plant;
 
 /// Convection coefficient relative to the model's, a factor range: ±30 % covers stirred to
 /// still water and the scatter of the paper's nine convection measurements.
@@ -190,7 +190,18 @@ pub fn run_morph_traced(
     mode: Mode,
     trace: &mut impl FnMut(&TracePoint),
 ) -> RunResult {
-    let mut rig = Rig::new(plant);
+    run_morph_on(Rig::new(plant), target_mm, mode, trace)
+}
+
+/// Runs one morph to `target_mm` in `mode` on the rig `rig` (any plant: the lumped link, or
+/// the high-fidelity one with `morphlink-plant`'s `hifi` feature), calling `trace` every tick,
+/// and measures it as [`run_morph_traced`] does.
+pub fn run_morph_on<P: Plant>(
+    mut rig: Rig<P>,
+    target_mm: f32,
+    mode: Mode,
+    trace: &mut impl FnMut(&TracePoint),
+) -> RunResult {
     let t0 = rig.now_ms();
     rig.ctrl.handle(
         t0,
