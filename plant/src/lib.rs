@@ -12,10 +12,16 @@
 //! [`wire::serve`] (feature `std`) answering any [`Plant`] over it. `no_std` and
 //! allocation-free without `std`, so the emulated firmware image runs the very same plant as
 //! the host tools.
-#![cfg_attr(not(any(test, feature = "std")), no_std)]
+//!
+//! With the `hifi` feature (host only, `std`), [`hifi`] is a high-fidelity plant structurally
+//! different from the controller's model: the 2-D finite-volume cross-section, beads beside the
+//! heaters, a viscoelastic PLA over its temperature field, a hysteretic, creeping TCA.
+#![cfg_attr(not(any(test, feature = "std", feature = "hifi")), no_std)]
 #![deny(missing_docs)]
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+#[cfg(feature = "hifi")]
+pub mod hifi;
 pub mod lumped;
 pub mod wire;
 

@@ -160,7 +160,13 @@ mod tests {
         let mut l = Lumped::new(spec());
         let r0 = l.sample().radius_mm;
         for _ in 0..300 {
-            l.step(0.1, Duties { pla: 0.4, tca: 0.05 });
+            l.step(
+                0.1,
+                Duties {
+                    pla: 0.4,
+                    tca: 0.05,
+                },
+            );
         }
         let s = l.sample();
         assert!(s.t_tca_c > spec().params.surroundings.ambient_c + 5.0);

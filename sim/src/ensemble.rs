@@ -193,8 +193,9 @@ pub fn run_morph_traced(
     run_morph_on(Rig::new(plant), target_mm, mode, trace)
 }
 
-/// Runs one morph to `target_mm` in `mode` on whatever plant `rig` holds (see
-/// [`run_morph_traced`]).
+/// Runs one morph to `target_mm` in `mode` on the rig `rig` (any plant: the lumped link, or
+/// the high-fidelity one with `morphlink-plant`'s `hifi` feature), calling `trace` every tick,
+/// and measures it as [`run_morph_traced`] does.
 pub fn run_morph_on<P: Plant>(
     mut rig: Rig<P>,
     target_mm: f32,

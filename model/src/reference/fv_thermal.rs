@@ -14,6 +14,11 @@
 //! error, never a NaN). Transients `C dT/dt = −A T + q` are stepped by backward Euler
 //! (unconditionally stable, same factorisation with `C/Δt` added) or explicit Euler, whose
 //! stability limit `Δt < 2/λmax(C⁻¹A)` is computed and enforced.
+//!
+//! For plants that step the section with powers that change every step, [`CrossSection::stepper`]
+//! factorises once for a step `Δt` and [`Stepper::step`] advances an absolute temperature field
+//! against an ambient that may change between steps. [`PlaHeat::Surface`] releases the nichrome's
+//! heat in the rod's boundary cells (those the rod's surface cuts) instead of through the rod.
 
 use super::ReferenceError;
 use crate::params::LinkParams;
@@ -55,8 +60,29 @@ pub struct CrossSection {
     tca_area: Vec<f64>,
     /// Heated area of the PLA in each cell, m².
     pla_area: Vec<f64>,
+    /// PLA area of the cells the rod's surface cuts (partly PLA), m²; zero elsewhere.
+    pla_surface_area: Vec<f64>,
+    /// Where the PLA heater's power goes.
+    pla_heat: PlaHeat,
+    /// Half-cell conduction resistance of each outer-ring cell to the rim, per metre, m K/W
+    /// (`dr / (2 k)` over the rim arc), so the rim conductance can follow a new `h`.
+    rim_half_r: Vec<f64>,
+    /// Disk radius, m.
+    radius_m: f64,
+    /// Rim heat-transfer coefficient, W/(m² K).
+    h_w_m2k: f64,
     /// Link length, m (to turn per-metre conductances into K/W).
     length_m: f64,
+}
+
+/// Where the PLA heater (the nichrome wrap) releases its power.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlaHeat {
+    /// Uniformly through the rod (`q̇ = P/V`, the paper's Eq. 2 form).
+    Volume,
+    /// In the rod's boundary cells, in proportion to their PLA area: the wire lies on the
+    /// rod's surface.
+    Surface,
 }
 
 /// Material of one sub-sample point.
@@ -189,33 +215,50 @@ pub struct SteadyField {
     pub pla_rise_k: f64,
 }
 
-/// Banded Cholesky factor (lower band, `bw` below the diagonal).
+/// Banded Cholesky factor (lower band, `bw` below the diagonal), stored twice: by rows of `L`
+/// (`l[i (bw+1) + (i − j)] = L[i][j]`) for the forward pass and by columns
+/// (`u[j (bw+1) + (i − j)] = L[i][j]`) for the backward pass, so both inner loops run over
+/// contiguous memory.
+#[derive(Clone, Debug)]
 struct Banded {
     n: usize,
     bw: usize,
     l: Vec<f64>,
+    u: Vec<f64>,
 }
 
 impl Banded {
-    fn at(&self, i: usize, j: usize) -> f64 {
-        self.l[i * (self.bw + 1) + (i - j)]
+    fn new(n: usize, bw: usize, l: Vec<f64>) -> Self {
+        let w = bw + 1;
+        let mut u = vec![0.0; n * w];
+        for i in 0..n {
+            for d in 0..=bw.min(i) {
+                u[(i - d) * w + d] = l[i * w + d];
+            }
+        }
+        Banded { n, bw, l, u }
     }
 
     fn solve(&self, b: &mut [f64]) {
         let (n, bw) = (self.n, self.bw);
+        let w = bw + 1;
         for i in 0..n {
+            let row = &self.l[i * w..(i + 1) * w];
+            let m = bw.min(i);
             let mut s = b[i];
-            for j in i.saturating_sub(bw)..i {
-                s -= self.at(i, j) * b[j];
+            for (d, lij) in row[1..=m].iter().enumerate() {
+                s -= lij * b[i - 1 - d];
             }
-            b[i] = s / self.at(i, i);
+            b[i] = s / row[0];
         }
         for i in (0..n).rev() {
+            let col = &self.u[i * w..(i + 1) * w];
+            let m = bw.min(n - 1 - i);
             let mut s = b[i];
-            for j in i + 1..(i + bw + 1).min(n) {
-                s -= self.at(j, i) * b[j];
+            for (lji, bj) in col[1..=m].iter().zip(&b[i + 1..=i + m]) {
+                s -= lji * bj;
             }
-            b[i] = s / self.at(i, i);
+            b[i] = s / col[0];
         }
     }
 }
@@ -258,9 +301,23 @@ impl CrossSection {
                 pla_area[c] = ps / ws * area;
             }
         }
+        let pla_surface_area: Vec<f64> = (0..n)
+            .map(|c| {
+                let (i, _) = (c / nt, c % nt);
+                let (r0, r1) = (i as f64 * dr, (i + 1) as f64 * dr);
+                let area = 0.5 * dth * (r1 * r1 - r0 * r0);
+                let frac = pla_area[c] / area;
+                if frac > 0.0 && frac < 1.0 - 1e-9 {
+                    pla_area[c]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let mut g_out = vec![0.0; n];
         let mut g_side = vec![0.0; n];
         let mut g_rim = vec![0.0; nt];
+        let mut rim_half_r = vec![0.0; nt];
         for i in 0..nr {
             let rc = (i as f64 + 0.5) * dr;
             let rf = (i + 1) as f64 * dr;
@@ -272,6 +329,7 @@ impl CrossSection {
                     let up = c + nt;
                     g_out[c] = rf * dth / (0.5 * dr * (1.0 / k[c] + 1.0 / k[up]));
                 } else {
+                    rim_half_r[j] = 0.5 * dr / k[c];
                     g_rim[j] = a * dth / (0.5 * dr / k[c] + 1.0 / layout.h_w_m2k);
                 }
             }
@@ -288,7 +346,281 @@ impl CrossSection {
             capacity,
             tca_area,
             pla_area,
+            pla_surface_area,
+            pla_heat: PlaHeat::Volume,
+            rim_half_r,
+            radius_m: a,
+            h_w_m2k: layout.h_w_m2k,
             length_m: layout.length_m,
+        })
+    }
+
+    /// The same section with the PLA heater's power released as `heat` says.
+    pub fn with_pla_heat(mut self, heat: PlaHeat) -> Self {
+        if heat == PlaHeat::Surface && self.pla_surface_area.iter().sum::<f64>() <= 0.0 {
+            // A grid so coarse that every rod cell is whole cannot say where the surface is:
+            // fall back to the volume (never reached for grids that resolve the rod).
+            return self;
+        }
+        self.pla_heat = heat;
+        self
+    }
+
+    /// Where the PLA heater's power goes.
+    pub fn pla_heat(&self) -> PlaHeat {
+        self.pla_heat
+    }
+
+    /// A new rim heat-transfer coefficient, W/(m² K) (e.g. another medium). A [`Stepper`] made
+    /// before must be made again.
+    pub fn set_h(&mut self, h_w_m2k: f64) {
+        let (a, dth) = (self.radius_m, 2.0 * PI / self.nt as f64);
+        for j in 0..self.nt {
+            self.g_rim[j] = a * dth / (self.rim_half_r[j] + 1.0 / h_w_m2k);
+        }
+        self.h_w_m2k = h_w_m2k;
+    }
+
+    /// Rim heat-transfer coefficient, W/(m² K).
+    pub fn h_w_m2k(&self) -> f64 {
+        self.h_w_m2k
+    }
+
+    /// Link length, m.
+    pub fn length_m(&self) -> f64 {
+        self.length_m
+    }
+
+    /// Ring width and sector angle, (m, rad).
+    fn spacing(&self) -> (f64, f64) {
+        (self.radius_m / self.nr as f64, 2.0 * PI / self.nt as f64)
+    }
+
+    /// Centre of cell `c` (ring-major), (x, y) in m; the TCA lies on +x, the PLA on −x.
+    pub fn cell_centre_m(&self, c: usize) -> (f64, f64) {
+        let (dr, dth) = self.spacing();
+        let (i, j) = (c / self.nt, c % self.nt);
+        let r = (i as f64 + 0.5) * dr;
+        let th = (j as f64 + 0.5) * dth;
+        (r * libm::cos(th), r * libm::sin(th))
+    }
+
+    /// PLA area of cell `c`, m².
+    pub fn pla_area_m2(&self, c: usize) -> f64 {
+        self.pla_area[c]
+    }
+
+    /// TCA tube area of cell `c`, m².
+    pub fn tca_area_m2(&self, c: usize) -> f64 {
+        self.tca_area[c]
+    }
+
+    /// PLA area of cell `c` if the rod's surface cuts it, else 0, m².
+    pub fn pla_surface_area_m2(&self, c: usize) -> f64 {
+        self.pla_surface_area[c]
+    }
+
+    /// Heat capacity of cell `c` per metre of link, J/(m K).
+    pub fn capacity_j_mk(&self, c: usize) -> f64 {
+        self.capacity[c]
+    }
+
+    /// Temperature of field `t` at the point (x, y), m: bilinear in ring and sector between
+    /// cell centres (periodic in angle, held flat inside the first and outside the last ring
+    /// centre).
+    pub fn value_at(&self, t: &[f64], x_m: f64, y_m: f64) -> f64 {
+        self.stencil(x_m, y_m).iter().map(|(c, w)| w * t[*c]).sum()
+    }
+
+    /// The four cells and weights [`Self::value_at`] interpolates the point (x, y) from.
+    pub fn stencil(&self, x_m: f64, y_m: f64) -> [(usize, f64); 4] {
+        let (dr, dth) = self.spacing();
+        let (nr, nt) = (self.nr, self.nt);
+        let r = libm::hypot(x_m, y_m);
+        let mut th = libm::atan2(y_m, x_m);
+        if th < 0.0 {
+            th += 2.0 * PI;
+        }
+        let u = (r / dr - 0.5).clamp(0.0, (nr - 1) as f64);
+        let i0 = (u.floor() as usize).min(nr - 1);
+        let i1 = (i0 + 1).min(nr - 1);
+        let fu = u - i0 as f64;
+        let v = th / dth - 0.5;
+        let vf = v.floor();
+        let fv = v - vf;
+        let j0 = ((vf as i64).rem_euclid(nt as i64)) as usize;
+        let j1 = (j0 + 1) % nt;
+        [
+            (i0 * nt + j0, (1.0 - fu) * (1.0 - fv)),
+            (i0 * nt + j1, (1.0 - fu) * fv),
+            (i1 * nt + j0, fu * (1.0 - fv)),
+            (i1 * nt + j1, fu * fv),
+        ]
+    }
+
+    /// Heat the rim gives the medium at `ambient_c` from the absolute field `t_c`, W (whole
+    /// link).
+    pub fn rim_power_w(&self, t_c: &[f64], ambient_c: f64) -> f64 {
+        let base = (self.nr - 1) * self.nt;
+        (0..self.nt)
+            .map(|j| self.g_rim[j] * (t_c[base + j] - ambient_c))
+            .sum::<f64>()
+            * self.length_m
+    }
+
+    /// Heat stored in the absolute field `t_c` above `reference_c`, J (whole link).
+    pub fn stored_j(&self, t_c: &[f64], reference_c: f64) -> f64 {
+        t_c.iter()
+            .zip(&self.capacity)
+            .map(|(t, c)| c * (t - reference_c))
+            .sum::<f64>()
+            * self.length_m
+    }
+
+    /// Source vectors per metre: TCA per whole-link watt, PLA per watt (as released), and the
+    /// rim's coupling to the ambient per kelvin.
+    fn input_vectors(&self) -> [Vec<f64>; 3] {
+        let n = self.cells();
+        let l = self.length_m;
+        let ta: f64 = self.tca_area.iter().sum();
+        let pla_w = match self.pla_heat {
+            PlaHeat::Volume => &self.pla_area,
+            PlaHeat::Surface => &self.pla_surface_area,
+        };
+        let pa: f64 = pla_w.iter().sum();
+        let mut amb = vec![0.0; n];
+        let base = (self.nr - 1) * self.nt;
+        amb[base..].copy_from_slice(&self.g_rim);
+        [
+            self.tca_area.iter().map(|a| a / ta / l).collect(),
+            pla_w.iter().map(|a| a / pa / l).collect(),
+            amb,
+        ]
+    }
+
+    /// A reduced-order model of this section by rational-Krylov (moment-matching) projection:
+    /// the basis spans `(A + σC)⁻¹ b` for each shift σ (1/s) and each input b (TCA power, PLA
+    /// power, ambient), `C`-orthonormalised; the Galerkin projection keeps the reduced system
+    /// symmetric positive definite (stable) and, with σ = 0 among the shifts, exact at steady
+    /// state. Stepped by backward Euler with step `dt_s`.
+    pub fn rom(&self, shifts_per_s: &[f64], dt_s: f64) -> Result<Rom, ReferenceError> {
+        if !(dt_s > 0.0) || !dt_s.is_finite() {
+            return Err(ReferenceError::BadStep { dt_s });
+        }
+        let n = self.cells();
+        let inputs = self.input_vectors();
+        let dot_c = |x: &[f64], y: &[f64]| -> f64 {
+            x.iter()
+                .zip(y)
+                .zip(&self.capacity)
+                .map(|((a, b), c)| a * b * c)
+                .sum()
+        };
+        let mut basis: Vec<Vec<f64>> = Vec::new();
+        for &sigma in shifts_per_s {
+            let shift: Vec<f64> = self.capacity.iter().map(|c| c * sigma).collect();
+            let f = self.factor(&shift)?;
+            for b in &inputs {
+                let mut x = b.clone();
+                f.solve(&mut x);
+                let before = libm::sqrt(dot_c(&x, &x));
+                for _ in 0..2 {
+                    for v in &basis {
+                        let h = dot_c(v, &x);
+                        for (xi, vi) in x.iter_mut().zip(v) {
+                            *xi -= h * vi;
+                        }
+                    }
+                }
+                let after = libm::sqrt(dot_c(&x, &x));
+                if after > 1e-9 * before && after.is_finite() {
+                    x.iter_mut().for_each(|v| *v /= after);
+                    basis.push(x);
+                }
+            }
+        }
+        let q = basis.len();
+        let mut av = vec![0.0; n];
+        let mut a_r = vec![0.0; q * q];
+        for j in 0..q {
+            self.apply(&basis[j], &mut av);
+            for i in 0..q {
+                a_r[i * q + j] = basis[i].iter().zip(&av).map(|(a, b)| a * b).sum();
+            }
+        }
+        // Symmetrise against rounding.
+        for i in 0..q {
+            for j in 0..i {
+                let m = 0.5 * (a_r[i * q + j] + a_r[j * q + i]);
+                a_r[i * q + j] = m;
+                a_r[j * q + i] = m;
+            }
+        }
+        let b_r: Vec<[f64; 3]> = basis
+            .iter()
+            .map(|v| {
+                let mut r = [0.0; 3];
+                for (k, b) in inputs.iter().enumerate() {
+                    r[k] = v.iter().zip(b).map(|(a, b)| a * b).sum();
+                }
+                r
+            })
+            .collect();
+        let ta: f64 = self.tca_area.iter().sum();
+        let pa: f64 = self.pla_area.iter().sum();
+        let means: Vec<[f64; 2]> = basis
+            .iter()
+            .map(|v| {
+                let t: f64 = v.iter().zip(&self.tca_area).map(|(a, w)| a * w).sum();
+                let p: f64 = v.iter().zip(&self.pla_area).map(|(a, w)| a * w).sum();
+                [t / ta, p / pa]
+            })
+            .collect();
+        // Column-major basis: cell c of mode k at v[c * q + k] (a cell's row is contiguous).
+        let mut v = vec![0.0; n * q];
+        for (k, col) in basis.iter().enumerate() {
+            for c in 0..n {
+                v[c * q + k] = col[c];
+            }
+        }
+        let mut rom = Rom {
+            n,
+            q,
+            v,
+            capacity: self.capacity.clone(),
+            a_r,
+            b_r,
+            means,
+            m: Vec::new(),
+            dt_s,
+            z: vec![0.0; q],
+        };
+        rom.set_dt(dt_s)?;
+        Ok(rom)
+    }
+
+    /// A backward-Euler stepper for steps of `dt_s`: one factorisation of `A + C/Δt`.
+    pub fn stepper(&self, dt_s: f64) -> Result<Stepper, ReferenceError> {
+        if !(dt_s > 0.0) || !dt_s.is_finite() {
+            return Err(ReferenceError::BadStep { dt_s });
+        }
+        let shift: Vec<f64> = self.capacity.iter().map(|c| c / dt_s).collect();
+        let factor = self.factor(&shift)?;
+        let l = self.length_m;
+        let ta: f64 = self.tca_area.iter().sum();
+        let pla_w = match self.pla_heat {
+            PlaHeat::Volume => &self.pla_area,
+            PlaHeat::Surface => &self.pla_surface_area,
+        };
+        let pa: f64 = pla_w.iter().sum();
+        Ok(Stepper {
+            dt_s,
+            shift,
+            factor,
+            tca_per_w: self.tca_area.iter().map(|a| a / ta / l).collect(),
+            pla_per_w: pla_w.iter().map(|a| a / pa / l).collect(),
+            rim: self.g_rim.clone(),
+            rim_base: (self.nr - 1) * self.nt,
         })
     }
 
@@ -378,16 +710,20 @@ impl CrossSection {
                 }
             }
         }
-        Ok(Banded { n, bw, l })
+        Ok(Banded::new(n, bw, l))
     }
 
     /// Source vector for `p_tca_w` and `p_pla_w` (whole-link watts), W per metre per cell.
     fn sources(&self, p_tca_w: f64, p_pla_w: f64) -> Vec<f64> {
         let ta: f64 = self.tca_area.iter().sum();
-        let pa: f64 = self.pla_area.iter().sum();
+        let pla_w = match self.pla_heat {
+            PlaHeat::Volume => &self.pla_area,
+            PlaHeat::Surface => &self.pla_surface_area,
+        };
+        let pa: f64 = pla_w.iter().sum();
         let l = self.length_m;
         (0..self.cells())
-            .map(|c| p_tca_w / l * self.tca_area[c] / ta + p_pla_w / l * self.pla_area[c] / pa)
+            .map(|c| p_tca_w / l * self.tca_area[c] / ta + p_pla_w / l * pla_w[c] / pa)
             .collect()
     }
 
@@ -578,6 +914,180 @@ impl CrossSection {
             out.push(self.heater_means_k(&t));
         }
         Ok(out)
+    }
+}
+
+/// A reduced-order model of a [`CrossSection`] ([`CrossSection::rom`]): `q` modes `z`, the
+/// field `T = V z`.
+#[derive(Clone, Debug)]
+pub struct Rom {
+    n: usize,
+    q: usize,
+    /// Basis, cell-major: `v[c q + k]`.
+    v: Vec<f64>,
+    capacity: Vec<f64>,
+    a_r: Vec<f64>,
+    b_r: Vec<[f64; 3]>,
+    means: Vec<[f64; 2]>,
+    /// `(I/Δt + A_r)⁻¹`.
+    m: Vec<f64>,
+    dt_s: f64,
+    z: Vec<f64>,
+}
+
+impl Rom {
+    /// Number of modes.
+    pub fn order(&self) -> usize {
+        self.q
+    }
+
+    /// The step it is set up for, s.
+    pub fn dt_s(&self) -> f64 {
+        self.dt_s
+    }
+
+    /// A new step length (inverts the small reduced matrix again).
+    pub fn set_dt(&mut self, dt_s: f64) -> Result<(), ReferenceError> {
+        if !(dt_s > 0.0) || !dt_s.is_finite() {
+            return Err(ReferenceError::BadStep { dt_s });
+        }
+        let q = self.q;
+        let mut a = self.a_r.clone();
+        for i in 0..q {
+            a[i * q + i] += 1.0 / dt_s;
+        }
+        self.m = invert(&a, q).ok_or(ReferenceError::NotPositiveDefinite { row: 0 })?;
+        self.dt_s = dt_s;
+        Ok(())
+    }
+
+    /// Sets the state to the projection of the field `t_c` (exact for a field in the basis,
+    /// such as a uniform one when σ = 0 was a shift).
+    pub fn set_field(&mut self, t_c: &[f64]) {
+        let q = self.q;
+        for k in 0..q {
+            self.z[k] = (0..self.n)
+                .map(|c| self.v[c * q + k] * self.capacity[c] * t_c[c])
+                .sum();
+        }
+    }
+
+    /// One backward-Euler step with whole-link powers and the medium at `ambient_c`.
+    pub fn step(&mut self, p_tca_w: f64, p_pla_w: f64, ambient_c: f64) {
+        let q = self.q;
+        let rhs: Vec<f64> = (0..q)
+            .map(|k| {
+                let b = self.b_r[k];
+                self.z[k] / self.dt_s + b[0] * p_tca_w + b[1] * p_pla_w + b[2] * ambient_c
+            })
+            .collect();
+        for i in 0..q {
+            self.z[i] = self.m[i * q..(i + 1) * q]
+                .iter()
+                .zip(&rhs)
+                .map(|(a, b)| a * b)
+                .sum();
+        }
+    }
+
+    /// Temperature of cell `c`, °C.
+    pub fn cell_c(&self, c: usize) -> f64 {
+        let q = self.q;
+        self.v[c * q..(c + 1) * q]
+            .iter()
+            .zip(&self.z)
+            .map(|(a, b)| a * b)
+            .sum()
+    }
+
+    /// The whole field, °C.
+    pub fn field_c(&self) -> Vec<f64> {
+        (0..self.n).map(|c| self.cell_c(c)).collect()
+    }
+
+    /// Area means of the TCA tube and the PLA rod, °C.
+    pub fn heater_means_c(&self) -> (f64, f64) {
+        let (mut t, mut p) = (0.0, 0.0);
+        for (m, z) in self.means.iter().zip(&self.z) {
+            t += m[0] * z;
+            p += m[1] * z;
+        }
+        (t, p)
+    }
+}
+
+/// Inverse of the `q × q` row-major matrix `a` by Gauss–Jordan with partial pivoting; `None`
+/// if singular.
+fn invert(a: &[f64], q: usize) -> Option<Vec<f64>> {
+    let mut m = a.to_vec();
+    let mut inv = vec![0.0; q * q];
+    for i in 0..q {
+        inv[i * q + i] = 1.0;
+    }
+    for col in 0..q {
+        let piv = (col..q).max_by(|&x, &y| {
+            m[x * q + col]
+                .abs()
+                .partial_cmp(&m[y * q + col].abs())
+                .unwrap_or(core::cmp::Ordering::Equal)
+        })?;
+        let p = m[piv * q + col];
+        if !(p.abs() > 1e-300) || !p.is_finite() {
+            return None;
+        }
+        for k in 0..q {
+            m.swap(col * q + k, piv * q + k);
+            inv.swap(col * q + k, piv * q + k);
+        }
+        for k in 0..q {
+            m[col * q + k] /= p;
+            inv[col * q + k] /= p;
+        }
+        for r in 0..q {
+            if r != col {
+                let f = m[r * q + col];
+                if f != 0.0 {
+                    for k in 0..q {
+                        m[r * q + k] -= f * m[col * q + k];
+                        inv[r * q + k] -= f * inv[col * q + k];
+                    }
+                }
+            }
+        }
+    }
+    Some(inv)
+}
+
+/// Backward-Euler stepping of an absolute temperature field with powers and ambient that may
+/// change every step: `(C/Δt + A) Tⁿ⁺¹ = C/Δt Tⁿ + q + g_rim T∞`.
+#[derive(Clone, Debug)]
+pub struct Stepper {
+    dt_s: f64,
+    shift: Vec<f64>,
+    factor: Banded,
+    tca_per_w: Vec<f64>,
+    pla_per_w: Vec<f64>,
+    rim: Vec<f64>,
+    rim_base: usize,
+}
+
+impl Stepper {
+    /// The step it was made for, s.
+    pub fn dt_s(&self) -> f64 {
+        self.dt_s
+    }
+
+    /// Advances `t_c` (°C, ring-major, one per cell) by one step with whole-link heater powers
+    /// `p_tca_w`, `p_pla_w` and the medium at `ambient_c`.
+    pub fn step(&self, t_c: &mut [f64], p_tca_w: f64, p_pla_w: f64, ambient_c: f64) {
+        for c in 0..t_c.len() {
+            t_c[c] =
+                self.shift[c] * t_c[c] + p_tca_w * self.tca_per_w[c] + p_pla_w * self.pla_per_w[c];
+        }
+        for (j, g) in self.rim.iter().enumerate() {
+            t_c[self.rim_base + j] += g * ambient_c;
+        }
+        self.factor.solve(t_c);
     }
 }
 
@@ -856,6 +1366,94 @@ mod tests {
         let auto = x.transient(1.0, 0.5, above, n, Stepping::Auto).unwrap();
         assert_eq!(auto.method, Stepping::Implicit);
         assert!(auto.tca_rise_k.iter().all(|v| v.is_finite() && *v >= 0.0));
+    }
+
+    #[test]
+    fn surface_heat_makes_the_rod_rim_hotter_than_its_core_and_steps_balance_energy() {
+        let p = LinkParams::DEFAULT;
+        let vol = CrossSection::of_link(&p, 12).unwrap();
+        let surf = vol.clone().with_pla_heat(PlaHeat::Surface);
+        assert_eq!(surf.pla_heat(), PlaHeat::Surface);
+        let centre = (-p.geometry.pla_offset_m, 0.0);
+        let rim_pt = (-p.geometry.pla_offset_m - 0.8e-3, 0.0);
+        let dip = |x: &CrossSection| {
+            let f = x.steady(0.0, 1.0).unwrap().rise_k;
+            x.value_at(&f, rim_pt.0, rim_pt.1) - x.value_at(&f, centre.0, centre.1)
+        };
+        // Volume heat peaks at the rod's centre; surface heat leaves the centre cooler than
+        // its rim's cells (or at most level with them).
+        assert!(dip(&vol) < 0.0, "volume {}", dip(&vol));
+        assert!(
+            dip(&surf) > dip(&vol) + 0.05,
+            "surface {} volume {}",
+            dip(&surf),
+            dip(&vol)
+        );
+        // The stepper reaches the steady field and its rim gives off what goes in.
+        let st = surf.stepper(5.0).unwrap();
+        let amb = 22.0;
+        let mut t = vec![amb; surf.cells()];
+        for _ in 0..400 {
+            st.step(&mut t, 0.3, 1.0, amb);
+        }
+        let out = surf.rim_power_w(&t, amb);
+        assert!((out - 1.3).abs() < 1e-6, "rim {out} W");
+        let steady = surf.steady(0.3, 1.0).unwrap();
+        let (mt, mp) = surf.heater_means_k(&t);
+        assert!((mt - amb - steady.tca_rise_k).abs() < 1e-6 * steady.tca_rise_k);
+        assert!((mp - amb - steady.pla_rise_k).abs() < 1e-6 * steady.pla_rise_k);
+        // A new h changes the rim: air keeps the section hotter.
+        let mut air = surf.clone();
+        air.set_h(20.0);
+        assert!(air.steady(0.3, 1.0).unwrap().tca_rise_k > 2.0 * steady.tca_rise_k);
+    }
+
+    #[test]
+    fn reduced_order_model_follows_the_grid_through_heating_and_cooling() {
+        let p = LinkParams::DEFAULT;
+        let x = CrossSection::of_link(&p, 12)
+            .unwrap()
+            .with_pla_heat(PlaHeat::Surface);
+        let shifts = [0.0, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0];
+        let dt = 0.1;
+        let mut rom = x.rom(&shifts, dt).unwrap();
+        assert!(
+            rom.order() <= 27 && rom.order() >= 12,
+            "order {}",
+            rom.order()
+        );
+        let st = x.stepper(dt).unwrap();
+        let amb = 22.0;
+        let mut t = vec![amb; x.cells()];
+        rom.set_field(&t);
+        assert!((rom.cell_c(5) - amb).abs() < 1e-9);
+        let mut worst: f64 = 0.0;
+        for k in 0..600 {
+            let (pt, pp, a) = if k < 300 {
+                (1.0, 3.0, amb)
+            } else {
+                (0.0, 0.0, amb + 3.0)
+            };
+            st.step(&mut t, pt, pp, a);
+            rom.step(pt, pp, a);
+            let (ft, fp) = x.heater_means_k(&t);
+            let (rt, rp) = rom.heater_means_c();
+            worst = worst.max((ft - rt).abs() / (ft - amb).abs().max(5.0));
+            worst = worst.max((fp - rp).abs() / (fp - amb).abs().max(5.0));
+            let c = x.cells() / 2 + 3;
+            worst = worst.max((t[c] - rom.cell_c(c)).abs() / (t[c] - amb).abs().max(5.0));
+        }
+        assert!(worst < 0.01, "worst {worst}");
+        // Steady state is exact.
+        let mut rom = x.rom(&shifts, 1e4).unwrap();
+        rom.set_field(&vec![amb; x.cells()]);
+        for _ in 0..50 {
+            rom.step(0.5, 1.0, amb);
+        }
+        let s = x.steady(0.5, 1.0).unwrap();
+        let (rt, rp) = rom.heater_means_c();
+        assert!((rt - amb - s.tca_rise_k).abs() < 1e-6 * s.tca_rise_k);
+        assert!((rp - amb - s.pla_rise_k).abs() < 1e-6 * s.pla_rise_k);
     }
 
     #[test]
