@@ -38,7 +38,10 @@ pub fn load_with_fourbar(path: &Path) -> Result<(LinkParams, FourBarGeometry), S
     let text =
         fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     let at = |e: String| format!("{}: {e}", path.display());
-    Ok((from_toml(&text).map_err(at)?, fourbar_from_toml(&text).map_err(at)?))
+    Ok((
+        from_toml(&text).map_err(at)?,
+        fourbar_from_toml(&text).map_err(at)?,
+    ))
 }
 
 /// Longest rigid link of the four-bar, m: 20 link lengths (1 m for the paper's link).
@@ -77,7 +80,9 @@ pub fn check_fourbar(g: &FourBarGeometry, p: &LinkParams) -> Result<(), String> 
     // straight link; the closed-form check covers every crank angle of each.
     for r in [Some(lo), Some(hi), None] {
         fourbar::FourBar::new(*g, p.geometry.length_m, r).map_err(|e| {
-            let which = r.map_or("the straight link".to_string(), |r| format!("radius {r:.2} mm"));
+            let which = r.map_or("the straight link".to_string(), |r| {
+                format!("radius {r:.2} mm")
+            });
             format!("[fourbar] with {which}: {e}")
         })?;
     }
@@ -141,8 +146,8 @@ mod tests {
 
     #[test]
     fn fourbar_section_is_optional_and_range_checked() {
-        let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../link.toml"))
-            .unwrap();
+        let base =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../link.toml")).unwrap();
         assert_eq!(fourbar_from_toml(&base).unwrap(), FourBarGeometry::DEFAULT);
         let with = |section: &str| fourbar_from_toml(&format!("{base}\n[fourbar]\n{section}\n"));
         let g = with("crank_m = 0.012\nbranch = \"left\"").unwrap();
@@ -162,7 +167,10 @@ mod tests {
             assert!(e.contains(key), "{section}: {e}");
         }
         let e = with("rocker_m = 0.016").unwrap_err();
-        assert!(e.contains("[fourbar] with radius") && e.contains("cannot assemble"), "{e}");
+        assert!(
+            e.contains("[fourbar] with radius") && e.contains("cannot assemble"),
+            "{e}"
+        );
         assert!(with("rocker_mm = 40").unwrap_err().contains("rocker_mm"));
         assert!(with("branch = \"up\"").is_err());
     }

@@ -47,8 +47,7 @@ pub const MIN_SIN_TRANSMISSION: f64 = 1e-3;
 
 /// The assembly mode: on which side of the directed line from the crank pin `A` to the rocker
 /// pivot `O4` the rocker pin `B` lies. The other side is the other mode of the same linkage.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Branch {
     /// `B` right of `A→O4` (below the ground line while the crank is near it): the legs hang.
@@ -67,8 +66,7 @@ impl Branch {
 }
 
 /// The rigid links, the foot and the assembly mode (the `[fourbar]` section of `link.toml`).
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct FourBarGeometry {
     /// Ground link, crank pivot `O2` to rocker pivot `O4`, m.
@@ -215,9 +213,8 @@ pub fn arc_point(length_m: f64, kappa_per_m: f64, s_m: f64) -> ([f64; 2], [f64; 
     let t = k * (s_m - length_m / 2.0);
     let x = chord_m(length_m, k) / 2.0 + (s_m - length_m / 2.0) * sinc(t);
     // R (cos t − cos φ) written without the cancellation: 2R sin(ks/2) sin(k(L−s)/2).
-    let y = k * s_m * (length_m - s_m) / 2.0
-        * sinc(k * s_m / 2.0)
-        * sinc(k * (length_m - s_m) / 2.0);
+    let y =
+        k * s_m * (length_m - s_m) / 2.0 * sinc(k * s_m / 2.0) * sinc(k * (length_m - s_m) / 2.0);
     ([x, y], [sin(t), cos(t)])
 }
 
@@ -423,7 +420,10 @@ impl FourBar {
         let u = [(b[0] - a[0]) / c, (b[1] - a[1]) / c];
         let n = [u[1], -u[0]]; // right of A→B: the bulge side
         let (p, nrm) = arc_point(self.length_m, self.kappa_per_m, g.foot_at * self.length_m);
-        let (x, y) = (p[0] + g.foot_offset_m * nrm[0], p[1] + g.foot_offset_m * nrm[1]);
+        let (x, y) = (
+            p[0] + g.foot_offset_m * nrm[0],
+            p[1] + g.foot_offset_m * nrm[1],
+        );
         [a[0] + x * u[0] + y * n[0], a[1] + x * u[1] + y * n[1]]
     }
 
@@ -437,7 +437,10 @@ impl FourBar {
             .map(|i| {
                 let s = self.length_m * i as f64 / n as f64;
                 let (p, _) = arc_point(self.length_m, self.kappa_per_m, s);
-                [a[0] + p[0] * u[0] + p[1] * nv[0], a[1] + p[0] * u[1] + p[1] * nv[1]]
+                [
+                    a[0] + p[0] * u[0] + p[1] * nv[0],
+                    a[1] + p[0] * u[1] + p[1] * nv[1],
+                ]
             })
             .collect()
     }
@@ -520,7 +523,11 @@ impl FourBar {
                 .iter()
                 .min_by(|p, q| (sign * p.foot[k]).total_cmp(&(sign * q.foot[k])))
                 .expect("at least 3 poses");
-            let deg = golden_min(|t| coord(t, k, sign), best.crank_deg - step, best.crank_deg + step);
+            let deg = golden_min(
+                |t| coord(t, k, sign),
+                best.crank_deg - step,
+                best.crank_deg + step,
+            );
             (sign * coord(deg, k, sign) * 1e3, deg.rem_euclid(360.0))
         };
         let (min_x_mm, _) = extreme(0, 1.0);
@@ -622,7 +629,9 @@ pub fn inverse(
     want_mm: f64,
 ) -> Result<Inverse, FourBarError> {
     let value = |r: f64| -> Result<f64, FourBarError> {
-        Ok(FourBar::new(geometry, length_m, Some(r))?.stats()?.get(prop))
+        Ok(FourBar::new(geometry, length_m, Some(r))?
+            .stats()?
+            .get(prop))
     };
     let (lo, hi) = range_mm;
     let radii: Vec<f64> = (0..=INVERSE_SCAN)
@@ -659,9 +668,11 @@ pub fn inverse(
     if !found.is_empty() {
         return Ok(Inverse::Found(found));
     }
-    let span_mm = vals.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-        (a.min(v + want_mm), b.max(v + want_mm))
-    });
+    let span_mm = vals
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v + want_mm), b.max(v + want_mm))
+        });
     let best = (0..vals.len())
         .min_by(|&i, &j| vals[i].abs().total_cmp(&vals[j].abs()))
         .expect("scan points");
@@ -669,7 +680,11 @@ pub fn inverse(
         radii[best.saturating_sub(1)],
         radii[(best + 1).min(INVERSE_SCAN)],
     );
-    let r = golden_min(|r| value(r).map_or(f64::INFINITY, |v| (v - want_mm).abs()), a, b);
+    let r = golden_min(
+        |r| value(r).map_or(f64::INFINITY, |v| (v - want_mm).abs()),
+        a,
+        b,
+    );
     Ok(Inverse::Unreachable {
         span_mm,
         nearest: (r, value(r)?),
@@ -723,7 +738,10 @@ mod tests {
         for r in [1.0, 10.0, 1e3, 1e6] {
             let gap = L - chord_m(L, 1.0 / r);
             let want = L * L * L / (24.0 * r * r);
-            assert!((gap - want).abs() <= 1e-2 * want + 1e-17, "{r}: {gap} vs {want}");
+            assert!(
+                (gap - want).abs() <= 1e-2 * want + 1e-17,
+                "{r}: {gap} vs {want}"
+            );
         }
         assert!((end_angle_rad(L, 1.0 / 0.04) - 0.625).abs() < 1e-15);
     }
@@ -743,7 +761,9 @@ mod tests {
             let ([x, y], n) = arc_point(L, k, s);
             let rr = ((x - c / 2.0).powi(2) + (y - cy).powi(2)).sqrt();
             assert!((rr - r).abs() < 1e-15, "{s}: {rr}");
-            assert!(((x - c / 2.0) / r - n[0]).abs() < 1e-12 && ((y - cy) / r - n[1]).abs() < 1e-12);
+            assert!(
+                ((x - c / 2.0) / r - n[0]).abs() < 1e-12 && ((y - cy) / r - n[1]).abs() < 1e-12
+            );
         }
         let ([_, sag], _) = arc_point(L, k, L / 2.0);
         assert!((sag - r * (1.0 - (L / (2.0 * r)).cos())).abs() < 1e-16);
@@ -770,7 +790,11 @@ mod tests {
     /// coupler point in the coupler's own frame.
     fn rigid_foot(g: &FourBarGeometry, coupler: f64, theta: f64) -> [f64; 2] {
         let (a, b, c, d) = (g.crank_m, g.rocker_m, coupler, g.ground_m);
-        let (k1, k2, k3) = (d / a, d / b, (a * a - c * c + b * b + d * d) / (2.0 * a * b));
+        let (k1, k2, k3) = (
+            d / a,
+            d / b,
+            (a * a - c * c + b * b + d * d) / (2.0 * a * b),
+        );
         let aa = theta.cos() - k1 - k2 * theta.cos() + k3;
         let bb = -2.0 * theta.sin();
         let cc = k1 - (k2 + 1.0) * theta.cos() + k3;
@@ -798,7 +822,12 @@ mod tests {
         assert_eq!(fb.chord_m(), L);
         for p in fb.sweep(DEFAULT_STEPS).unwrap() {
             let want = rigid_foot(&g, L, p.crank_deg.to_radians());
-            assert!(dist(p.foot, want) < 1e-15, "{}: {:?} vs {want:?}", p.crank_deg, p.foot);
+            assert!(
+                dist(p.foot, want) < 1e-15,
+                "{}: {:?} vs {want:?}",
+                p.crank_deg,
+                p.foot
+            );
         }
         // An infinite radius is the straight link.
         assert_eq!(default_bar(Some(f64::INFINITY)), fb);
@@ -841,31 +870,63 @@ mod tests {
     #[test]
     fn a_geometry_that_cannot_assemble_is_refused_with_the_crank_angles() {
         // The rocker so short that at 180 deg the pins cannot meet (d + a = 65 mm > b + c).
-        let g = FourBarGeometry { rocker_m: 0.016, ..FourBarGeometry::DEFAULT };
+        let g = FourBarGeometry {
+            rocker_m: 0.016,
+            ..FourBarGeometry::DEFAULT
+        };
         let e = FourBar::new(g, L, Some(38.0)).unwrap_err();
-        let FourBarError::CannotAssemble { crank_deg: (lo, hi), .. } = e else { panic!("{e:?}") };
-        assert!(lo > 90.0 && lo < 180.0 && (lo + hi - 360.0).abs() < 1e-9, "{lo}..{hi}");
-        assert!(e.to_string().contains("cannot assemble over a full revolution"), "{e}");
+        let FourBarError::CannotAssemble {
+            crank_deg: (lo, hi),
+            ..
+        } = e
+        else {
+            panic!("{e:?}")
+        };
+        assert!(
+            lo > 90.0 && lo < 180.0 && (lo + hi - 360.0).abs() < 1e-9,
+            "{lo}..{hi}"
+        );
+        assert!(
+            e.to_string()
+                .contains("cannot assemble over a full revolution"),
+            "{e}"
+        );
     }
 
     #[test]
     fn a_radius_can_be_what_makes_the_linkage_fail_to_assemble() {
         // Rocker 18 mm: the straight link (b + c = 68 mm > d + a = 65 mm) turns fully, but a
         // chord under 47 mm cannot reach at 180 deg, and the tightest reachable radius gives 45.27.
-        let g = FourBarGeometry { rocker_m: 0.018, ..FourBarGeometry::DEFAULT };
-        FourBar::new(g, L, None).unwrap().sweep(DEFAULT_STEPS).unwrap();
+        let g = FourBarGeometry {
+            rocker_m: 0.018,
+            ..FourBarGeometry::DEFAULT
+        };
+        FourBar::new(g, L, None)
+            .unwrap()
+            .sweep(DEFAULT_STEPS)
+            .unwrap();
         let (lo, _) = reachable();
         let e = FourBar::new(g, L, Some(lo)).unwrap_err();
         assert!(matches!(e, FourBarError::CannotAssemble { .. }), "{e:?}");
         assert!(e.to_string().contains("45.27 mm chord"), "{e}");
         // Right at the toggle (b + c = d + a) it is singular, not merely unassemblable.
-        let g = FourBarGeometry { rocker_m: 0.015, ..FourBarGeometry::DEFAULT };
-        assert!(matches!(FourBar::new(g, L, None), Err(FourBarError::Toggle { .. })));
+        let g = FourBarGeometry {
+            rocker_m: 0.015,
+            ..FourBarGeometry::DEFAULT
+        };
+        assert!(matches!(
+            FourBar::new(g, L, None),
+            Err(FourBarError::Toggle { .. })
+        ));
     }
 
     /// A straight-link linkage `delta` metres short of its toggle at 180 deg.
     fn near_toggle(delta: f64) -> FourBarGeometry {
-        FourBarGeometry { ground_m: 0.055, rocker_m: 0.020 + delta, ..FourBarGeometry::DEFAULT }
+        FourBarGeometry {
+            ground_m: 0.055,
+            rocker_m: 0.020 + delta,
+            ..FourBarGeometry::DEFAULT
+        }
     }
 
     #[test]
@@ -878,7 +939,11 @@ mod tests {
         };
         let (_, just_inside) = sin_at(1e-9);
         match just_inside {
-            Err(FourBarError::Toggle { crank_deg, sin_transmission, .. }) => {
+            Err(FourBarError::Toggle {
+                crank_deg,
+                sin_transmission,
+                ..
+            }) => {
                 assert_eq!(crank_deg, 180.0);
                 assert!(sin_transmission < MIN_SIN_TRANSMISSION);
             }
@@ -890,7 +955,11 @@ mod tests {
         assert!(s.min_sin_transmission > MIN_SIN_TRANSMISSION && s.min_sin_transmission < 0.05);
         assert!(g.rocker_m > 0.020);
         // A pose asked for at the toggle of a linkage built around the check is refused too.
-        let raw = FourBar { geometry: near_toggle(0.0), length_m: L, kappa_per_m: 0.0 };
+        let raw = FourBar {
+            geometry: near_toggle(0.0),
+            length_m: L,
+            kappa_per_m: 0.0,
+        };
         assert!(matches!(raw.pose(180.0), Err(FourBarError::Toggle { .. })));
     }
 
@@ -901,7 +970,9 @@ mod tests {
         // Fine steps follow the branch through the near-toggle at 180 deg…
         fb.sweep(3600).unwrap();
         // …a coarse step that lands on both sides of it cannot tell the modes apart.
-        let e = (3..40).find_map(|n| fb.sweep(n).err()).expect("some coarse sweep flips");
+        let e = (3..40)
+            .find_map(|n| fb.sweep(n).err())
+            .expect("some coarse sweep flips");
         assert!(matches!(e, FourBarError::BranchFlip { .. }), "{e:?}");
         assert!(e.to_string().contains("lost its assembly mode"));
         // The default is far from any toggle: even 3 steps keep the branch.
@@ -910,9 +981,18 @@ mod tests {
 
     #[test]
     fn bad_inputs_are_errors() {
-        assert!(matches!(FourBar::new(FourBarGeometry::DEFAULT, L, Some(-3.0)), Err(FourBarError::BadRadius { .. })));
-        assert!(matches!(FourBar::new(FourBarGeometry::DEFAULT, L, Some(f64::NAN)), Err(FourBarError::BadRadius { .. })));
-        assert!(matches!(default_bar(Some(38.0)).sweep(2), Err(FourBarError::TooFewSteps { steps: 2 })));
+        assert!(matches!(
+            FourBar::new(FourBarGeometry::DEFAULT, L, Some(-3.0)),
+            Err(FourBarError::BadRadius { .. })
+        ));
+        assert!(matches!(
+            FourBar::new(FourBarGeometry::DEFAULT, L, Some(f64::NAN)),
+            Err(FourBarError::BadRadius { .. })
+        ));
+        assert!(matches!(
+            default_bar(Some(38.0)).sweep(2),
+            Err(FourBarError::TooFewSteps { steps: 2 })
+        ));
     }
 
     #[test]
@@ -920,7 +1000,10 @@ mod tests {
         let straight = default_bar(None).stats().unwrap();
         let (lo, _) = reachable();
         let bent = default_bar(Some(lo)).stats().unwrap();
-        assert!((straight.min_y_mm - bent.min_y_mm).abs() > 1.0, "{straight:?} {bent:?}");
+        assert!(
+            (straight.min_y_mm - bent.min_y_mm).abs() > 1.0,
+            "{straight:?} {bent:?}"
+        );
     }
 
     #[test]
@@ -928,10 +1011,20 @@ mod tests {
         let fb = default_bar(Some(40.0));
         let path = fb.foot_path(DEFAULT_STEPS).unwrap();
         let s = fb.stats().unwrap();
-        let low = path.iter().map(|p| p.foot_y_mm).fold(f64::INFINITY, f64::min);
-        assert!(s.min_y_mm <= low && low - s.min_y_mm < 1e-2, "{} {low}", s.min_y_mm);
+        let low = path
+            .iter()
+            .map(|p| p.foot_y_mm)
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            s.min_y_mm <= low && low - s.min_y_mm < 1e-2,
+            "{} {low}",
+            s.min_y_mm
+        );
         let fine = fb.foot_path(36_000).unwrap();
-        let low_fine = fine.iter().map(|p| p.foot_y_mm).fold(f64::INFINITY, f64::min);
+        let low_fine = fine
+            .iter()
+            .map(|p| p.foot_y_mm)
+            .fold(f64::INFINITY, f64::min);
         assert!((s.min_y_mm - low_fine).abs() < 1e-6);
     }
 
@@ -946,10 +1039,37 @@ mod tests {
                     panic!("{prop:?} at {r}")
                 };
                 assert!(
-                    sols.iter().any(|&(s, v)| (s - r).abs() < 1e-5 && (v - want).abs() < 1e-6),
+                    sols.iter()
+                        .any(|&(s, v)| (s - r).abs() < 1e-5 && (v - want).abs() < 1e-6),
                     "{prop:?} {r}: {sols:?}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn a_non_monotonic_property_gives_every_solution() {
+        // A foot 30 mm off the link, three quarters along it: its lowest point first falls then
+        // rises with the radius (−9.80 mm at the tightest radius, −9.36 mm at the turn, −9.57 mm
+        // at the loosest), so −9.45 mm has two radii.
+        let g = FourBarGeometry {
+            foot_at: 0.75,
+            foot_offset_m: -0.03,
+            ..FourBarGeometry::DEFAULT
+        };
+        let Inverse::Found(sols) = inverse(g, L, reachable(), Property::Lowest, -9.45).unwrap()
+        else {
+            panic!()
+        };
+        assert_eq!(sols.len(), 2, "{sols:?}");
+        for (r, v) in sols {
+            assert!((v + 9.45).abs() < 1e-6, "{r} {v}");
+            let back = FourBar::new(g, L, Some(r))
+                .unwrap()
+                .stats()
+                .unwrap()
+                .get(Property::Lowest);
+            assert!((back + 9.45).abs() < 1e-6);
         }
     }
 
@@ -962,7 +1082,10 @@ mod tests {
         else {
             panic!()
         };
-        assert!(span_mm.0 > 1.0 && nearest.1 - span_mm.0 < 1e-6, "{span_mm:?} {nearest:?}");
+        assert!(
+            span_mm.0 > 1.0 && nearest.1 - span_mm.0 < 1e-6,
+            "{span_mm:?} {nearest:?}"
+        );
         assert!(nearest.0 >= range.0 && nearest.0 <= range.1);
     }
 }

@@ -304,7 +304,9 @@ fn fourbar_json(fb: &FourBar, radius_mm: Option<f64>) -> Result<serde_json::Valu
 }
 
 fn radius_words(radius_mm: Option<f64>) -> String {
-    radius_mm.map_or("straight".to_string(), |r| format!("locked at R = {r:.2} mm"))
+    radius_mm.map_or("straight".to_string(), |r| {
+        format!("locked at R = {r:.2} mm")
+    })
 }
 
 /// The human summary: the linkage, the chord, the foot path's lowest point and extents.
@@ -364,11 +366,14 @@ fn morph_line(radius_mm: f64, (lo, hi): (f64, f64)) -> String {
 /// the reachable range gets (an error).
 fn fourbar_inverse(p: &LinkParams, g: &FourBarGeometry, want: &str) -> Result<String, String> {
     let names: Vec<&str> = Property::ALL.iter().map(|p| p.name()).collect();
-    let (name, value) = want
-        .split_once('=')
-        .ok_or(format!("--want takes PROPERTY=VALUE, e.g. stride_mm=30 (properties: {})", names.join(", ")))?;
-    let prop = Property::parse(name.trim())
-        .ok_or(format!("--want: unknown property {name:?}; properties: {}", names.join(", ")))?;
+    let (name, value) = want.split_once('=').ok_or(format!(
+        "--want takes PROPERTY=VALUE, e.g. stride_mm=30 (properties: {})",
+        names.join(", ")
+    ))?;
+    let prop = Property::parse(name.trim()).ok_or(format!(
+        "--want: unknown property {name:?}; properties: {}",
+        names.join(", ")
+    ))?;
     let want_mm: f64 = value
         .trim()
         .parse()
@@ -377,7 +382,9 @@ fn fourbar_inverse(p: &LinkParams, g: &FourBarGeometry, want: &str) -> Result<St
         .ok_or(format!("--want: {value:?} is not a number of mm"))?;
     let range = fourbar::reachable_radii_mm(p);
     let (lo, hi) = range;
-    match fourbar::inverse(*g, p.geometry.length_m, range, prop, want_mm).map_err(|e| e.to_string())? {
+    match fourbar::inverse(*g, p.geometry.length_m, range, prop, want_mm)
+        .map_err(|e| e.to_string())?
+    {
         Inverse::Found(sols) => {
             let mut out = format!(
                 "{} = {want_mm} mm: {} solution{} within the reachable radii {lo:.2}..{hi:.2} mm\n",
@@ -426,7 +433,11 @@ struct FourBarChart {
 const FOURBAR_PX_PER_MM: f64 = 9.0;
 
 impl Figure for FourBarChart {
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>, format: Format) -> PlotResult {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        format: Format,
+    ) -> PlotResult {
         let text = format.has_text();
         let frame = Frame::new(20, 12, 40, 55).text(text);
         let title = format!("Foot paths; linkage at {}", self.drawn);
@@ -435,17 +446,34 @@ impl Figure for FourBarChart {
             .build_cartesian_2d(self.x.0..self.x.1, self.y.0..self.y.1)?;
         mesh(&mut chart, "x (mm)", "y (mm)", text).draw()?;
         for (i, pose) in self.poses.iter().enumerate() {
-            let style = if i == 0 { BLACK.stroke_width(2) } else { BLACK.mix(0.35).stroke_width(1) };
+            let style = if i == 0 {
+                BLACK.stroke_width(2)
+            } else {
+                BLACK.mix(0.35).stroke_width(1)
+            };
             line(&mut chart, pose.iter().copied(), style, None)?;
             // The joints: O4, O2, A and B (the link's last point before the rocker).
             let joints = [pose[0], pose[1], pose[2], pose[pose.len() - 2]];
-            chart.draw_series(joints.into_iter().map(|p| Circle::new(p, 3, style.filled())))?;
+            chart.draw_series(
+                joints
+                    .into_iter()
+                    .map(|p| Circle::new(p, 3, style.filled())),
+            )?;
         }
         for (i, (label, pts)) in self.paths.iter().enumerate() {
-            let colour = if i == 0 { RGBColor(90, 90, 90) } else { palette(i - 1) };
+            let colour = if i == 0 {
+                RGBColor(90, 90, 90)
+            } else {
+                palette(i - 1)
+            };
             let mut closed = pts.clone();
             closed.push(pts[0]);
-            line(&mut chart, closed, colour.stroke_width(2), text.then_some(label.as_str()))?;
+            line(
+                &mut chart,
+                closed,
+                colour.stroke_width(2),
+                text.then_some(label.as_str()),
+            )?;
         }
         if text {
             legend(&mut chart, SeriesLabelPosition::UpperRight)?;
@@ -454,7 +482,11 @@ impl Figure for FourBarChart {
     }
 }
 
-fn fourbar_chart(p: &LinkParams, g: &FourBarGeometry, path: &std::path::Path) -> Result<(), String> {
+fn fourbar_chart(
+    p: &LinkParams,
+    g: &FourBarGeometry,
+    path: &std::path::Path,
+) -> Result<(), String> {
     let l = p.geometry.length_m;
     let (lo, hi) = fourbar::reachable_radii_mm(p);
     let mut radii: Vec<Option<f64>> = vec![None];
@@ -484,8 +516,14 @@ fn fourbar_chart(p: &LinkParams, g: &FourBarGeometry, path: &std::path::Path) ->
         pts.push(mm([g.ground_m, 0.0]));
         poses.push(pts);
     }
-    let all = paths.iter().flat_map(|(_, v)| v.iter()).chain(poses.iter().flatten());
-    let (mut x, mut y) = ((f64::INFINITY, f64::NEG_INFINITY), (f64::INFINITY, f64::NEG_INFINITY));
+    let all = paths
+        .iter()
+        .flat_map(|(_, v)| v.iter())
+        .chain(poses.iter().flatten());
+    let (mut x, mut y) = (
+        (f64::INFINITY, f64::NEG_INFINITY),
+        (f64::INFINITY, f64::NEG_INFINITY),
+    );
     for &(px, py) in all {
         x = (x.0.min(px), x.1.max(px));
         y = (y.0.min(py), y.1.max(py));
@@ -544,5 +582,117 @@ mod tests {
     fn pick_rejects_a_tolerance_that_is_not_positive() {
         let cli = Cli::parse_from(["morph-model", "pick", "--tolerance-mm", "0"]);
         assert!(run(cli).unwrap_err().contains("positive"));
+    }
+
+    #[test]
+    fn fourbar_json_has_the_documented_shape_and_the_closed_form_chord() {
+        let p = LinkParams::DEFAULT;
+        let l = p.geometry.length_m;
+        for r in [Some(38.0), None] {
+            let fb = FourBar::new(FourBarGeometry::DEFAULT, l, r).unwrap();
+            let j = fourbar_json(&fb, r).unwrap();
+            let want_chord = r.map_or(50.0, |r| 2.0 * r * (50.0 / (2.0 * r)).sin());
+            assert!((j["chord_mm"].as_f64().unwrap() - want_chord).abs() < 1e-12);
+            assert_eq!(j["radius_mm"].as_f64(), r);
+            assert_eq!(j["straight"].as_bool(), Some(r.is_none()));
+            let pts = j["points"].as_array().unwrap();
+            assert_eq!(pts.len(), 360);
+            for (i, q) in pts.iter().enumerate() {
+                let q = q.as_object().unwrap();
+                assert_eq!(q.len(), 3);
+                assert_eq!(q["crank_deg"].as_f64(), Some(i as f64));
+                assert!(q["foot_x_mm"].as_f64().unwrap().is_finite());
+                assert!(
+                    q["foot_y_mm"].as_f64().unwrap() < 0.0,
+                    "the foot hangs below the pivots"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn fourbar_inverse_prints_the_morph_line_and_round_trips() {
+        let p = LinkParams::DEFAULT;
+        let g = FourBarGeometry::DEFAULT;
+        let out = fourbar_inverse(&p, &g, "stride_mm=26.5").unwrap();
+        assert!(
+            out.contains("1 solution") && out.contains("send: MORPH 35.94"),
+            "{out}"
+        );
+        let r: f64 = out
+            .split("send: MORPH ")
+            .nth(1)
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap();
+        let s = FourBar::new(g, p.geometry.length_m, Some(r))
+            .unwrap()
+            .stats()
+            .unwrap();
+        assert!((s.get(Property::Stride) - 26.5).abs() < 1e-3);
+        let e = fourbar_inverse(&p, &g, "stride_mm=30").unwrap_err();
+        assert!(
+            e.contains("no reachable radius") && e.contains("nearest") && e.contains("MORPH 46.45"),
+            "{e}"
+        );
+        assert!(fourbar_inverse(&p, &g, "width_mm=3")
+            .unwrap_err()
+            .contains("lowest_mm, stride_mm, height_mm"));
+        assert!(fourbar_inverse(&p, &g, "stride_mm")
+            .unwrap_err()
+            .contains("PROPERTY=VALUE"));
+        assert!(fourbar_inverse(&p, &g, "stride_mm=abc")
+            .unwrap_err()
+            .contains("not a number"));
+    }
+
+    #[test]
+    fn fourbar_morph_lines_stay_inside_the_reachable_range() {
+        let range = (32.7166, 46.4571);
+        assert_eq!(morph_line(38.123, range), "MORPH 38.12");
+        assert_eq!(morph_line(32.7166, range), "MORPH 32.72");
+        assert_eq!(morph_line(46.4571, range), "MORPH 46.45");
+    }
+
+    #[test]
+    fn fourbar_cli_refuses_what_it_cannot_do() {
+        let run_args = |a: &[&str]| {
+            let mut v = vec!["morph-model", "fourbar"];
+            v.extend_from_slice(a);
+            Cli::try_parse_from(v)
+                .map_err(|e| e.to_string())
+                .and_then(run)
+        };
+        assert!(run_args(&["--radius-mm", "20"])
+            .unwrap_err()
+            .contains("outside the reachable range"));
+        assert!(run_args(&["--want", "stride_mm=26.5", "--json"])
+            .unwrap_err()
+            .contains("--json goes with"));
+        assert!(
+            run_args(&[]).is_err(),
+            "one of --radius-mm, --straight, --chart, --want is needed"
+        );
+        assert!(run_args(&["--radius-mm", "38", "--straight"]).is_err());
+    }
+
+    #[test]
+    fn fourbar_chart_names_every_radius() {
+        let dir = std::env::temp_dir().join(format!("morphlink-fourbar-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("fourbar.svg");
+        fourbar_chart(&LinkParams::DEFAULT, &FourBarGeometry::DEFAULT, &path).unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        for s in [
+            "straight link",
+            "R = 46.46 mm",
+            "R = 32.72 mm",
+            "x (mm)",
+            "y (mm)",
+        ] {
+            assert!(svg.contains(s), "{s} missing");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
