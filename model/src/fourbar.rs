@@ -19,7 +19,7 @@
 
 use crate::params::LinkParams;
 use core::fmt;
-use libm::{atan2, cos, sin, sqrt};
+use libm::{cos, sin, sqrt};
 
 /// The default geometry's ground link (pivot to pivot), m. With the crank 15 mm, the rocker
 /// 40 mm and the coupler's chord 45.3–50 mm over the reachable radii and the straight link, it
@@ -313,6 +313,15 @@ impl PathStats {
     }
 }
 
+/// One closed-form position: the crank pin, the rocker pin on this branch and on the other,
+/// `sin` of the transmission angle.
+struct Solved {
+    a: [f64; 2],
+    b: [f64; 2],
+    other_b: [f64; 2],
+    sin_mu: f64,
+}
+
 fn dist(p: [f64; 2], q: [f64; 2]) -> f64 {
     sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]))
 }
@@ -384,10 +393,10 @@ impl FourBar {
         Ok(())
     }
 
-    /// Both positions of the rocker pin at crank angle `theta_rad`: `(this branch, the other)`,
-    /// and the crank pin and `sin` of the transmission angle. `None` if the pins cannot join
+    /// The crank pin, both positions of the rocker pin at crank angle `theta_rad` (this branch,
+    /// then the other) and `sin` of the transmission angle. `None` if the pins cannot join
     /// (only for a linkage not built by [`FourBar::new`]).
-    fn solve(&self, theta_rad: f64) -> Option<([f64; 2], [f64; 2], [f64; 2], f64)> {
+    fn solve(&self, theta_rad: f64) -> Option<Solved> {
         let g = &self.geometry;
         let (a, b, c) = (g.crank_m, g.rocker_m, self.chord_m());
         let pa = [a * cos(theta_rad), a * sin(theta_rad)];
@@ -410,7 +419,12 @@ impl FourBar {
         let sign = g.branch.sign();
         // The triangle A B O4: sin μ = f sin α / rocker (law of sines).
         let sin_mu = f * sin_al / b;
-        Some((pa, at(sign), at(-sign), sin_mu))
+        Some(Solved {
+            a: pa,
+            b: at(sign),
+            other_b: at(-sign),
+            sin_mu,
+        })
     }
 
     /// The foot, ground frame, m, for the crank and rocker pins `a`, `b`.
@@ -447,7 +461,7 @@ impl FourBar {
 
     /// The linkage at `crank_deg` on its branch.
     pub fn pose(&self, crank_deg: f64) -> Result<Pose, FourBarError> {
-        let (a, b, _, sin_mu) =
+        let Solved { a, b, sin_mu, .. } =
             self.solve(crank_deg.to_radians())
                 .ok_or(FourBarError::CannotAssemble {
                     chord_mm: self.chord_m() * 1e3,
@@ -481,7 +495,10 @@ impl FourBar {
         for i in 0..=steps {
             let crank_deg = 360.0 * i as f64 / steps as f64;
             let pose = self.pose(crank_deg)?;
-            let (_, _, other, _) = self.solve(crank_deg.to_radians()).expect("pose solved it");
+            let other = self
+                .solve(crank_deg.to_radians())
+                .expect("pose solved it")
+                .other_b;
             if let Some(pb) = prev {
                 if dist(other, pb) < dist(pose.b, pb) {
                     return Err(FourBarError::BranchFlip { crank_deg, steps });
@@ -514,7 +531,7 @@ impl FourBar {
         let poses = self.sweep(DEFAULT_STEPS)?;
         let step = 360.0 / DEFAULT_STEPS as f64;
         let coord = |deg: f64, k: usize, sign: f64| -> f64 {
-            let (a, b, _, _) = self.solve(deg.to_radians()).expect("checked revolution");
+            let Solved { a, b, .. } = self.solve(deg.to_radians()).expect("checked revolution");
             sign * self.foot(a, b)[k]
         };
         // Smallest of sign·coord k: the best sample, then golden section over its neighbours.
@@ -689,16 +706,6 @@ pub fn inverse(
         span_mm,
         nearest: (r, value(r)?),
     })
-}
-
-/// The link's length from the parameters, m, and its reachable radii, mm.
-pub fn link_of(p: &LinkParams) -> (f64, (f64, f64)) {
-    (p.geometry.length_m, reachable_radii_mm(p))
-}
-
-/// `atan2` of a vector, degrees (for the chart and the docs' angles).
-pub fn angle_deg(v: [f64; 2]) -> f64 {
-    atan2(v[1], v[0]).to_degrees()
 }
 
 #[cfg(test)]
