@@ -678,6 +678,44 @@ mod tests {
     }
 
     #[test]
+    fn fourbar_reads_its_section_from_the_link_file() {
+        let dir =
+            std::env::temp_dir().join(format!("morphlink-fourbar-link-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let base =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../link.toml")).unwrap();
+        let run_with = |section: &str| {
+            let path = dir.join("link.toml");
+            std::fs::write(&path, format!("{base}\n[fourbar]\n{section}\n")).unwrap();
+            let link = path.to_str().unwrap().to_string();
+            run(Cli::parse_from([
+                "morph-model",
+                "--link",
+                &link,
+                "fourbar",
+                "--straight",
+            ]))
+        };
+        run_with("crank_m = 0.012").unwrap();
+        let e = run_with("rocker_m = 0.018").unwrap_err();
+        assert!(
+            e.contains("link.toml: [fourbar] with radius 32.72 mm")
+                && e.contains("cannot assemble"),
+            "{e}"
+        );
+        // The other commands do not judge the four-bar.
+        let path = dir.join("link.toml");
+        run(Cli::parse_from([
+            "morph-model",
+            "--link",
+            path.to_str().unwrap(),
+            "table",
+        ]))
+        .unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn fourbar_chart_names_every_radius() {
         let dir = std::env::temp_dir().join(format!("morphlink-fourbar-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
