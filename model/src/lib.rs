@@ -4,7 +4,8 @@
 //! simulated link and host tools: [`thermal`] (steady resistance matrix and transient network),
 //! [`mechanics`] (TCA force law and constant-curvature balance) and [`table`]. With the `std`
 //! feature, [`file`] reads and writes `link.toml`; with `fit`, [`calibrate`] fits the unknown
-//! mechanical constants to measured radii. With `reference`, [`reference`] holds the paper's full
+//! mechanical constants to measured radii; [`fourbar`] is the paper's application, a four-bar
+//! linkage with the locked link as its coupler, and the foot path it draws. With `reference`, [`reference`] holds the paper's full
 //! model (2-D finite-volume thermal, Cosserat rod, physics-based TCA law) and the study of what
 //! each level of model costs and buys.
 #![cfg_attr(not(any(feature = "std", test)), no_std)]
@@ -22,6 +23,8 @@ pub mod thermal;
 pub mod calibrate;
 #[cfg(feature = "std")]
 pub mod file;
+#[cfg(feature = "std")]
+pub mod fourbar;
 #[cfg(feature = "reference")]
 pub mod reference;
 
