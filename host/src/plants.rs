@@ -1,10 +1,8 @@
 //! The in-process plants a shell can pick by name (`morph-sim --plant`, `morph-plant --plant`).
 //!
-//! The one place that maps a name to a plant. The high-fidelity plant
-//! (`morphlink_plant::hifi::Hifi`, behind the plant crate's `hifi` feature) is not built in
-//! yet: wiring it in is the `PlantKind::Hifi` arm of [`in_process`] and the `hifi` feature on
-//! the `morphlink-plant` dependency in `host/Cargo.toml`.
+//! The one place that maps a name to a plant.
 
+use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
 use morphlink_plant::Plant;
 use morphlink_sim::LinkSetup;
 
@@ -13,19 +11,22 @@ use morphlink_sim::LinkSetup;
 pub enum PlantKind {
     /// The lumped link (`morphlink_plant::Lumped`): the nominal link of `morph-sim`.
     Lumped,
-    /// The high-fidelity link (`morphlink_plant::hifi`): not built in yet.
+    /// The high-fidelity link (`morphlink_plant::hifi`) of the same parameters, on the full
+    /// finite-volume grid: structurally different from the controller's model.
     Hifi,
 }
-
-/// Why `hifi` is refused until it is built in.
-pub const HIFI_NOT_BUILT: &str = "the hifi plant is not built in (this build has no \
-     morphlink_plant::hifi; build with the plant crate's `hifi` feature once it exists)";
 
 /// The plant `kind` for the nominal link `setup`, or why it cannot be had.
 pub fn in_process(kind: PlantKind, setup: &LinkSetup) -> Result<Box<dyn Plant>, String> {
     match kind {
         PlantKind::Lumped => Ok(Box::new(setup.lumped())),
-        PlantKind::Hifi => Err(HIFI_NOT_BUILT.to_string()),
+        PlantKind::Hifi => {
+            let spec = HifiSpec::nominal(setup.params, Grid::Full)
+                .map_err(|e| format!("the hifi plant cannot be built: {e}"))?;
+            let plant =
+                Hifi::new(spec).map_err(|e| format!("the hifi plant cannot be built: {e}"))?;
+            Ok(Box::new(plant))
+        }
     }
 }
 
@@ -34,12 +35,15 @@ mod tests {
     use super::*;
 
     #[test]
-    fn lumped_is_built_in_and_hifi_says_it_is_not() {
+    fn both_plants_are_built_in_and_start_at_rest() {
         let p = in_process(PlantKind::Lumped, &LinkSetup::NOMINAL).unwrap();
         assert_eq!(p.sample(), LinkSetup::NOMINAL.lumped().sample());
-        let e = in_process(PlantKind::Hifi, &LinkSetup::NOMINAL)
-            .err()
-            .unwrap();
-        assert!(e.starts_with("the hifi plant is not built in"), "{e}");
+        let h = in_process(PlantKind::Hifi, &LinkSetup::NOMINAL).unwrap();
+        let (s, amb) = (h.sample(), LinkSetup::NOMINAL.params.surroundings.ambient_c);
+        // At rest every bead reads the ambient (within its R25/Beta tolerance).
+        for t in [s.t_pla_c, s.t_tca_c, s.t_amb_c] {
+            assert!((t - amb).abs() < 1.0, "{s:?}");
+        }
+        assert_ne!(s.radius_mm, p.sample().radius_mm, "two different links");
     }
 }
