@@ -145,7 +145,8 @@ pub fn run_policy<P: Plant>(mut plant: P, tca_hold_c: f64) -> OracleRun {
 /// (tighter than the hottest hold gives, or looser than the link at rest).
 pub fn best<P: Plant + Clone>(plant: &P, target_mm: f64) -> Option<OracleRun> {
     let ambient = plant.sample().t_amb_c;
-    let (mut lo, mut hi) = (ambient + 1.0, ORACLE_TCA_MAX_C);
+    // At a hold of the ambient the TCA is never heated: the loosest the policy goes.
+    let (mut lo, mut hi) = (ambient, ORACLE_TCA_MAX_C);
     let hot = run_policy(plant.clone(), hi);
     if hot.time_s.is_nan() || hot.final_mm > target_mm {
         return None;
