@@ -48,9 +48,7 @@ impl fmt::Display for LinkError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             LinkError::Interrupted(sig) => write!(f, "interrupted by {}", signal_name(*sig)),
-            LinkError::Timeout(m) | LinkError::Closed(m) | LinkError::Protocol(m) => {
-                f.write_str(m)
-            }
+            LinkError::Timeout(m) | LinkError::Closed(m) | LinkError::Protocol(m) => f.write_str(m),
         }
     }
 }
@@ -119,6 +117,9 @@ pub struct Link {
     signals: Arc<AtomicUsize>,
     /// False while morphctl stops the heaters: a second Ctrl-C must not cut that short.
     interruptible: bool,
+    /// Replies still owed to commands whose wait a signal cut short: the next final replies
+    /// are theirs, not the next command's.
+    owed: usize,
     /// Over-long lines dropped so far.
     pub dropped_lines: usize,
     /// True for `morph-sim` (it answers `SIM` commands).
@@ -236,6 +237,7 @@ impl Link {
             child,
             signals: Arc::new(AtomicUsize::new(0)),
             interruptible: true,
+            owed: 0,
             dropped_lines: 0,
             simulated,
             name,
@@ -364,12 +366,35 @@ impl Link {
         timeout_s: f64,
         on_event: &mut dyn FnMut(&str),
     ) -> Result<(Vec<String>, String), LinkError> {
+        self.command_where(line, timeout_s, on_event, &|_| true)
+    }
+
+    /// [`Link::command`] whose reply must pass `expected`: other final lines (a late reply to
+    /// an earlier command that timed out) are skipped with a note on stderr. Replies owed to
+    /// an interrupted command are skipped first.
+    pub fn command_where(
+        &mut self,
+        line: &str,
+        timeout_s: f64,
+        on_event: &mut dyn FnMut(&str),
+        expected: &dyn Fn(&str) -> bool,
+    ) -> Result<(Vec<String>, String), LinkError> {
         self.send(line)?;
         let deadline = Instant::now() + Duration::from_secs_f64(timeout_s);
         let mut data = Vec::new();
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
-            let got = if left.is_zero() { None } else { self.recv(left)? };
+            let got = if left.is_zero() {
+                None
+            } else {
+                match self.recv(left) {
+                    Err(e @ LinkError::Interrupted(_)) => {
+                        self.owed += 1;
+                        return Err(e);
+                    }
+                    r => r?,
+                }
+            };
             let Some(l) = got else {
                 return Err(LinkError::Timeout(format!(
                     "{} did not answer `{line}` within {timeout_s} s",
@@ -379,6 +404,14 @@ impl Link {
             match classify(&l) {
                 kind if kind.is_unsolicited() => on_event(&l),
                 LineKind::Data => data.push(data_text(&l).unwrap_or_default().to_string()),
+                kind if kind.is_final() && self.owed > 0 => {
+                    self.owed -= 1;
+                    data.clear();
+                }
+                kind if kind.is_final() && !expected(&l) => {
+                    eprintln!("morphctl: ignored `{l}`, a late reply to an earlier command");
+                    data.clear();
+                }
                 kind if kind.is_final() => return Ok((data, l)),
                 LineKind::Blank => {}
                 _ => return Err(LinkError::Protocol(not_morphlink(&self.name, &l))),
@@ -497,12 +530,18 @@ mod tests {
         let mut l = link_from_text(&format!("{long}\n{exact}\r\nok\n"));
         assert_eq!(l.recv(Duration::from_secs(2)).unwrap(), Some(exact));
         assert_eq!(l.dropped_lines, 1);
-        assert_eq!(l.recv(Duration::from_secs(2)).unwrap().as_deref(), Some("ok"));
+        assert_eq!(
+            l.recv(Duration::from_secs(2)).unwrap().as_deref(),
+            Some("ok")
+        );
     }
 
     #[test]
     fn the_line_cap_is_the_firmware_line_capacity() {
-        assert_eq!(MAX_REPLY_LINE, morphlink::protocol::OutLine::new().capacity());
+        assert_eq!(
+            MAX_REPLY_LINE,
+            morphlink::protocol::OutLine::new().capacity()
+        );
     }
 
     #[test]

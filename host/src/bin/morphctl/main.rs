@@ -346,11 +346,16 @@ fn stop_heaters(link: &mut Link) -> Result<String, String> {
 /// One ABORT, then STATUS: Ok(the STATUS line) if it shows the heaters off.
 fn abort_and_check(link: &mut Link) -> Result<String, String> {
     let print_event = &mut |l: &str| println!("{l}");
-    let (_, reply) = link.command("ABORT", REPLY_TIMEOUT_S, print_event)?;
+    // ABORT answers a plain `ok`; STATUS `ok phase=...`: anything else is a late reply.
+    let (_, reply) = link.command_where("ABORT", REPLY_TIMEOUT_S, print_event, &|l| {
+        l == morphlink::protocol::OK || classify(l) == LineKind::Error
+    })?;
     if classify(&reply) != LineKind::Ok {
         return Err(format!("ABORT answered `{reply}`"));
     }
-    let (_, status) = link.command("STATUS", REPLY_TIMEOUT_S, print_event)?;
+    let (_, status) = link.command_where("STATUS", REPLY_TIMEOUT_S, print_event, &|l| {
+        field(l, "phase").is_some() || classify(l) == LineKind::Error
+    })?;
     if heaters_off(&status) {
         Ok(status)
     } else {
@@ -360,7 +365,8 @@ fn abort_and_check(link: &mut Link) -> Result<String, String> {
 
 /// True if a STATUS reply shows both powers zero in phase idle or fault.
 fn heaters_off(status: &str) -> bool {
-    let is = |key: &str, want: &[&str]| field(status, key).is_some_and(|v| want.contains(&v.as_str()));
+    let is =
+        |key: &str, want: &[&str]| field(status, key).is_some_and(|v| want.contains(&v.as_str()));
     classify(status) == LineKind::Ok
         && is("p_pla_w", &["0.000"])
         && is("p_tca_w", &["0.000"])
@@ -460,4 +466,25 @@ fn follow(
     }
     println!();
     Ok(outcome.unwrap_or(ExitCode::FAILURE))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn heaters_off_needs_both_powers_zero_in_idle_or_fault() {
+        let st = |phase: &str, pla: &str, tca: &str| {
+            format!("ok phase={phase} target_mm=38.00 t_pla_c=74.17 t_tca_c=56.88 t_amb_c=21.94 p_pla_w={pla} p_tca_w={tca} supply_v=12.00 fault=none")
+        };
+        assert!(heaters_off(&st("idle", "0.000", "0.000")));
+        assert!(heaters_off(&st("fault", "0.000", "0.000")));
+        assert!(!heaters_off(&st("bend", "0.000", "0.000")));
+        assert!(!heaters_off(&st("idle", "0.000", "0.001")));
+        assert!(!heaters_off(&st("idle", "1.500", "0.000")));
+        assert!(!heaters_off("ok"));
+        assert!(!heaters_off(
+            "error: busy p_pla_w=0.000 p_tca_w=0.000 phase=idle"
+        ));
+    }
 }
