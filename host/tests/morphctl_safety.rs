@@ -155,8 +155,7 @@ fn sigint_during_a_morph_sends_abort_and_the_device_reports_the_heaters_off() {
     // What the device answered: heaters on before, off in the last STATUS.
     let from = eventually(&dir.join("from_device.log"), |t| {
         t.lines()
-            .filter(|l| l.starts_with("ok phase="))
-            .last()
+            .rfind(|l| l.starts_with("ok phase="))
             .is_some_and(heaters_off)
     });
     let statuses: Vec<&str> = from
@@ -258,6 +257,8 @@ fn status_after_a_long_line(dir: &Path, long_bytes: usize) -> (i32, String, Stri
 done"#
         ),
     );
+    // Reaped by wait4(2) below, which also reports its peak memory.
+    #[allow(clippy::zombie_processes)]
     let child = Command::new(MORPHCTL)
         .args(["--sim", "--sim-program", device.to_str().unwrap(), "status"])
         .stdin(Stdio::null())
