@@ -23,8 +23,8 @@ enum Op {
     Line(String),
     /// A known command word.
     Known(u8),
-    /// `MORPH <radius> <mode>`.
-    Morph { radius_mm: f32, mode: u8 },
+    /// `MORPH <radius> <mode>`, the radius in 0.01 mm (so the reachable range is often hit).
+    Morph { radius_cmm: u16, mode: u8 },
     /// A tick after `dt_ms` with raw counts.
     Step { dt_ms: u16, thermistor_counts: [u32; 3], supply_counts: u32, sample_lag_ms: u16 },
     /// A tick after `dt_ms` with counts for these temperatures (°C) and supply (dV).
@@ -75,8 +75,9 @@ fuzz_target!(|ops: Vec<Op>| {
         match op {
             Op::Line(text) => line(&mut c, now_ms, &text),
             Op::Known(i) => line(&mut c, now_ms, KNOWN[i as usize % KNOWN.len()]),
-            Op::Morph { radius_mm, mode } => {
+            Op::Morph { radius_cmm, mode } => {
                 let m = MODES[mode as usize % MODES.len()];
+                let radius_mm = radius_cmm as f32 / 100.0;
                 line(&mut c, now_ms, &format!("MORPH {radius_mm}{m}"));
             }
             Op::Step { dt_ms, thermistor_counts, supply_counts, sample_lag_ms } => {
