@@ -3,10 +3,14 @@
 //! unsolicited `event:`/`alarm:` lines.
 
 use morphlink::protocol::client::{classify, data_text, LineKind};
+use std::fmt;
 use std::io::{Read, Write};
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Protocol version this tool speaks (`VERSION` replies `ok version=<v> protocol=<PROTOCOL>`).
@@ -18,6 +22,63 @@ pub const HANDSHAKE_TIMEOUT_S: f64 = 3.0;
 pub const REPLY_TIMEOUT_S: f64 = 2.0;
 /// Read timeout of the serial port, ms: short, so the reader thread notices a closed tool.
 const SERIAL_READ_TIMEOUT_MS: u64 = 100;
+/// Longest line a device sends, bytes without the ending: the firmware writes every line into a
+/// `protocol::OutLine` (192 bytes). Longer lines are dropped and reported, never buffered.
+pub const MAX_REPLY_LINE: usize = 192;
+/// Lines the reader thread may queue before it waits for the tool to take them (then the
+/// device's side of the pipe or the serial driver's buffer fills instead of our memory).
+const LINE_QUEUE: usize = 256;
+/// Longest a wait for a line goes without looking at the signal flag, ms.
+const SIGNAL_POLL_MS: u64 = 50;
+
+/// Why a link operation failed.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LinkError {
+    /// A termination signal arrived (its number) while waiting.
+    Interrupted(i32),
+    /// The device did not answer in time.
+    Timeout(String),
+    /// The link closed, or a write failed.
+    Closed(String),
+    /// The device sent something that is not the protocol.
+    Protocol(String),
+}
+
+impl fmt::Display for LinkError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LinkError::Interrupted(sig) => write!(f, "interrupted by {}", signal_name(*sig)),
+            LinkError::Timeout(m) | LinkError::Closed(m) | LinkError::Protocol(m) => f.write_str(m),
+        }
+    }
+}
+
+impl From<LinkError> for String {
+    fn from(e: LinkError) -> String {
+        e.to_string()
+    }
+}
+
+/// `SIGINT`, `SIGTERM`, ... for a signal number.
+pub fn signal_name(sig: i32) -> String {
+    match sig {
+        libc::SIGINT => "SIGINT (Ctrl-C)".into(),
+        libc::SIGTERM => "SIGTERM".into(),
+        libc::SIGHUP => "SIGHUP".into(),
+        n => format!("signal {n}"),
+    }
+}
+
+/// The signal flag: 0, or the number of the last termination signal received. The handlers
+/// only store into it (`signal_hook::flag`); the tool's loops look at it.
+pub fn watch_signals() -> Result<Arc<AtomicUsize>, String> {
+    let flag = Arc::new(AtomicUsize::new(0));
+    for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+        signal_hook::flag::register_usize(sig, Arc::clone(&flag), sig as usize)
+            .map_err(|e| format!("cannot watch {}: {e}", signal_name(sig)))?;
+    }
+    Ok(flag)
+}
 
 /// Where the lines come from.
 pub enum Target {
@@ -42,6 +103,8 @@ pub enum Target {
 pub enum Incoming {
     /// A line of text (without its line ending).
     Line(String),
+    /// A line longer than [`MAX_REPLY_LINE`] was dropped; its length in bytes.
+    TooLong(usize),
     /// The device closed the link (the child exited, the port vanished).
     Closed(String),
 }
@@ -51,6 +114,14 @@ pub struct Link {
     writer: Box<dyn Write + Send>,
     lines: Receiver<Incoming>,
     child: Option<Child>,
+    signals: Arc<AtomicUsize>,
+    /// False while morphctl stops the heaters: a second Ctrl-C must not cut that short.
+    interruptible: bool,
+    /// Replies still owed to commands whose wait a signal cut short: the next final replies
+    /// are theirs, not the next command's.
+    owed: usize,
+    /// Over-long lines dropped so far.
+    pub dropped_lines: usize,
     /// True for `morph-sim` (it answers `SIM` commands).
     pub simulated: bool,
     /// What the link is, for messages.
@@ -81,10 +152,14 @@ fn serial_error(path: &str, e: &serialport::Error) -> String {
     }
 }
 
+/// Reads lines on a thread into a bounded queue; each line is held in at most
+/// [`MAX_REPLY_LINE`] bytes.
 fn spawn_reader(mut source: impl Read + Send + 'static, what: String) -> Receiver<Incoming> {
-    let (tx, rx) = mpsc::channel();
+    let (tx, rx) = mpsc::sync_channel(LINE_QUEUE);
     std::thread::spawn(move || {
-        let mut pending = Vec::new();
+        let mut pending = Vec::with_capacity(MAX_REPLY_LINE);
+        // Bytes of the current line, counted past the ones kept.
+        let mut line_bytes = 0usize;
         let mut buf = [0u8; 256];
         loop {
             match source.read(&mut buf) {
@@ -95,15 +170,27 @@ fn spawn_reader(mut source: impl Read + Send + 'static, what: String) -> Receive
                 Ok(n) => {
                     for &b in &buf[..n] {
                         if b == b'\n' {
-                            let line = String::from_utf8_lossy(&pending)
-                                .trim_end_matches('\r')
-                                .to_string();
+                            let item = if line_bytes > MAX_REPLY_LINE {
+                                Incoming::TooLong(line_bytes)
+                            } else {
+                                Incoming::Line(
+                                    String::from_utf8_lossy(&pending)
+                                        .trim_end_matches('\r')
+                                        .to_string(),
+                                )
+                            };
                             pending.clear();
-                            if tx.send(Incoming::Line(line)).is_err() {
+                            line_bytes = 0;
+                            if tx.send(item).is_err() {
                                 return;
                             }
+                        } else if b == b'\r' && line_bytes == MAX_REPLY_LINE {
+                            // A full-length line's `\r\n` ending: the `\r` is not content.
                         } else {
-                            pending.push(b);
+                            line_bytes = line_bytes.saturating_add(1);
+                            if pending.len() < MAX_REPLY_LINE {
+                                pending.push(b);
+                            }
                         }
                     }
                 }
@@ -137,6 +224,45 @@ pub fn default_sim_program() -> PathBuf {
 }
 
 impl Link {
+    fn new(
+        writer: Box<dyn Write + Send>,
+        lines: Receiver<Incoming>,
+        child: Option<Child>,
+        simulated: bool,
+        name: String,
+    ) -> Link {
+        Link {
+            writer,
+            lines,
+            child,
+            signals: Arc::new(AtomicUsize::new(0)),
+            interruptible: true,
+            owed: 0,
+            dropped_lines: 0,
+            simulated,
+            name,
+        }
+    }
+
+    /// Waits for lines abort with [`LinkError::Interrupted`] once `flag` (from
+    /// [`watch_signals`]) is set.
+    pub fn watch(&mut self, flag: Arc<AtomicUsize>) {
+        self.signals = flag;
+    }
+
+    /// The termination signal received, if any.
+    pub fn signal(&self) -> Option<i32> {
+        match self.signals.load(Ordering::SeqCst) {
+            0 => None,
+            n => Some(n as i32),
+        }
+    }
+
+    /// Whether a signal cuts waits short (true by default; false while stopping the heaters).
+    pub fn set_interruptible(&mut self, on: bool) {
+        self.interruptible = on;
+    }
+
     /// Opens the link (no handshake yet).
     pub fn open(target: &Target) -> Result<Link, String> {
         match target {
@@ -155,13 +281,13 @@ impl Link {
                 let reader = port
                     .try_clone()
                     .map_err(|e| format!("cannot read from {path}: {e}"))?;
-                Ok(Link {
-                    writer: Box::new(port),
-                    lines: spawn_reader(reader, path.clone()),
-                    child: None,
-                    simulated: false,
-                    name: path.clone(),
-                })
+                Ok(Link::new(
+                    Box::new(port),
+                    spawn_reader(reader, path.clone()),
+                    None,
+                    false,
+                    path.clone(),
+                ))
             }
             Target::Sim { program, speed } => {
                 let mut child = Command::new(program)
@@ -170,6 +296,9 @@ impl Link {
                     .stdin(Stdio::piped())
                     .stdout(Stdio::piped())
                     .stderr(Stdio::null())
+                    // Its own process group: a terminal's Ctrl-C reaches morphctl only, which
+                    // then still has a simulator to send ABORT to.
+                    .process_group(0)
                     .spawn()
                     .map_err(|e| {
                         format!(
@@ -179,32 +308,53 @@ impl Link {
                     })?;
                 let stdin = child.stdin.take().expect("piped stdin");
                 let stdout = child.stdout.take().expect("piped stdout");
-                Ok(Link {
-                    writer: Box::new(stdin),
-                    lines: spawn_reader(stdout, "morph-sim".into()),
-                    child: Some(child),
-                    simulated: true,
-                    name: "morph-sim".into(),
-                })
+                Ok(Link::new(
+                    Box::new(stdin),
+                    spawn_reader(stdout, "morph-sim".into()),
+                    Some(child),
+                    true,
+                    "morph-sim".into(),
+                ))
             }
         }
     }
 
     /// Sends one line.
-    pub fn send(&mut self, line: &str) -> Result<(), String> {
+    pub fn send(&mut self, line: &str) -> Result<(), LinkError> {
         self.writer
             .write_all(format!("{line}\n").as_bytes())
             .and_then(|_| self.writer.flush())
-            .map_err(|e| format!("cannot write to {}: {e}", self.name))
+            .map_err(|e| LinkError::Closed(format!("cannot write to {}: {e}", self.name)))
     }
 
-    /// Next received line within `timeout`; `Ok(None)` if none arrived.
-    pub fn recv(&mut self, timeout: Duration) -> Result<Option<String>, String> {
-        match self.lines.recv_timeout(timeout) {
-            Ok(Incoming::Line(l)) => Ok(Some(l)),
-            Ok(Incoming::Closed(why)) => Err(why),
-            Err(RecvTimeoutError::Timeout) => Ok(None),
-            Err(RecvTimeoutError::Disconnected) => Err(format!("{} closed the link", self.name)),
+    /// Next received line within `timeout`; `Ok(None)` if none arrived. Over-long lines are
+    /// reported on stderr and skipped; a signal (while interruptible) ends the wait.
+    pub fn recv(&mut self, timeout: Duration) -> Result<Option<String>, LinkError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if self.interruptible {
+                if let Some(sig) = self.signal() {
+                    return Err(LinkError::Interrupted(sig));
+                }
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            let slice = left.min(Duration::from_millis(SIGNAL_POLL_MS));
+            match self.lines.recv_timeout(slice) {
+                Ok(Incoming::Line(l)) => return Ok(Some(l)),
+                Ok(Incoming::TooLong(n)) => {
+                    self.dropped_lines += 1;
+                    eprintln!(
+                        "morphctl: skipped a {n}-byte line from {} (lines are at most {MAX_REPLY_LINE} bytes)",
+                        self.name
+                    );
+                }
+                Ok(Incoming::Closed(why)) => return Err(LinkError::Closed(why)),
+                Err(RecvTimeoutError::Timeout) if left.is_zero() => return Ok(None),
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => {
+                    return Err(LinkError::Closed(format!("{} closed the link", self.name)))
+                }
+            }
         }
     }
 
@@ -215,25 +365,56 @@ impl Link {
         line: &str,
         timeout_s: f64,
         on_event: &mut dyn FnMut(&str),
-    ) -> Result<(Vec<String>, String), String> {
+    ) -> Result<(Vec<String>, String), LinkError> {
+        self.command_where(line, timeout_s, on_event, &|_| true)
+    }
+
+    /// [`Link::command`] whose reply must pass `expected`: other final lines (a late reply to
+    /// an earlier command that timed out) are skipped with a note on stderr. Replies owed to
+    /// an interrupted command are skipped first.
+    pub fn command_where(
+        &mut self,
+        line: &str,
+        timeout_s: f64,
+        on_event: &mut dyn FnMut(&str),
+        expected: &dyn Fn(&str) -> bool,
+    ) -> Result<(Vec<String>, String), LinkError> {
         self.send(line)?;
         let deadline = Instant::now() + Duration::from_secs_f64(timeout_s);
         let mut data = Vec::new();
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return Err(format!(
+            let got = if left.is_zero() {
+                None
+            } else {
+                match self.recv(left) {
+                    Err(e @ LinkError::Interrupted(_)) => {
+                        self.owed += 1;
+                        return Err(e);
+                    }
+                    r => r?,
+                }
+            };
+            let Some(l) = got else {
+                return Err(LinkError::Timeout(format!(
                     "{} did not answer `{line}` within {timeout_s} s",
                     self.name
-                ));
-            }
-            let Some(l) = self.recv(left)? else { continue };
+                )));
+            };
             match classify(&l) {
                 kind if kind.is_unsolicited() => on_event(&l),
                 LineKind::Data => data.push(data_text(&l).unwrap_or_default().to_string()),
+                kind if kind.is_final() && self.owed > 0 => {
+                    self.owed -= 1;
+                    data.clear();
+                }
+                kind if kind.is_final() && !expected(&l) => {
+                    eprintln!("morphctl: ignored `{l}`, a late reply to an earlier command");
+                    data.clear();
+                }
                 kind if kind.is_final() => return Ok((data, l)),
                 LineKind::Blank => {}
-                _ => return Err(not_morphlink(&self.name, &l)),
+                _ => return Err(LinkError::Protocol(not_morphlink(&self.name, &l))),
             }
         }
     }
@@ -243,8 +424,9 @@ impl Link {
     pub fn handshake(&mut self) -> Result<String, String> {
         let (_, reply) = self
             .command("VERSION", HANDSHAKE_TIMEOUT_S, &mut |_| {})
-            .map_err(|e| {
-                format!("{e}; is this a morphlink board? (it must answer VERSION with `ok version=.. protocol={PROTOCOL}`)")
+            .map_err(|e| match e {
+                LinkError::Interrupted(_) => e.to_string(),
+                _ => format!("{e}; is this a morphlink board? (it must answer VERSION with `ok version=.. protocol={PROTOCOL}`)")
             })?;
         let version = field(&reply, "version");
         let ok = classify(&reply) == LineKind::Ok;
@@ -284,16 +466,16 @@ pub fn field(line: &str, key: &str) -> Option<String> {
 /// A reader over a fixed text, for tests: lines as a device would send them.
 #[cfg(test)]
 pub fn link_from_text(text: &str) -> Link {
-    Link {
-        writer: Box::new(std::io::sink()),
-        lines: spawn_reader(
+    Link::new(
+        Box::new(std::io::sink()),
+        spawn_reader(
             std::io::Cursor::new(text.as_bytes().to_vec()),
             "test".into(),
         ),
-        child: None,
-        simulated: false,
-        name: "test device".into(),
-    }
+        None,
+        false,
+        "test device".into(),
+    )
 }
 
 #[cfg(test)]
@@ -339,6 +521,43 @@ mod tests {
             e.starts_with("no serial port at /dev/morphlink-no-such-port"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn over_long_lines_are_dropped_and_counted_not_buffered() {
+        let long = "x".repeat(100_000);
+        let exact = "y".repeat(MAX_REPLY_LINE);
+        let mut l = link_from_text(&format!("{long}\n{exact}\r\nok\n"));
+        assert_eq!(l.recv(Duration::from_secs(2)).unwrap(), Some(exact));
+        assert_eq!(l.dropped_lines, 1);
+        assert_eq!(
+            l.recv(Duration::from_secs(2)).unwrap().as_deref(),
+            Some("ok")
+        );
+    }
+
+    #[test]
+    fn the_line_cap_is_the_firmware_line_capacity() {
+        assert_eq!(
+            MAX_REPLY_LINE,
+            morphlink::protocol::OutLine::new().capacity()
+        );
+    }
+
+    #[test]
+    fn a_signal_ends_a_wait_unless_stopping_the_heaters() {
+        let mut l = link_from_text("");
+        let flag = Arc::new(AtomicUsize::new(libc::SIGTERM as usize));
+        l.watch(flag);
+        assert_eq!(
+            l.command("STATUS", 1.0, &mut |_| {}).unwrap_err(),
+            LinkError::Interrupted(libc::SIGTERM)
+        );
+        l.set_interruptible(false);
+        assert!(matches!(
+            l.command("STATUS", 1.0, &mut |_| {}).unwrap_err(),
+            LinkError::Closed(_)
+        ));
     }
 
     #[test]

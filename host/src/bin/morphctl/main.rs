@@ -5,10 +5,11 @@ mod link;
 mod telemetry;
 
 use clap::{Parser, Subcommand};
-use link::{default_sim_program, field, Link, Target, REPLY_TIMEOUT_S};
+use link::{default_sim_program, field, Link, LinkError, Target, REPLY_TIMEOUT_S};
 use morphlink::protocol::client::{classify, LineKind};
-use std::io::Write;
-use std::path::PathBuf;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 use telemetry::{Sample, CSV_HEADER};
@@ -24,6 +25,9 @@ const DEFAULT_POLL_MS: u64 = 500;
 /// Longest a morph may run before morphctl sends ABORT, s: above the sum of the firmware's
 /// phase timeouts (60 + 120 + 600 + 10 s).
 const DEFAULT_MORPH_TIMEOUT_S: f64 = 900.0;
+/// ABORTs sent before morphctl gives up confirming the heaters off: one lost line or a slow
+/// reply is retried, a dead device costs at most this many reply timeouts.
+const ABORT_TRIES: u32 = 3;
 
 #[derive(Parser)]
 #[command(
@@ -126,7 +130,9 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
             baud: cli.baud,
         }
     };
+    let signals = link::watch_signals()?;
     let mut link = Link::open(&target)?;
+    link.watch(signals);
     let version = link.handshake()?;
     let print_event = &mut |l: &str| println!("{l}");
     match cli.cmd {
@@ -160,21 +166,29 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 poll: Duration::from_secs_f64(poll_ms as f64 / 1000.0 / speed),
                 timeout_s,
             };
-            let (code, samples) = morph(&mut link, &opts)?;
-            if let Some(path) = log {
-                let mut text = format!("{CSV_HEADER}\n");
-                for s in &samples {
-                    text.push_str(&s.csv_row());
-                    text.push('\n');
+            let mut csv = match &log {
+                Some(path) => Some(CsvLog::create(path)?),
+                None => None,
+            };
+            let mut samples = Vec::new();
+            let end = morph(&mut link, &opts, &mut samples, &mut csv);
+            let code = finish(&mut link, end);
+            if let (Some(path), Some(csv)) = (&log, &csv) {
+                println!("telemetry: {} ({} samples)", path.display(), csv.rows);
+                if let Some(e) = &csv.failed {
+                    eprintln!("morphctl: the log stopped early: {e}");
                 }
-                std::fs::write(&path, text)
-                    .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
-                println!("telemetry: {} ({} samples)", path.display(), samples.len());
             }
             if let Some(path) = plot {
                 let title = format!("MORPH {} {} on {}", opts.radius_mm, opts.mode, link.name);
-                telemetry::plot(&samples, &title, &path)?;
-                println!("plot: {}", path.display());
+                if samples.is_empty() {
+                    println!("plot: skipped, no samples were logged");
+                } else {
+                    match telemetry::plot(&samples, &title, &path) {
+                        Ok(()) => println!("plot: {}", path.display()),
+                        Err(e) => eprintln!("morphctl: plot: {e}"),
+                    }
+                }
             }
             Ok(code)
         }
@@ -184,6 +198,9 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
 
 /// Sends one line and prints the reply; an `error:` reply is a failure exit.
 fn simple(link: &mut Link, line: &str) -> Result<ExitCode, String> {
+    if let Some(sig) = link.signal() {
+        return Err(LinkError::Interrupted(sig).into());
+    }
     let (data, fin) = link.command(line, REPLY_TIMEOUT_S, &mut |l| println!("{l}"))?;
     for d in data {
         println!("data: {d}");
@@ -204,30 +221,194 @@ struct MorphOpts {
 }
 
 /// Link time from `SIM STATE` on the simulator, s; None on a board.
-fn sim_time_and_radius(link: &mut Link, on_event: &mut dyn FnMut(&str)) -> Option<(f64, f64)> {
+/// A link that fails is an error; a reply without the numbers is None.
+fn sim_time_and_radius(
+    link: &mut Link,
+    on_event: &mut dyn FnMut(&str),
+) -> Result<Option<(f64, f64)>, LinkError> {
     if !link.simulated {
-        return None;
+        return Ok(None);
     }
-    let (_, st) = link.command("SIM STATE", REPLY_TIMEOUT_S, on_event).ok()?;
-    let t = field(&st, "time_s")?.parse().ok()?;
-    let r = field(&st, "radius_mm")?.parse().ok()?;
-    Some((t, r))
+    let (_, st) = link.command("SIM STATE", REPLY_TIMEOUT_S, on_event)?;
+    let num = |key: &str| field(&st, key)?.parse::<f64>().ok();
+    Ok(num("time_s").zip(num("radius_mm")))
 }
 
-/// Runs one morph: MORPH, then STATUS polls until `done` or an alarm; prints the phases.
-fn morph(link: &mut Link, o: &MorphOpts) -> Result<(ExitCode, Vec<Sample>), String> {
-    let mut events: Vec<String> = Vec::new();
-    let (_, reply) = link.command(
-        &format!("MORPH {} {}", o.radius_mm, o.mode),
-        REPLY_TIMEOUT_S,
-        &mut |l| events.push(l.to_string()),
-    )?;
-    if reply != morphlink::protocol::OK {
-        return Err(format!("MORPH refused: {reply}"));
+/// The telemetry CSV, written as the samples arrive: a run that ends early keeps its rows.
+struct CsvLog {
+    file: BufWriter<File>,
+    path: PathBuf,
+    rows: usize,
+    /// The first write error; later rows are not attempted.
+    failed: Option<String>,
+}
+
+impl CsvLog {
+    fn create(path: &Path) -> Result<CsvLog, String> {
+        let mut log = CsvLog {
+            file: BufWriter::new(
+                File::create(path).map_err(|e| format!("cannot write {}: {e}", path.display()))?,
+            ),
+            path: path.to_path_buf(),
+            rows: 0,
+            failed: None,
+        };
+        log.line(CSV_HEADER);
+        match log.failed.take() {
+            Some(e) => Err(e),
+            None => Ok(log),
+        }
     }
+
+    /// Appends one line and flushes it to the file.
+    fn line(&mut self, text: &str) {
+        if self.failed.is_some() {
+            return;
+        }
+        if let Err(e) = writeln!(self.file, "{text}").and_then(|_| self.file.flush()) {
+            self.failed = Some(format!("cannot write {}: {e}", self.path.display()));
+        }
+    }
+
+    fn row(&mut self, s: &Sample) {
+        self.line(&s.csv_row());
+        if self.failed.is_none() {
+            self.rows += 1;
+        }
+    }
+}
+
+/// How a morph ended.
+enum MorphEnd {
+    /// `event: done` (exit 0) or an alarm (the controller has turned the heaters off; exit 1).
+    Finished(ExitCode),
+    /// Failed with no heater left on: MORPH refused or never written, or the morph went idle
+    /// on its own without `done`.
+    Failed(String),
+    /// Anything else once MORPH was sent: a signal, a lost reply, a closed link, garbage, an
+    /// overrun. The heaters may be on.
+    Broken(LinkError),
+}
+
+impl From<LinkError> for MorphEnd {
+    fn from(e: LinkError) -> MorphEnd {
+        MorphEnd::Broken(e)
+    }
+}
+
+/// Turns a morph's end into the exit code; after a broken morph stops the heaters first.
+fn finish(link: &mut Link, end: MorphEnd) -> ExitCode {
+    let why = match end {
+        MorphEnd::Finished(code) => return code,
+        MorphEnd::Failed(why) => {
+            eprintln!("morphctl: {why}");
+            return ExitCode::FAILURE;
+        }
+        MorphEnd::Broken(why) => why,
+    };
+    println!();
+    eprintln!("morphctl: {why}; stopping the heaters");
+    match stop_heaters(link) {
+        Ok(done) => eprintln!("morphctl: {done}"),
+        Err(e) => eprintln!(
+            "morphctl: could not confirm the heaters off after {ABORT_TRIES} ABORTs ({e}); {} is lost: the heaters may still be on, cut the heater supply",
+            link.name
+        ),
+    }
+    match why {
+        // The shell's convention for a run ended by a signal.
+        LinkError::Interrupted(sig) => ExitCode::from((128 + sig) as u8),
+        _ => ExitCode::FAILURE,
+    }
+}
+
+/// Sends ABORT until STATUS shows both heaters off (at most [`ABORT_TRIES`] times); signals
+/// do not cut this short.
+fn stop_heaters(link: &mut Link) -> Result<String, String> {
+    link.set_interruptible(false);
+    let mut last = String::new();
+    for attempt in 1..=ABORT_TRIES {
+        match abort_and_check(link) {
+            Ok(status) => {
+                return Ok(format!(
+                    "sent ABORT ({attempt} of at most {ABORT_TRIES}); heaters off: {status}"
+                ))
+            }
+            Err(e) => {
+                eprintln!("morphctl: ABORT {attempt} of {ABORT_TRIES}: {e}");
+                last = e;
+            }
+        }
+    }
+    Err(last)
+}
+
+/// One ABORT, then STATUS: Ok(the STATUS line) if it shows the heaters off.
+fn abort_and_check(link: &mut Link) -> Result<String, String> {
+    let print_event = &mut |l: &str| println!("{l}");
+    // ABORT answers a plain `ok`; STATUS `ok phase=...`: anything else is a late reply.
+    let (_, reply) = link.command_where("ABORT", REPLY_TIMEOUT_S, print_event, &|l| {
+        l == morphlink::protocol::OK || classify(l) == LineKind::Error
+    })?;
+    if classify(&reply) != LineKind::Ok {
+        return Err(format!("ABORT answered `{reply}`"));
+    }
+    let (_, status) = link.command_where("STATUS", REPLY_TIMEOUT_S, print_event, &|l| {
+        field(l, "phase").is_some() || classify(l) == LineKind::Error
+    })?;
+    if heaters_off(&status) {
+        Ok(status)
+    } else {
+        Err(format!("STATUS does not show the heaters off: `{status}`"))
+    }
+}
+
+/// True if a STATUS reply shows both powers zero in phase idle or fault.
+fn heaters_off(status: &str) -> bool {
+    let is =
+        |key: &str, want: &[&str]| field(status, key).is_some_and(|v| want.contains(&v.as_str()));
+    classify(status) == LineKind::Ok
+        && is("p_pla_w", &["0.000"])
+        && is("p_tca_w", &["0.000"])
+        && is("phase", &["idle", "fault"])
+}
+
+/// Runs one morph: MORPH, then STATUS polls until `done` or an alarm; prints the phases and
+/// appends each sample to `samples` and the log.
+fn morph(
+    link: &mut Link,
+    o: &MorphOpts,
+    samples: &mut Vec<Sample>,
+    csv: &mut Option<CsvLog>,
+) -> MorphEnd {
+    let mut events: Vec<String> = Vec::new();
+    let line = format!("MORPH {} {}", o.radius_mm, o.mode);
+    let reply = match link.command(&line, REPLY_TIMEOUT_S, &mut |l| events.push(l.to_string())) {
+        Ok((_, reply)) => reply,
+        // Never written: nothing started.
+        Err(LinkError::Closed(e)) => return MorphEnd::Failed(e),
+        // Sent, so it may have started.
+        Err(e) => return MorphEnd::Broken(e),
+    };
+    if reply != morphlink::protocol::OK {
+        return MorphEnd::Failed(format!("MORPH refused: {reply}"));
+    }
+    match follow(link, o, samples, csv, events) {
+        Ok(code) => MorphEnd::Finished(code),
+        Err(e) => e,
+    }
+}
+
+/// Follows a started morph to its end.
+fn follow(
+    link: &mut Link,
+    o: &MorphOpts,
+    samples: &mut Vec<Sample>,
+    csv: &mut Option<CsvLog>,
+    mut events: Vec<String>,
+) -> Result<ExitCode, MorphEnd> {
     let start = Instant::now();
-    let sim_start = sim_time_and_radius(link, &mut |l| events.push(l.to_string())).map(|x| x.0);
-    let mut samples = Vec::new();
+    let sim_start = sim_time_and_radius(link, &mut |l| events.push(l.to_string()))?.map(|x| x.0);
     let mut outcome = None;
     let mut last_line = Instant::now();
     while outcome.is_none() {
@@ -240,7 +421,7 @@ fn morph(link: &mut Link, o: &MorphOpts) -> Result<(ExitCode, Vec<Sample>), Stri
             }
         }
         let mut on_event = |l: &str| events.push(l.to_string());
-        let sim = sim_time_and_radius(link, &mut on_event);
+        let sim = sim_time_and_radius(link, &mut on_event)?;
         let (_, status) = link.command("STATUS", REPLY_TIMEOUT_S, &mut on_event)?;
         let t_s = match (sim, sim_start) {
             (Some((t, _)), Some(t0)) => t - t0,
@@ -256,6 +437,9 @@ fn morph(link: &mut Link, o: &MorphOpts) -> Result<(ExitCode, Vec<Sample>), Stri
             last_line = Instant::now();
         }
         let phase = s.phase.clone();
+        if let Some(csv) = csv {
+            csv.row(&s);
+        }
         samples.push(s);
         if outcome.is_none() && (phase == "idle" || phase == "fault") && events.is_empty() {
             // The done/alarm event may already have been read with this reply; give it a tick.
@@ -264,14 +448,15 @@ fn morph(link: &mut Link, o: &MorphOpts) -> Result<(ExitCode, Vec<Sample>), Stri
                 continue;
             }
             println!();
-            return Err(format!(
+            return Err(MorphEnd::Failed(format!(
                 "the morph stopped in phase {phase} without a done event"
-            ));
+            )));
         }
         if t_s > o.timeout_s {
-            let _ = link.command("ABORT", REPLY_TIMEOUT_S, &mut |_| {});
-            println!();
-            return Err(format!("no done after {} s: sent ABORT", o.timeout_s));
+            return Err(MorphEnd::Broken(LinkError::Timeout(format!(
+                "no done after {} s",
+                o.timeout_s
+            ))));
         }
         if outcome.is_none() {
             if let Some(l) = link.recv(o.poll)? {
@@ -280,5 +465,26 @@ fn morph(link: &mut Link, o: &MorphOpts) -> Result<(ExitCode, Vec<Sample>), Stri
         }
     }
     println!();
-    Ok((outcome.unwrap_or(ExitCode::FAILURE), samples))
+    Ok(outcome.unwrap_or(ExitCode::FAILURE))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn heaters_off_needs_both_powers_zero_in_idle_or_fault() {
+        let st = |phase: &str, pla: &str, tca: &str| {
+            format!("ok phase={phase} target_mm=38.00 t_pla_c=74.17 t_tca_c=56.88 t_amb_c=21.94 p_pla_w={pla} p_tca_w={tca} supply_v=12.00 fault=none")
+        };
+        assert!(heaters_off(&st("idle", "0.000", "0.000")));
+        assert!(heaters_off(&st("fault", "0.000", "0.000")));
+        assert!(!heaters_off(&st("bend", "0.000", "0.000")));
+        assert!(!heaters_off(&st("idle", "0.000", "0.001")));
+        assert!(!heaters_off(&st("idle", "1.500", "0.000")));
+        assert!(!heaters_off("ok"));
+        assert!(!heaters_off(
+            "error: busy p_pla_w=0.000 p_tca_w=0.000 phase=idle"
+        ));
+    }
 }
