@@ -1,24 +1,75 @@
-//! Shared helpers of the integration tests: a rig that records every line it sends.
+//! Shared helpers of the integration tests: a rig that records every line it sends, on either
+//! plant: the lumped link (the controller's own equations) or the high-fidelity link (built
+//! from different physics; docs/plant.md).
 #![allow(dead_code)]
 
+use std::sync::OnceLock;
+
+use morphlink::bench::Noise;
 use morphlink::controller::Outputs;
 use morphlink::vocab::Phase;
+use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
+use morphlink_plant::Plant;
 use morphlink_sim::{LinkSetup, Rig};
+
+/// The simulated link a bench runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Link {
+    /// The nominal lumped link: the controller's own equations.
+    Lumped,
+    /// The nominal high-fidelity link of the same parameters on `Grid::Reduced` (its
+    /// reduced-order form: within 5e-6 of the full grid's peak rise in beads and heater means,
+    /// the same radius after a morph; docs/plant.md, "Cost").
+    Hifi,
+}
+
+/// Both links, lumped first.
+pub const LINKS: [Link; 2] = [Link::Lumped, Link::Hifi];
+
+/// The nominal hifi link at rest, built once (its identification and reduced model take a
+/// moment) and cloned for each bench.
+fn nominal_hifi() -> Hifi {
+    static LINK: OnceLock<Hifi> = OnceLock::new();
+    LINK.get_or_init(|| {
+        let spec = HifiSpec::nominal(LinkSetup::NOMINAL.params, Grid::Reduced).unwrap();
+        Hifi::new(spec).unwrap()
+    })
+    .clone()
+}
 
 /// A rig plus the lines it has written.
 pub struct Bench {
-    pub rig: Rig,
+    pub rig: Rig<Box<dyn Plant>>,
     pub lines: Vec<String>,
 }
 
 impl Bench {
+    /// The nominal lumped link.
     pub fn new() -> Self {
         Self::with_plant(LinkSetup::NOMINAL)
     }
 
+    /// The nominal hifi link.
+    pub fn hifi() -> Self {
+        Self::on(Link::Hifi)
+    }
+
+    /// The nominal `link`.
+    pub fn on(link: Link) -> Self {
+        match link {
+            Link::Lumped => Self::new(),
+            Link::Hifi => Self::with_rig(Rig::with_plant(Box::new(nominal_hifi()), Noise::NOMINAL)),
+        }
+    }
+
+    /// The lumped link `plant`.
     pub fn with_plant(plant: LinkSetup) -> Self {
+        Self::with_rig(Rig::with_plant(Box::new(plant.lumped()), plant.noise()))
+    }
+
+    fn with_rig(rig: Rig<Box<dyn Plant>>) -> Self {
         Bench {
-            rig: Rig::new(plant),
+            rig,
             lines: Vec::new(),
         }
     }
