@@ -116,17 +116,29 @@ impl Bench {
         self.rig.ctrl.phase()
     }
 
-    /// Starts a morph (asserting `ok`) and runs until the controller is idle again.
+    /// Starts a morph (asserting `ok`) and runs until the controller is idle again; returns its
+    /// time, s.
     pub fn morph(&mut self, radius_mm: f32, mode: &str) -> f64 {
+        self.morph_peaks(radius_mm, mode).0
+    }
+
+    /// As [`Bench::morph`], and the peak true temperatures over the morph (the PLA rod's mean,
+    /// the TCA's mean), °C.
+    pub fn morph_peaks(&mut self, radius_mm: f32, mode: &str) -> (f64, [f64; 2]) {
         let r = self.send(&format!("MORPH {radius_mm} {mode}"));
         assert_eq!(r, ["ok"], "MORPH {radius_mm} {mode}");
         let t0 = self.rig.now_ms();
+        let mut peak_c = [f64::NEG_INFINITY; 2];
         assert!(
-            self.run_until(400.0, |b| !b.rig.ctrl.busy()),
+            self.run_until(400.0, |b| {
+                let t = b.rig.plant().truth();
+                peak_c = [peak_c[0].max(t.pla_c), peak_c[1].max(t.tca_c)];
+                !b.rig.ctrl.busy()
+            }),
             "morph did not finish: {:?}",
             self.lines
         );
-        (self.rig.now_ms() - t0) as f64 / 1000.0
+        ((self.rig.now_ms() - t0) as f64 / 1000.0, peak_c)
     }
 
     /// Phase names announced by `event: phase` lines so far.
