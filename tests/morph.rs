@@ -14,26 +14,32 @@ fn targets() -> Vec<f32> {
         .collect()
 }
 
+/// After a morph to `target` that ended: asserts its phases came in order, lets the TCA cool
+/// fully (spring-back included, 60 s) and returns the `done` event's radius estimate, the
+/// final true radius (mm) and its error (%).
+fn phases_then_settle(b: &mut Bench, target: f32) -> (f32, f32, f32) {
+    assert_eq!(
+        b.phases(),
+        ["soften", "bend", "lock", "release"],
+        "target {target}"
+    );
+    let done = b
+        .lines
+        .iter()
+        .find(|l| classify(l) == LineKind::Done)
+        .expect("done event");
+    let estimate: f32 = Bench::field(done, "radius_mm").unwrap().parse().unwrap();
+    b.run_for(60.0);
+    let r = b.rig.radius_mm() as f32;
+    (estimate, r, (r - target) / target * 100.0)
+}
+
 #[test]
 fn auto_morphs_reach_every_target_within_two_percent_with_phases_in_order() {
     for target in targets() {
         let mut b = Bench::new();
         let t = b.morph(target, "auto");
-        assert_eq!(
-            b.phases(),
-            ["soften", "bend", "lock", "release"],
-            "target {target}"
-        );
-        let done = b
-            .lines
-            .iter()
-            .find(|l| classify(l) == LineKind::Done)
-            .expect("done event");
-        let estimate: f32 = Bench::field(done, "radius_mm").unwrap().parse().unwrap();
-        // Let the TCA cool fully: spring-back included.
-        b.run_for(60.0);
-        let r = b.rig.radius_mm() as f32;
-        let err = (r - target) / target * 100.0;
+        let (estimate, r, err) = phases_then_settle(&mut b, target);
         println!("target {target:.2} mm: final {r:.2} mm ({err:+.2} %), estimate {estimate:.2} mm, {t:.1} s");
         assert!(
             err.abs() < 2.0,
@@ -119,38 +125,21 @@ fn auto_morphs_on_the_hifi_link_end_within_the_limits_and_their_error_is_measure
         );
         // The wrap heated the rod through its transition.
         assert!(peak_c[0] > 60.0, "target {target}: peaks {peak_c:?} °C");
-        let alarms: Vec<&String> = b
-            .lines
-            .iter()
-            .filter(|l| classify(l) == LineKind::Alarm)
-            .collect();
         if target < HIFI_TCA_FALSE_ALARM_BELOW_MM {
-            println!("hifi target {target:.2} mm: false alarm after {t:.1} s: {alarms:?}");
-            assert_eq!(b.phases(), ["soften", "bend"], "target {target}");
-            assert_eq!(alarms.len(), 1, "target {target}: {:?}", b.lines);
-            assert!(
-                alarms[0].starts_with("alarm: heater-not-heating tca "),
-                "target {target}: {}",
-                alarms[0]
+            println!(
+                "hifi target {target:.2} mm: false alarm after {t:.1} s: {:?}",
+                b.alarms_since(0)
             );
-            assert!((t - 10.2).abs() < 0.3, "target {target}: at {t} s");
+            assert_eq!(b.phases(), ["soften", "bend"], "target {target}");
+            b.assert_known_alarm(0, "alarm: heater-not-heating tca ", t, 10.2);
             continue;
         }
-        assert!(alarms.is_empty(), "target {target}: {alarms:?}");
-        assert_eq!(
-            b.phases(),
-            ["soften", "bend", "lock", "release"],
-            "target {target}"
+        assert!(
+            b.alarms_since(0).is_empty(),
+            "target {target}: {:?}",
+            b.lines
         );
-        let done = b
-            .lines
-            .iter()
-            .find(|l| classify(l) == LineKind::Done)
-            .expect("done event");
-        let estimate: f32 = Bench::field(done, "radius_mm").unwrap().parse().unwrap();
-        b.run_for(60.0);
-        let r = b.rig.radius_mm() as f32;
-        let err = (r - target) / target * 100.0;
+        let (estimate, r, err) = phases_then_settle(&mut b, target);
         println!(
             "hifi target {target:.2} mm: final {r:.2} mm ({err:+.2} %), estimate {estimate:.2} mm, \
              {t:.1} s, peaks {:.1} / {:.1} °C",

@@ -7,6 +7,7 @@ use std::sync::OnceLock;
 
 use morphlink::bench::Noise;
 use morphlink::controller::Outputs;
+use morphlink::protocol::{classify, LineKind};
 use morphlink::vocab::Phase;
 use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
 use morphlink_plant::Plant;
@@ -139,6 +140,33 @@ impl Bench {
             self.lines
         );
         ((self.rig.now_ms() - t0) as f64 / 1000.0, peak_c)
+    }
+
+    /// Alarm lines written since line `from` of [`Bench::lines`].
+    pub fn alarms_since(&self, from: usize) -> Vec<String> {
+        self.lines[from..]
+            .iter()
+            .filter(|l| classify(l) == LineKind::Alarm)
+            .cloned()
+            .collect()
+    }
+
+    /// A known false alarm, measured: exactly one alarm since line `from`, starting with
+    /// `start`, raised `t_s` after MORPH where `at_s` was measured (within 0.3 s).
+    pub fn assert_known_alarm(&self, from: usize, start: &str, t_s: f64, at_s: f64) {
+        let alarms = self.alarms_since(from);
+        assert_eq!(
+            alarms.len(),
+            1,
+            "one alarm, {start}...: {:?}",
+            &self.lines[from..]
+        );
+        assert!(alarms[0].starts_with(start), "{start}...: {}", alarms[0]);
+        assert!(
+            (t_s - at_s).abs() < 0.3,
+            "{}: at {t_s} s, not {at_s}",
+            alarms[0]
+        );
     }
 
     /// Phase names announced by `event: phase` lines so far.
