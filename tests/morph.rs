@@ -1,7 +1,9 @@
-//! Whole morphs on the simulated link with nominal parameters.
+//! Whole morphs on the simulated link with nominal parameters: the lumped link (the controller's
+//! own equations) held to the controller's accuracy, the hifi link (different physics) measured.
 mod common;
 use common::Bench;
 use morphlink::protocol::{classify, LineKind};
+use morphlink::supervisor::{PLA_LIMITS, TCA_LIMITS};
 use morphlink::table;
 
 /// Targets spread over the reachable range, ends included (0.2 mm inside).
@@ -12,26 +14,32 @@ fn targets() -> Vec<f32> {
         .collect()
 }
 
+/// After a morph to `target` that ended: asserts its phases came in order, lets the TCA cool
+/// fully (spring-back included, 60 s) and returns the `done` event's radius estimate, the
+/// final true radius (mm) and its error (%).
+fn phases_then_settle(b: &mut Bench, target: f32) -> (f32, f32, f32) {
+    assert_eq!(
+        b.phases(),
+        ["soften", "bend", "lock", "release"],
+        "target {target}"
+    );
+    let done = b
+        .lines
+        .iter()
+        .find(|l| classify(l) == LineKind::Done)
+        .expect("done event");
+    let estimate: f32 = Bench::field(done, "radius_mm").unwrap().parse().unwrap();
+    b.run_for(60.0);
+    let r = b.rig.radius_mm() as f32;
+    (estimate, r, (r - target) / target * 100.0)
+}
+
 #[test]
 fn auto_morphs_reach_every_target_within_two_percent_with_phases_in_order() {
     for target in targets() {
         let mut b = Bench::new();
         let t = b.morph(target, "auto");
-        assert_eq!(
-            b.phases(),
-            ["soften", "bend", "lock", "release"],
-            "target {target}"
-        );
-        let done = b
-            .lines
-            .iter()
-            .find(|l| classify(l) == LineKind::Done)
-            .expect("done event");
-        let estimate: f32 = Bench::field(done, "radius_mm").unwrap().parse().unwrap();
-        // Let the TCA cool fully: spring-back included.
-        b.run_for(60.0);
-        let r = b.rig.radius_mm() as f32;
-        let err = (r - target) / target * 100.0;
+        let (estimate, r, err) = phases_then_settle(&mut b, target);
         println!("target {target:.2} mm: final {r:.2} mm ({err:+.2} %), estimate {estimate:.2} mm, {t:.1} s");
         assert!(
             err.abs() < 2.0,
@@ -91,4 +99,55 @@ fn morph_while_busy_or_out_of_range_is_refused_and_changes_nothing() {
         Bench::field(&status[0], "target_mm").as_deref(),
         Some("38.00")
     );
+}
+
+/// KNOWN GAP, measured (the calibration issue closes it): the radius error of `auto` morphs on the
+/// nominal hifi link after 60 s of rest lies within this band, %. Measured: -8.4 % at 37.4 mm
+/// to +6.3 % at 46.3 mm; the controller's table and model are the lumped link's, not this
+/// link's (docs/plant.md, "The controller on the hifi link"). The lumped link's bound is 2 %.
+const HIFI_ERROR_BAND_PCT: f32 = 12.0;
+
+/// KNOWN DEFECT, measured (the safety issue removes it): below this target `auto`'s TCA bend
+/// power is high enough for the heater check to judge it, and the TCA bead beside the tube lags
+/// it: the healthy morph trips heater-not-heating on the TCA 10 s after MORPH, in bend. The
+/// same false alarm is measured in `tests/safety.rs` (`HIFI_FALSE_ALARMS`).
+const HIFI_TCA_FALSE_ALARM_BELOW_MM: f32 = 36.0;
+
+#[test]
+fn auto_morphs_on_the_hifi_link_end_within_the_limits_and_their_error_is_measured() {
+    for target in targets() {
+        let mut b = Bench::hifi();
+        let (t, peak_c) = b.morph_peaks(target, "auto");
+        // Nothing runs away, whatever the outcome.
+        assert!(
+            peak_c[0] < PLA_LIMITS.max_c as f64 && peak_c[1] < TCA_LIMITS.max_c as f64,
+            "target {target}: peaks {peak_c:?} °C"
+        );
+        // The wrap heated the rod through its transition.
+        assert!(peak_c[0] > 60.0, "target {target}: peaks {peak_c:?} °C");
+        if target < HIFI_TCA_FALSE_ALARM_BELOW_MM {
+            println!(
+                "hifi target {target:.2} mm: false alarm after {t:.1} s: {:?}",
+                b.alarms_since(0)
+            );
+            assert_eq!(b.phases(), ["soften", "bend"], "target {target}");
+            b.assert_known_alarm(0, "alarm: heater-not-heating tca ", t, 10.2);
+            continue;
+        }
+        assert!(
+            b.alarms_since(0).is_empty(),
+            "target {target}: {:?}",
+            b.lines
+        );
+        let (estimate, r, err) = phases_then_settle(&mut b, target);
+        println!(
+            "hifi target {target:.2} mm: final {r:.2} mm ({err:+.2} %), estimate {estimate:.2} mm, \
+             {t:.1} s, peaks {:.1} / {:.1} °C",
+            peak_c[0], peak_c[1]
+        );
+        assert!(
+            err.abs() < HIFI_ERROR_BAND_PCT,
+            "target {target} mm ended at {r} mm ({err:+.2} %)"
+        );
+    }
 }

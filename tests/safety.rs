@@ -1,8 +1,15 @@
 //! Every safety trip injected in every phase on the simulated link: heaters off in the same tick,
 //! latched, and RESET only once the condition has cleared. ABORT from every phase. Every check
 //! runs with every morph strategy: the supervisor runs before the sequencer, whatever it asks.
+//!
+//! Every test runs on both plants (`<test>::lumped`, `<test>::hifi`): the faults are injected on
+//! the rig's side (`SIM FAULT`, `SIM SUPPLY`, ...), so the hifi link must trip them too. On the
+//! hifi link some strategies false-alarm on a healthy morph (`HIFI_FALSE_ALARMS`, measured by
+//! `healthy_hifi_morphs_false_alarms_are_measured`); a check there uses only the modes whose
+//! healthy morph gets through the check without that alarm (`bench_in`, `healthy`): an alarm
+//! there could not be told from the false one.
 mod common;
-use common::Bench;
+use common::{Bench, Link};
 use morphlink::controller::Outputs;
 use morphlink::protocol::{classify, LineKind};
 use morphlink::vocab::Phase;
@@ -22,21 +29,129 @@ const PHASES: [Phase; 5] = [
 /// Every MORPH mode.
 const MODES: [&str; 5] = ["auto", "paper", "gated", "boost", "closed"];
 
-/// A bench in `phase` of a morph to `target_mm` in `mode` (Idle: no morph started), a little
-/// way in.
-fn bench_in(phase: Phase, target_mm: f32, mode: &str) -> Bench {
-    let mut b = Bench::new();
+/// One test per plant for each check `name(link)`: `name::lumped` and `name::hifi`.
+macro_rules! on_both_links {
+    ($($name:ident),* $(,)?) => {$(
+        mod $name {
+            use super::Link;
+            #[test]
+            fn lumped() {
+                super::$name(Link::Lumped)
+            }
+            #[test]
+            fn hifi() {
+                super::$name(Link::Hifi)
+            }
+        }
+    )*};
+}
+
+/// KNOWN DEFECT, measured: the healthy morphs on the nominal hifi link, to the targets these
+/// tests use, that end in an alarm: (mode, target mm, phases announced, the alarm's start, the
+/// seconds after MORPH it comes at). The beads beside the heaters lag them: 10 s after a heater
+/// comes on its bead has risen less than the 30 % of the model's steady rise the supervisor
+/// asks for (`HEATING_MIN_FRACTION`, `src/supervisor.rs`): the PLA bead 29.9 K in paper's and
+/// gated's 4 W soften; the TCA bead 14.5 K at 35 mm, where the TCA's bend power is high enough
+/// to be judged (at 38 mm it is not). boost's soften at 38 mm does not reach its end condition on
+/// this link before `SOFTEN_TIMEOUT_S`. The safety issue (supervisor v2, per-link calibration)
+/// removes these; `healthy_hifi_morphs_false_alarms_are_measured` then fails and this table
+/// must shrink (ideally to nothing).
+#[rustfmt::skip]
+const HIFI_FALSE_ALARMS: [(&str, f32, &[&str], &str, f64); 8] = [
+    ("auto", 35.0, &["soften", "bend"], "alarm: heater-not-heating tca ", 10.2),
+    ("paper", 35.0, &["soften"], "alarm: heater-not-heating pla ", 10.2),
+    ("gated", 35.0, &["soften"], "alarm: heater-not-heating pla ", 10.2),
+    ("boost", 35.0, &["soften"], "alarm: heater-not-heating tca ", 10.2),
+    ("closed", 35.0, &["soften", "bend"], "alarm: heater-not-heating tca ", 10.2),
+    ("paper", 38.0, &["soften"], "alarm: heater-not-heating pla ", 10.2),
+    ("gated", 38.0, &["soften"], "alarm: heater-not-heating pla ", 10.2),
+    ("boost", 38.0, &["soften"], "alarm: phase-timeout phase soften ", 60.2),
+];
+
+/// KNOWN DEFECT, measured: on the nominal hifi link a healthy morph to 38 mm started as soon as
+/// a first one to 38 mm has ended false-alarms too (mode, the alarm's start, seconds after its
+/// MORPH): the PLA bead, still warm, rises 7.1 K in the 10 s check, short of the 30 % of the
+/// model's steady rise. Same fix, same test (`healthy_hifi_morphs_false_alarms_are_measured`).
+#[rustfmt::skip]
+const HIFI_SECOND_MORPH_FALSE_ALARMS: [(&str, &str, f64); 2] = [
+    ("auto", "alarm: heater-not-heating pla ", 10.2),
+    ("closed", "alarm: heater-not-heating pla ", 10.2),
+];
+
+/// The targets of the tests below: every false alarm above is at one of them.
+const TARGETS_MM: [f32; 2] = [35.0, 38.0];
+
+/// The false alarm that ends a healthy morph to `target_mm` in `mode` on `link`, if one does.
+fn false_alarm(link: Link, mode: &str, target_mm: f32) -> Option<(&'static str, f64)> {
+    match link {
+        Link::Lumped => None,
+        Link::Hifi => HIFI_FALSE_ALARMS
+            .iter()
+            .find(|(m, t, ..)| *m == mode && *t == target_mm)
+            .map(|&(_, _, _, alarm, at_s)| (alarm, at_s)),
+    }
+}
+
+/// A healthy morph to `target_mm` in `mode` on `link` ends without an alarm: a check that runs
+/// whole morphs can tell an injected fault's trip from a false alarm only then.
+fn healthy(link: Link, mode: &str, target_mm: f32) -> bool {
+    false_alarm(link, mode, target_mm).is_none()
+}
+
+/// The target of the heater checks (a dead heater, a stalled controller): 35 mm on the lumped
+/// link, where the TCA's 1 W bend is judged by the heater check; 38 mm on the hifi link, where
+/// at 35 mm every mode false-alarms ([`HIFI_FALSE_ALARMS`]).
+fn heater_target_mm(link: Link) -> f32 {
+    match link {
+        Link::Lumped => 35.0,
+        Link::Hifi => 38.0,
+    }
+}
+
+/// A healthy morph to `target_mm` in `mode` on `link` started as soon as a first one has ended
+/// ends without an alarm.
+fn second_morph_healthy(link: Link, mode: &str, target_mm: f32) -> bool {
+    healthy(link, mode, target_mm)
+        && !(link == Link::Hifi
+            && target_mm == 38.0
+            && HIFI_SECOND_MORPH_FALSE_ALARMS
+                .iter()
+                .any(|(m, ..)| *m == mode))
+}
+
+/// A bench on `link` in `phase` of a morph to `target_mm` in `mode` (Idle: no morph started), a
+/// little way in, for a check that needs `window_s` more; `None` where that morph's known
+/// false alarm ([`HIFI_FALSE_ALARMS`]) comes before the phase or within the window, so a trip
+/// there could not be told from it.
+fn bench_in(link: Link, phase: Phase, target_mm: f32, mode: &str, window_s: f64) -> Option<Bench> {
+    let mut b = Bench::on(link);
     if phase != Phase::Idle {
+        let known = false_alarm(link, mode, target_mm);
         assert_eq!(b.send(&format!("MORPH {target_mm} {mode}")), ["ok"]);
+        let t0 = b.rig.now_ms();
         assert!(
-            b.run_until(300.0, |b| b.phase() == phase),
+            b.run_until(300.0, |b| b.phase() == phase
+                || (known.is_some() && b.phase() == Phase::Fault)),
             "never reached {phase:?}: {:?}",
             b.lines
         );
         b.run_for(0.5);
+        if let Some((_, at_s)) = known {
+            let in_s = (b.rig.now_ms() - t0) as f64 / 1000.0;
+            if b.phase() != phase || in_s + window_s >= at_s {
+                return None;
+            }
+        }
         assert_eq!(b.phase(), phase);
     }
-    b
+    Some(b)
+}
+
+/// Records how many cases a check ran on `link` and asserts it ran some: a check skipped
+/// wholesale on hifi would prove nothing.
+fn checked(link: Link, test: &str, cases: usize) {
+    println!("{test} on {link:?}: {cases} cases");
+    assert!(cases > 0, "{test} on {link:?} checked nothing");
 }
 
 /// Ticks until an alarm appears (within `max_s`); asserts the tick that raised it output zero
@@ -100,8 +215,8 @@ fn assert_reset_rules(b: &mut Bench, clear: &[&str], settle_s: f64) {
     assert_eq!(b.phase(), Phase::Idle);
 }
 
-#[test]
-fn thermistor_open_and_short_trip_in_every_phase() {
+fn thermistor_open_and_short_trip_in_every_phase(link: Link) {
+    let mut cases = 0;
     for mode in MODES {
         for phase in PHASES {
             for sensor in ["pla", "tca", "amb"] {
@@ -109,7 +224,10 @@ fn thermistor_open_and_short_trip_in_every_phase() {
                     ("thermistor-open", "thermistor-open"),
                     ("thermistor-short", "thermistor-short"),
                 ] {
-                    let mut b = bench_in(phase, 38.0, mode);
+                    let Some(mut b) = bench_in(link, phase, 38.0, mode, 1.0) else {
+                        continue;
+                    };
+                    cases += 1;
                     assert!(b.send(&format!("SIM FAULT {kind} {sensor}"))[0].starts_with("ok"));
                     let a = expect_alarm(&mut b, code, 1.0);
                     assert!(a.contains(sensor), "{a}");
@@ -119,14 +237,18 @@ fn thermistor_open_and_short_trip_in_every_phase() {
             }
         }
     }
+    checked(link, "thermistor_open_and_short_trip_in_every_phase", cases);
 }
 
-#[test]
-fn supply_out_of_range_trips_in_every_phase() {
+fn supply_out_of_range_trips_in_every_phase(link: Link) {
+    let mut cases = 0;
     for mode in MODES {
         for phase in PHASES {
             for volts in ["5", "20"] {
-                let mut b = bench_in(phase, 38.0, mode);
+                let Some(mut b) = bench_in(link, phase, 38.0, mode, 0.3) else {
+                    continue;
+                };
+                cases += 1;
                 assert!(b.send(&format!("SIM SUPPLY {volts}"))[0].starts_with("ok"));
                 expect_alarm(&mut b, "supply-out-of-range", 0.3);
                 assert_latched(&mut b, "supply-out-of-range");
@@ -134,13 +256,17 @@ fn supply_out_of_range_trips_in_every_phase() {
             }
         }
     }
+    checked(link, "supply_out_of_range_trips_in_every_phase", cases);
 }
 
-#[test]
-fn stale_sensor_frames_trip_in_every_phase() {
+fn stale_sensor_frames_trip_in_every_phase(link: Link) {
+    let mut cases = 0;
     for mode in MODES {
         for phase in PHASES {
-            let mut b = bench_in(phase, 38.0, mode);
+            let Some(mut b) = bench_in(link, phase, 38.0, mode, 1.5) else {
+                continue;
+            };
+            cases += 1;
             if b.rig.now_ms() < 1500 {
                 b.run_for(1.5);
             }
@@ -163,10 +289,11 @@ fn stale_sensor_frames_trip_in_every_phase() {
             assert!(b.send("RESET")[0].starts_with("ok"));
         }
     }
+    checked(link, "stale_sensor_frames_trip_in_every_phase", cases);
 }
 
-#[test]
-fn a_dead_heater_trips_heater_not_heating_wherever_it_is_on() {
+fn a_dead_heater_trips_heater_not_heating_wherever_it_is_on(link: Link) {
+    let mut cases = 0;
     for mode in MODES {
         // PLA heater: on in soften and bend. TCA: on in bend (and lock) at 1 W (target 35 mm).
         let paper_lock: &[(&str, Phase)] = if mode == "paper" {
@@ -188,7 +315,10 @@ fn a_dead_heater_trips_heater_not_heating_wherever_it_is_on() {
                 continue;
             }
             {
-                let mut b = bench_in(phase, 35.0, mode);
+                let Some(mut b) = bench_in(link, phase, heater_target_mm(link), mode, 60.0) else {
+                    continue;
+                };
+                cases += 1;
                 // Injecting at the start of the phase: re-enter it fresh for bend/lock.
                 assert!(b.send(&format!("SIM FAULT heater-open {heater}"))[0].starts_with("ok"));
                 let a = expect_alarm(&mut b, "heater-not-heating", 60.0);
@@ -200,11 +330,22 @@ fn a_dead_heater_trips_heater_not_heating_wherever_it_is_on() {
             }
         }
     }
+    checked(
+        link,
+        "a_dead_heater_trips_heater_not_heating_wherever_it_is_on",
+        cases,
+    );
 }
 
-#[test]
-fn a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph() {
+fn a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph(link: Link) {
+    let mut cases = 0;
     for mode in MODES {
+        // The next morph runs whole: only a mode whose healthy morph ends without an alarm can
+        // tell the dead heater's trip from a false alarm.
+        let target = heater_target_mm(link);
+        if !healthy(link, mode, target) {
+            continue;
+        }
         // A TCA that dies during lock cools too slowly to be told from a working one before the lock
         // ends (about 15 s); the PLA is freezing the shape by then, so the morph completes and the
         // next one trips in bend.
@@ -226,7 +367,14 @@ fn a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph() {
             if mode == "paper" && phase == Phase::Lock {
                 continue;
             }
-            let mut b = bench_in(phase, 35.0, mode);
+            // Past idle the next morph starts as soon as this one has ended.
+            if phase != Phase::Idle && !second_morph_healthy(link, mode, target) {
+                continue;
+            }
+            let Some(mut b) = bench_in(link, phase, target, mode, 0.0) else {
+                continue;
+            };
+            cases += 1;
             assert!(b.send(&format!("SIM FAULT heater-open {heater}"))[0].starts_with("ok"));
             // paper's lock runs to 120 s after MORPH whatever the temperatures.
             let rest_s = if mode == "paper" { 120.0 } else { 30.0 };
@@ -236,21 +384,29 @@ fn a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph() {
                 b.lines
             );
             assert_eq!(b.tick().0, ZERO);
-            assert_eq!(b.send(&format!("MORPH 35 {mode}")), ["ok"]);
+            assert_eq!(b.send(&format!("MORPH {target} {mode}")), ["ok"]);
             // paper switches the TCA on only 20 s after MORPH.
             let trip_s = if mode == "paper" { 60.0 } else { 30.0 };
             let a = expect_alarm(&mut b, "heater-not-heating", trip_s);
-            assert!(a.contains(heater), "{a}");
+            assert!(a.contains(heater), "{mode} {phase:?} {heater}: {a}");
         }
     }
+    checked(
+        link,
+        "a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph",
+        cases,
+    );
 }
 
-#[test]
-fn a_stuck_heater_trips_over_temperature_in_every_phase() {
+fn a_stuck_heater_trips_over_temperature_in_every_phase(link: Link) {
+    let mut cases = 0;
     for mode in MODES {
         for phase in PHASES {
             for heater in ["pla", "tca"] {
-                let mut b = bench_in(phase, 38.0, mode);
+                let Some(mut b) = bench_in(link, phase, 38.0, mode, 120.0) else {
+                    continue;
+                };
+                cases += 1;
                 assert!(b.send(&format!("SIM FAULT heater-stuck {heater}"))[0].starts_with("ok"));
                 let a = expect_alarm(&mut b, "over-temperature", 120.0);
                 assert!(a.contains(heater), "{a}");
@@ -260,12 +416,18 @@ fn a_stuck_heater_trips_over_temperature_in_every_phase() {
             }
         }
     }
+    checked(
+        link,
+        "a_stuck_heater_trips_over_temperature_in_every_phase",
+        cases,
+    );
 }
 
-#[test]
-fn freezing_surroundings_trip_under_temperature() {
+fn freezing_surroundings_trip_under_temperature(link: Link) {
     for mode in MODES {
-        let mut b = bench_in(Phase::Idle, 38.0, mode);
+        let Some(mut b) = bench_in(link, Phase::Idle, 38.0, mode, 30.0) else {
+            continue;
+        };
         assert!(b.send("SIM AMBIENT -5")[0].starts_with("ok"));
         expect_alarm(&mut b, "under-temperature", 30.0);
         assert_latched(&mut b, "under-temperature");
@@ -273,24 +435,33 @@ fn freezing_surroundings_trip_under_temperature() {
     }
 }
 
-#[test]
-fn a_lock_that_cannot_cool_ends_in_phase_timeout() {
+fn a_lock_that_cannot_cool_ends_in_phase_timeout(link: Link) {
+    let mut cases = 0;
     // paper ends lock on time, not temperature (see the next test for boost: its lock starts
     // before the silicone is warm, so the rod does cool below 45 °C before the bath warms it).
     for mode in ["auto", "gated", "closed"] {
-        let mut b = bench_in(Phase::Lock, 38.0, mode);
+        let Some(mut b) = bench_in(link, Phase::Lock, 38.0, mode, 700.0) else {
+            continue;
+        };
+        cases += 1;
         // 46 °C water: the PLA can never fall below the 45 °C rigid threshold.
         assert!(b.send("SIM AMBIENT 46")[0].starts_with("ok"));
         let a = expect_alarm(&mut b, "phase-timeout", 700.0);
         assert!(a.contains("lock"), "{a}");
         assert_latched(&mut b, "phase-timeout");
     }
+    checked(link, "a_lock_that_cannot_cool_ends_in_phase_timeout", cases);
 }
 
-#[test]
-fn a_morph_in_a_bath_too_warm_to_lock_ends_in_phase_timeout() {
+fn a_morph_in_a_bath_too_warm_to_lock_ends_in_phase_timeout(link: Link) {
+    let mut cases = 0;
     for mode in ["auto", "gated", "boost", "closed"] {
-        let mut b = Bench::new();
+        // A whole morph: only modes whose healthy morph ends without an alarm.
+        if !healthy(link, mode, 38.0) {
+            continue;
+        }
+        let mut b = Bench::on(link);
+        cases += 1;
         // 46 °C water from the start, the link at its temperature: the PLA can never read rigid.
         assert!(b.send("SIM AMBIENT 46")[0].starts_with("ok"));
         b.run_for(120.0);
@@ -299,13 +470,21 @@ fn a_morph_in_a_bath_too_warm_to_lock_ends_in_phase_timeout() {
         assert!(a.contains("lock"), "{mode}: {a}");
         assert_latched(&mut b, "phase-timeout");
     }
+    checked(
+        link,
+        "a_morph_in_a_bath_too_warm_to_lock_ends_in_phase_timeout",
+        cases,
+    );
 }
 
-#[test]
-fn abort_in_every_phase_turns_both_heaters_off_at_once() {
+fn abort_in_every_phase_turns_both_heaters_off_at_once(link: Link) {
+    let mut cases = 0;
     for mode in MODES {
         for phase in PHASES {
-            let mut b = bench_in(phase, 38.0, mode);
+            let Some(mut b) = bench_in(link, phase, 38.0, mode, 0.0) else {
+                continue;
+            };
+            cases += 1;
             assert_eq!(b.send("ABORT"), ["ok"]);
             assert_eq!(b.rig.ctrl.outputs(), ZERO, "{phase:?}");
             assert_eq!(b.phase(), Phase::Idle);
@@ -319,12 +498,20 @@ fn abort_in_every_phase_turns_both_heaters_off_at_once() {
             assert_eq!(b.send("MORPH 40"), ["ok"]);
         }
     }
+    checked(
+        link,
+        "abort_in_every_phase_turns_both_heaters_off_at_once",
+        cases,
+    );
 }
 
-#[test]
-fn a_stalled_controller_cannot_leave_a_heater_on() {
+fn a_stalled_controller_cannot_leave_a_heater_on(link: Link) {
+    let mut cases = 0;
     for phase in [Phase::Soften, Phase::Bend, Phase::Lock] {
-        let mut b = bench_in(phase, 35.0, "auto");
+        let Some(mut b) = bench_in(link, phase, heater_target_mm(link), "auto", 1.0) else {
+            continue;
+        };
+        cases += 1;
         let before = b.rig.applied();
         assert!(
             before.pla_duty > 0.0 || before.tca_duty > 0.0,
@@ -347,5 +534,74 @@ fn a_stalled_controller_cannot_leave_a_heater_on() {
         assert_eq!(b.rig.applied(), ZERO, "{phase:?}");
         b.rig.stalled_tick();
         assert_eq!(b.rig.powers_w(), [0.0, 0.0], "{phase:?}");
+    }
+    checked(link, "a_stalled_controller_cannot_leave_a_heater_on", cases);
+}
+
+on_both_links!(
+    thermistor_open_and_short_trip_in_every_phase,
+    supply_out_of_range_trips_in_every_phase,
+    stale_sensor_frames_trip_in_every_phase,
+    a_dead_heater_trips_heater_not_heating_wherever_it_is_on,
+    a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph,
+    a_stuck_heater_trips_over_temperature_in_every_phase,
+    freezing_surroundings_trip_under_temperature,
+    a_lock_that_cannot_cool_ends_in_phase_timeout,
+    a_morph_in_a_bath_too_warm_to_lock_ends_in_phase_timeout,
+    abort_in_every_phase_turns_both_heaters_off_at_once,
+    a_stalled_controller_cannot_leave_a_heater_on,
+);
+
+/// KNOWN DEFECT, measured (not a property to keep): every mode's healthy morph on the nominal
+/// hifi link, to the safety tests' targets, ends exactly as [`HIFI_FALSE_ALARMS`] says: paper
+/// and gated trip heater-not-heating on the PLA heater 10 s into soften at both targets, auto,
+/// boost and closed on the TCA heater in bend at 35 mm, boost's soften times out at 38 mm; auto
+/// and closed finish at 38 mm. The safety issue (supervisor v2 and per-link calibration) removes
+/// the false alarms; then this test fails and the table must be updated.
+#[test]
+fn healthy_hifi_morphs_false_alarms_are_measured() {
+    for target in TARGETS_MM {
+        for mode in MODES {
+            let mut b = Bench::hifi();
+            let t = b.morph(target, mode);
+            println!(
+                "hifi {mode} {target} mm: {t:.1} s, phases {:?}, alarms {:?}",
+                b.phases(),
+                b.alarms_since(0)
+            );
+            match HIFI_FALSE_ALARMS
+                .iter()
+                .find(|(m, t, ..)| *m == mode && *t == target)
+            {
+                Some(&(_, _, phases, alarm, at_s)) => {
+                    b.assert_known_alarm(0, alarm, t, at_s);
+                    assert_eq!(b.phase(), Phase::Fault);
+                    assert_eq!(b.phases(), phases, "{mode} {target}");
+                }
+                None => {
+                    assert!(
+                        b.alarms_since(0).is_empty(),
+                        "{mode} {target}: {:?}",
+                        b.lines
+                    );
+                    assert_eq!(b.phase(), Phase::Idle);
+                    assert_eq!(b.phases(), ["soften", "bend", "lock", "release"]);
+                    assert!(b.lines.iter().any(|l| classify(l) == LineKind::Done));
+                    // And a second morph at once.
+                    let n = b.lines.len();
+                    let t = b.morph(target, mode);
+                    println!(
+                        "hifi {mode} {target} mm again: {t:.1} s, alarms {:?}",
+                        b.alarms_since(n)
+                    );
+                    let (_, alarm, at_s) = HIFI_SECOND_MORPH_FALSE_ALARMS
+                        .iter()
+                        .find(|(m, ..)| *m == mode)
+                        .expect("every mode that morphs once false-alarms the second time");
+                    b.assert_known_alarm(n, alarm, t, *at_s);
+                    assert!(!second_morph_healthy(Link::Hifi, mode, target));
+                }
+            }
+        }
     }
 }

@@ -1,7 +1,10 @@
 //! The controller on the high-fidelity plant (`cargo test -p morphlink-sim --features hifi`): a
 //! link not built from the controller's own equations. These hold that the rig drives it to an
 //! outcome within the plant's limits; the outcomes and errors they print are the measurement the
-//! lumped plant cannot give (docs/plant.md, "The controller on the hifi link").
+//! lumped plant cannot give (docs/plant.md, "The controller on the hifi link"). The morph and
+//! safety suites (`tests/morph.rs`, `tests/safety.rs`) run on the nominal hifi link too and
+//! assert its measured false alarms and radius errors; these stay for `run_morph_on` over a
+//! `Rig<Hifi>` and for drawn links.
 #![cfg(feature = "hifi")]
 
 use morphlink::bench::Noise;

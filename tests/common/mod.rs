@@ -1,24 +1,76 @@
-//! Shared helpers of the integration tests: a rig that records every line it sends.
+//! Shared helpers of the integration tests: a rig that records every line it sends, on either
+//! plant: the lumped link (the controller's own equations) or the high-fidelity link (built
+//! from different physics; docs/plant.md).
 #![allow(dead_code)]
 
+use std::sync::OnceLock;
+
+use morphlink::bench::Noise;
 use morphlink::controller::Outputs;
+use morphlink::protocol::{classify, LineKind};
 use morphlink::vocab::Phase;
+use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
+use morphlink_plant::Plant;
 use morphlink_sim::{LinkSetup, Rig};
+
+/// The simulated link a bench runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Link {
+    /// The nominal lumped link: the controller's own equations.
+    Lumped,
+    /// The nominal high-fidelity link of the same parameters on `Grid::Reduced` (its
+    /// reduced-order form: within 5e-6 of the full grid's peak rise in beads and heater means,
+    /// the same radius after a morph; docs/plant.md, "Cost").
+    Hifi,
+}
+
+/// Both links, lumped first.
+pub const LINKS: [Link; 2] = [Link::Lumped, Link::Hifi];
+
+/// The nominal hifi link at rest, built once (its identification and reduced model take a
+/// moment) and cloned for each bench.
+fn nominal_hifi() -> Hifi {
+    static LINK: OnceLock<Hifi> = OnceLock::new();
+    LINK.get_or_init(|| {
+        let spec = HifiSpec::nominal(LinkSetup::NOMINAL.params, Grid::Reduced).unwrap();
+        Hifi::new(spec).unwrap()
+    })
+    .clone()
+}
 
 /// A rig plus the lines it has written.
 pub struct Bench {
-    pub rig: Rig,
+    pub rig: Rig<Box<dyn Plant>>,
     pub lines: Vec<String>,
 }
 
 impl Bench {
+    /// The nominal lumped link.
     pub fn new() -> Self {
         Self::with_plant(LinkSetup::NOMINAL)
     }
 
+    /// The nominal hifi link.
+    pub fn hifi() -> Self {
+        Self::on(Link::Hifi)
+    }
+
+    /// The nominal `link`.
+    pub fn on(link: Link) -> Self {
+        match link {
+            Link::Lumped => Self::new(),
+            Link::Hifi => Self::with_rig(Rig::with_plant(Box::new(nominal_hifi()), Noise::NOMINAL)),
+        }
+    }
+
+    /// The lumped link `plant`.
     pub fn with_plant(plant: LinkSetup) -> Self {
+        Self::with_rig(Rig::with_plant(Box::new(plant.lumped()), plant.noise()))
+    }
+
+    fn with_rig(rig: Rig<Box<dyn Plant>>) -> Self {
         Bench {
-            rig: Rig::new(plant),
+            rig,
             lines: Vec::new(),
         }
     }
@@ -65,17 +117,56 @@ impl Bench {
         self.rig.ctrl.phase()
     }
 
-    /// Starts a morph (asserting `ok`) and runs until the controller is idle again.
+    /// Starts a morph (asserting `ok`) and runs until the controller is idle again; returns its
+    /// time, s.
     pub fn morph(&mut self, radius_mm: f32, mode: &str) -> f64 {
+        self.morph_peaks(radius_mm, mode).0
+    }
+
+    /// As [`Bench::morph`], and the peak true temperatures over the morph (the PLA rod's mean,
+    /// the TCA's mean), °C.
+    pub fn morph_peaks(&mut self, radius_mm: f32, mode: &str) -> (f64, [f64; 2]) {
         let r = self.send(&format!("MORPH {radius_mm} {mode}"));
         assert_eq!(r, ["ok"], "MORPH {radius_mm} {mode}");
         let t0 = self.rig.now_ms();
+        let mut peak_c = [f64::NEG_INFINITY; 2];
         assert!(
-            self.run_until(400.0, |b| !b.rig.ctrl.busy()),
+            self.run_until(400.0, |b| {
+                let t = b.rig.plant().truth();
+                peak_c = [peak_c[0].max(t.pla_c), peak_c[1].max(t.tca_c)];
+                !b.rig.ctrl.busy()
+            }),
             "morph did not finish: {:?}",
             self.lines
         );
-        (self.rig.now_ms() - t0) as f64 / 1000.0
+        ((self.rig.now_ms() - t0) as f64 / 1000.0, peak_c)
+    }
+
+    /// Alarm lines written since line `from` of [`Bench::lines`].
+    pub fn alarms_since(&self, from: usize) -> Vec<String> {
+        self.lines[from..]
+            .iter()
+            .filter(|l| classify(l) == LineKind::Alarm)
+            .cloned()
+            .collect()
+    }
+
+    /// A known false alarm, measured: exactly one alarm since line `from`, starting with
+    /// `start`, raised `t_s` after MORPH where `at_s` was measured (within 0.3 s).
+    pub fn assert_known_alarm(&self, from: usize, start: &str, t_s: f64, at_s: f64) {
+        let alarms = self.alarms_since(from);
+        assert_eq!(
+            alarms.len(),
+            1,
+            "one alarm, {start}...: {:?}",
+            &self.lines[from..]
+        );
+        assert!(alarms[0].starts_with(start), "{start}...: {}", alarms[0]);
+        assert!(
+            (t_s - at_s).abs() < 0.3,
+            "{}: at {t_s} s, not {at_s}",
+            alarms[0]
+        );
     }
 
     /// Phase names announced by `event: phase` lines so far.
