@@ -14,6 +14,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 #![allow(clippy::needless_range_loop)]
 
+pub mod draw;
 pub mod mechanics;
 pub mod params;
 pub mod table;

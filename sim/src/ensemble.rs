@@ -4,6 +4,7 @@
 //!
 //! Every range is a named default with the reason for it.
 
+use morphlink_model::draw::{splitmix, uniform};
 use crate::rig::{LinkSetup, Rig};
 use morphlink_plant::Plant;
 use morphlink::controller::{Outputs, TICK_MS};
@@ -65,20 +66,6 @@ pub struct Mismatch {
     pub force_scale: f64,
     /// Seed of the sensor noise.
     pub seed: u64,
-}
-
-/// SplitMix64: a small, well-mixed generator so draw `i` of seed `s` is reproducible alone.
-fn splitmix(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
-fn uniform(state: &mut u64, (lo, hi): (f64, f64)) -> f64 {
-    let u = (splitmix(state) >> 11) as f64 / (1u64 << 53) as f64;
-    lo + (hi - lo) * u
 }
 
 impl Mismatch {

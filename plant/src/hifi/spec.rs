@@ -5,6 +5,7 @@
 //! ensemble (`morphlink-sim`'s `ensemble`). [`HifiSpec::draw`] is reproducible: draw `i` of
 //! seed `s` is the same link whatever else was drawn.
 
+use morphlink_model::draw::{splitmix, uniform};
 use super::tca::Tca;
 use super::thermal::cross_section;
 use crate::Medium;
@@ -278,19 +279,6 @@ pub struct HifiSpec {
     pub beads: [BeadSpec; 3],
     /// Calibration miss (offset, slope) the TCA law was identified against.
     pub calibration_miss: (f64, f64),
-}
-
-fn splitmix(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
-fn uniform(state: &mut u64, (lo, hi): (f64, f64)) -> f64 {
-    let u = (splitmix(state) >> 11) as f64 / (1u64 << 53) as f64;
-    lo + (hi - lo) * u
 }
 
 /// Bead beside a heater of centre (x, y) and radius `r`, `gap` from its surface, turned by
