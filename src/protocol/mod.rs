@@ -98,6 +98,10 @@ pub enum SimCommand {
     /// `SIM PANIC`: the emulated image panics on purpose, to prove the panic path (heaters
     /// off, failing exit); the host simulator refuses it.
     Panic,
+    /// `SIM STALL`: the emulated image stops running its tasks on purpose (a busy loop in
+    /// thread mode), to prove the watchdog: it fires within its timeout, heaters off, and the
+    /// next boot says `reset=watchdog`; the host simulator refuses it.
+    Stall,
 }
 
 /// A parsed command line.
@@ -276,6 +280,11 @@ impl LineAssembler {
             overrun: false,
             after_cr: false,
         }
+    }
+
+    /// True between lines: nothing of a line received yet, and no overrun marked.
+    pub fn at_line_start(&self) -> bool {
+        self.len == 0 && !self.overflow && !self.overrun
     }
 
     /// Marks input lost at this point (a full receive buffer, a UART overrun): the line in
@@ -458,6 +467,7 @@ mod tests {
     fn sim_commands() {
         assert_eq!(sim("SIM STATE"), SimCommand::State);
         assert_eq!(sim("sim clear"), SimCommand::Clear);
+        assert_eq!(sim("SIM STALL"), SimCommand::Stall);
         assert_eq!(
             sim("SIM FAULT thermistor-open"),
             SimCommand::Fault(SimFault::ThermistorOpen, Sensor::Pla)
@@ -483,6 +493,7 @@ mod tests {
             "SIM NOTHING",
             "SIM STATE now",
             "SIM CLEAR all",
+            "SIM STALL now",
             "SIM FAULT",
             "SIM FAULT melted",
             "SIM FAULT heater-open amb",

@@ -27,7 +27,7 @@ pub const HELP: [&str; 11] = [
     "VERSION                         firmware and protocol version",
     "HELP                            this list",
     "STATS                           control-loop timing (us) and reset cause; hardware only",
-    "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|WAIT|CLEAR|PANIC  simulated builds only",
+    "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|WAIT|CLEAR|PANIC|STALL  simulated builds only",
     "SIM WAIT <s>                    run <s> of simulated time, then ok; morph-sim only",
 ];
 
@@ -47,6 +47,12 @@ pub const ERR_SIM_UNSUPPORTED: ProtoError = ProtoError {
 pub const ERR_SIM_PANIC_UNSUPPORTED: ProtoError = ProtoError {
     code: ErrorCode::Unsupported,
     text: "SIM PANIC exists only in the emulated image",
+};
+
+/// `SIM STALL` on the host simulator.
+pub const ERR_SIM_STALL_UNSUPPORTED: ProtoError = ProtoError {
+    code: ErrorCode::Unsupported,
+    text: "SIM STALL exists only in the emulated image",
 };
 
 /// `SIM WAIT` where the clock cannot be skipped (the emulated image runs at firmware time).
