@@ -205,9 +205,9 @@ mod firmware {
     const OUT_RESERVE: usize = 2 * LINE_ROOM;
     /// Room for one line and its ending: [`OutLine`]'s capacity and a newline.
     const LINE_ROOM: usize = 192 + 1;
-    /// Most bytes written to the serial port in one go before the serial task yields: under
-    /// QEMU every byte is a slow register write, and the control task must not wait long.
-    const TX_CHUNK: usize = 16;
+    /// Most bytes handed to the serial port in one go before the serial task yields (a board
+    /// may take fewer: the emulated port takes four, each a slow QEMU round trip).
+    const TX_CHUNK: usize = 64;
 
     /// Replies, events and alarms waiting for the serial port, and the replies dropped
     /// because there was no room (their commands were run).
@@ -247,7 +247,8 @@ mod firmware {
         /// Queues the dropped-replies notice and any event and alarm lines that fit.
         fn refill(&mut self) {
             let line_room = LINE_ROOM;
-            if self.dropped > 0 && self.room() >= line_room {
+            // Once the congestion is over (all queued output sent): one notice per flood.
+            if self.dropped > 0 && self.q.is_empty() {
                 let mut l = OutLine::new();
                 reply::replies_dropped(&mut l, self.dropped);
                 let _ = l.push('\n');
