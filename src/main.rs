@@ -322,7 +322,8 @@ mod firmware {
     /// at most [`TX_CHUNK`] bytes and yields, and waits on the port only for whichever of
     /// input, room to write or events comes first. A reply that finds [`Output`] full is
     /// dropped and counted (its command was run); the count goes out as one `error: busy`
-    /// line once there is room. Lost input makes its line an overrun error.
+    /// line once all queued output is out, and until then later replies are dropped too. Lost
+    /// input makes its line an overrun error.
     async fn serial_loop(mut tx: impl Write, mut rx: impl SerialReceive, boot: OutLine) {
         let mut reply: heapless::String<REPLY_BYTES> = heapless::String::new();
         let mut out = Output {
@@ -355,8 +356,15 @@ mod firmware {
                     if changed || abort {
                         APPLY_NOW.signal(());
                     }
-                    let keep = if abort { 0 } else { OUT_RESERVE };
-                    if !out.offer(&reply, keep) && !reply.is_empty() {
+                    // Once one reply is dropped, the following ones are too until the notice
+                    // is out, so the notice counts the replies right before it (an ABORT's
+                    // reply still goes out, in the room kept free).
+                    let queued = if abort {
+                        out.offer(&reply, 0)
+                    } else {
+                        out.dropped == 0 && out.offer(&reply, OUT_RESERVE)
+                    };
+                    if !queued && !reply.is_empty() {
                         out.dropped += 1;
                     }
                     // A MORPH's first event follows its `ok`.
