@@ -452,27 +452,23 @@ fn a_status_flood_loses_no_abort_and_merges_no_lines() {
         return;
     };
     let n = flood_lines();
-    // How many lines the firmware answers per second of firmware time, to put the ABORT in the
-    // middle of the paper morph's bend (20..70 s after MORPH).
-    let (t0, _, _) = stats(&mut emu);
-    let probe = 400;
-    emu.write_raw("STATUS\n".repeat(probe).as_bytes()).unwrap();
-    drain(&mut emu, MORPH_WALL);
-    let (t1, _, _) = stats(&mut emu);
-    let lines_per_s = probe as f64 / ((t1 - t0).max(1) as f64 / 10.0);
-    let k = ((lines_per_s * 45.0) as usize).clamp(50, n - 1);
-    let pre = (n / 2).saturating_sub(k);
-    let post = n - pre - k;
-    println!("flood: {lines_per_s:.0} lines per firmware s; {pre} STATUS, MORPH, {k} STATUS, ABORT, {post} STATUS");
     let (_, late_before, _) = stats(&mut emu);
-
-    let mut blob = "STATUS\n".repeat(pre);
-    blob.push_str("MORPH 38 paper\n");
-    blob.push_str(&"STATUS\n".repeat(k));
-    blob.push_str("ABORT\n");
-    blob.push_str(&"STATUS\n".repeat(post));
+    // The first half of the flood, then the morph; once it is in bend (20..70 s of firmware
+    // time after MORPH in paper mode), a few hundred more STATUS lines, the ABORT and the second
+    // half: the ABORT lands a few firmware seconds into bend.
+    let k = 200;
+    let pre = n / 2 - k;
+    let post = n - pre - k;
     let from = emu.transcript.len();
     let started = std::time::Instant::now();
+    let mut blob = "STATUS\n".repeat(pre);
+    blob.push_str("MORPH 38 paper\n");
+    emu.write_raw(blob.as_bytes()).unwrap();
+    emu.wait_for("event: phase bend", Duration::from_secs(60) + Duration::from_millis(20) * n as u32)
+        .unwrap();
+    let mut blob = "STATUS\n".repeat(k);
+    blob.push_str("ABORT\n");
+    blob.push_str(&"STATUS\n".repeat(post));
     emu.write_raw(blob.as_bytes()).unwrap();
     let versions = drain(
         &mut emu,
@@ -480,6 +476,7 @@ fn a_status_flood_loses_no_abort_and_merges_no_lines() {
     );
     let wall = started.elapsed();
     let lines = emu.transcript[from..].to_vec();
+    println!("flood: {pre} STATUS, MORPH 38 paper, (bend) {k} STATUS, ABORT, {post} STATUS");
 
     let (mut statuses, mut bare_ok, mut dropped, mut overruns) = (0usize, Vec::new(), 0usize, 0usize);
     let mut version_replies = 0;
