@@ -401,20 +401,22 @@ fn cr_only_and_crlf_line_endings_run_abort_and_status() {
     check!(emu, r.len() == 1 && r[0].starts_with("ok phase="), "{r:?}");
 }
 
-/// Waits until the firmware has worked through everything written so far: sends VERSION until
-/// one is answered (while the output is congested, replies are dropped and counted); returns
-/// how many VERSION lines it sent.
+/// Waits until the firmware has worked through everything written so far: sends RANGE until
+/// one is answered (while the output is congested, replies are dropped and counted, or come
+/// late), then until the line has been quiet for a second; returns how many RANGE lines it sent.
 fn drain(emu: &mut Emulator, limit: Duration) -> usize {
     let end = std::time::Instant::now() + limit;
     let mut sent = 0;
     loop {
-        emu.write_raw(b"VERSION\n").unwrap();
+        emu.write_raw(b"RANGE\n").unwrap();
         sent += 1;
-        if emu.wait_for("ok version=", Duration::from_secs(2)).is_ok() {
-            return sent;
+        if emu.wait_for("ok min_mm=", Duration::from_secs(2)).is_ok() {
+            break;
         }
         check!(emu, std::time::Instant::now() < end, "the firmware did not drain the flood in {limit:?}");
     }
+    while emu.next_line(Duration::from_secs(1)).is_ok() {}
+    sent
 }
 
 /// `STATS` as (ticks, late, period_max_us).
@@ -470,7 +472,7 @@ fn a_status_flood_loses_no_abort_and_merges_no_lines() {
     blob.push_str("ABORT\n");
     blob.push_str(&"STATUS\n".repeat(post));
     emu.write_raw(blob.as_bytes()).unwrap();
-    let versions = drain(
+    let ranges = drain(
         &mut emu,
         Duration::from_secs(60) + Duration::from_millis(20) * n as u32,
     );
@@ -479,12 +481,12 @@ fn a_status_flood_loses_no_abort_and_merges_no_lines() {
     println!("flood: {pre} STATUS, MORPH 38 paper, (bend) {k} STATUS, ABORT, {post} STATUS");
 
     let (mut statuses, mut bare_ok, mut dropped, mut overruns) = (0usize, Vec::new(), 0usize, 0usize);
-    let mut version_replies = 0;
+    let mut range_replies = 0;
     for (i, l) in lines.iter().enumerate() {
         if l.starts_with("ok phase=") {
             statuses += 1;
-        } else if l.starts_with("ok version=") {
-            version_replies += 1;
+        } else if l.starts_with("ok min_mm=") {
+            range_replies += 1;
         } else if l == "ok" {
             bare_ok.push(i);
         } else if l.starts_with("event: phase ") || l.starts_with("event: done ") {
@@ -532,10 +534,10 @@ fn a_status_flood_loses_no_abort_and_merges_no_lines() {
         // Nothing lost: every STATUS, the MORPH and the ABORT answered or counted as dropped.
         check!(
             emu,
-            statuses + bare_ok.len() + version_replies + dropped == n + 2 + versions,
-            "{statuses} STATUS + {} ok + {version_replies} VERSION + {dropped} dropped != {} lines",
+            statuses + bare_ok.len() + range_replies + dropped == n + 2 + ranges,
+            "{statuses} STATUS + {} ok + {range_replies} RANGE + {dropped} dropped != {} lines",
             bare_ok.len(),
-            n + 2 + versions
+            n + 2 + ranges
         );
     }
     check!(emu, emu.exited().is_none(), "QEMU ended during the flood");
@@ -560,13 +562,13 @@ fn a_help_flood_does_not_starve_the_control_task() {
     let started = std::time::Instant::now();
     let from = emu.transcript.len();
     emu.write_raw("HELP\n".repeat(n).as_bytes()).unwrap();
-    let versions = drain(&mut emu, MORPH_WALL);
+    let ranges = drain(&mut emu, MORPH_WALL);
     let wall = started.elapsed();
     let lines = emu.transcript[from..].to_vec();
-    let (mut oks, mut dropped, mut version_replies) = (0usize, 0usize, 0usize);
+    let (mut oks, mut dropped, mut range_replies) = (0usize, 0usize, 0usize);
     for l in &lines {
-        if l.starts_with("ok version=") {
-            version_replies += 1;
+        if l.starts_with("ok min_mm=") {
+            range_replies += 1;
         } else if l == "ok" {
             oks += 1;
         } else if let Some(rest) = l.strip_prefix("error: busy ") {
@@ -582,9 +584,9 @@ fn a_help_flood_does_not_starve_the_control_task() {
     );
     check!(
         emu,
-        oks + version_replies + dropped == n + versions,
-        "{oks} HELP + {version_replies} VERSION answered + {dropped} dropped != {}",
-        n + versions
+        oks + range_replies + dropped == n + ranges,
+        "{oks} HELP + {range_replies} RANGE answered + {dropped} dropped != {}",
+        n + ranges
     );
     check!(emu, emu.exited().is_none(), "QEMU ended during the HELP flood");
     check!(
