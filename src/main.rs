@@ -391,8 +391,7 @@ mod firmware {
                     Either::Second(()) => None,
                 }
             } else {
-                match select3(rx.receive(&mut inbuf), tx.write(out.chunk()), EVENTS.wait()).await
-                {
+                match select3(rx.receive(&mut inbuf), tx.write(out.chunk()), EVENTS.wait()).await {
                     Either3::First(r) => Some(r),
                     Either3::Second(r) => {
                         sent(&mut out, r);

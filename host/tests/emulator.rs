@@ -298,7 +298,11 @@ fn a_panic_turns_heaters_off_resets_and_the_next_boot_names_it() {
             && boot_line.len() <= morphlink::protocol::reply::BOOT_LINE_MAX,
         "boot line after the panic: {boot_line}"
     );
-    check!(emu, emu.exited().is_none(), "QEMU must keep running: the machine resets");
+    check!(
+        emu,
+        emu.exited().is_none(),
+        "QEMU must keep running: the machine resets"
+    );
     emu.wait_ready(REPLY).unwrap();
     assert_idle_and_off(&mut emu, "after the panic reset");
     // The reason is reported once: a RESET-free second look at STATS shows the software reset.
@@ -330,11 +334,18 @@ fn a_stalled_control_task_is_reset_by_the_watchdog_with_heaters_off() {
     );
     // 500 ms of firmware time is 25 ms of wall time at 20x; allow a loaded machine 100x that.
     println!("SIM STALL to the watchdog's reboot line: {wall:?} wall");
-    check!(emu, wall < Duration::from_millis(2500), "watchdog took {wall:?}");
+    check!(
+        emu,
+        wall < Duration::from_millis(2500),
+        "watchdog took {wall:?}"
+    );
     emu.wait_ready(REPLY).unwrap();
     assert_idle_and_off(&mut emu, "after the watchdog reset");
     let report = emu.report();
-    assert!(report.contains("watchdog: the control task stopped"), "{report}");
+    assert!(
+        report.contains("watchdog: the control task stopped"),
+        "{report}"
+    );
 }
 
 /// Nothing heats after a boot: the controller starts idle, and the simulated link stays at
@@ -346,7 +357,10 @@ fn a_boot_never_heats() {
     };
     let watch = |emu: &mut Emulator, when: &str| {
         let t0 = emu.command("SIM STATE", REPLY).unwrap();
-        let t0: f64 = field(t0.last().unwrap(), "time_s").unwrap().parse().unwrap();
+        let t0: f64 = field(t0.last().unwrap(), "time_s")
+            .unwrap()
+            .parse()
+            .unwrap();
         let started = std::time::Instant::now();
         loop {
             assert_idle_and_off(emu, when);
@@ -378,11 +392,16 @@ fn cr_only_and_crlf_line_endings_run_abort_and_status() {
         return;
     };
     for ending in ["\r", "\r\n"] {
-        emu.write_raw(format!("MORPH 36{ending}").as_bytes()).unwrap();
+        emu.write_raw(format!("MORPH 36{ending}").as_bytes())
+            .unwrap();
         emu.wait_for("event: phase soften", MORPH_WALL).unwrap();
         emu.write_raw(format!("ABORT{ending}").as_bytes()).unwrap();
         let a = emu.wait_for("ok", REPLY).unwrap();
-        check!(emu, a.last().map(String::as_str) == Some("ok"), "{ending:?}: {a:?}");
+        check!(
+            emu,
+            a.last().map(String::as_str) == Some("ok"),
+            "{ending:?}: {a:?}"
+        );
         emu.write_raw(format!("STATUS{ending}").as_bytes()).unwrap();
         let s = emu.next_line(REPLY).unwrap();
         check!(
@@ -413,7 +432,11 @@ fn drain(emu: &mut Emulator, limit: Duration) -> usize {
         if emu.wait_for("ok min_mm=", Duration::from_secs(2)).is_ok() {
             break;
         }
-        check!(emu, std::time::Instant::now() < end, "the firmware did not drain the flood in {limit:?}");
+        check!(
+            emu,
+            std::time::Instant::now() < end,
+            "the firmware did not drain the flood in {limit:?}"
+        );
     }
     while emu.next_line(Duration::from_secs(1)).is_ok() {}
     sent
@@ -426,7 +449,11 @@ fn stats(emu: &mut Emulator) -> (u64, u64, u64) {
 }
 
 fn parse_stats(line: &str) -> (u64, u64, u64) {
-    let n = |k: &str| field(line, k).and_then(|v| v.parse().ok()).unwrap_or(u64::MAX);
+    let n = |k: &str| {
+        field(line, k)
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(u64::MAX)
+    };
     (n("ticks"), n("late"), n("period_max_us"))
 }
 
@@ -466,8 +493,11 @@ fn a_status_flood_loses_no_abort_and_merges_no_lines() {
     let mut blob = "STATUS\n".repeat(pre);
     blob.push_str("MORPH 38 paper\n");
     emu.write_raw(blob.as_bytes()).unwrap();
-    emu.wait_for("event: phase bend", Duration::from_secs(60) + Duration::from_millis(20) * n as u32)
-        .unwrap();
+    emu.wait_for(
+        "event: phase bend",
+        Duration::from_secs(60) + Duration::from_millis(20) * n as u32,
+    )
+    .unwrap();
     let mut blob = "STATUS\n".repeat(k);
     blob.push_str("ABORT\n");
     blob.push_str(&"STATUS\n".repeat(post));
@@ -480,7 +510,8 @@ fn a_status_flood_loses_no_abort_and_merges_no_lines() {
     let lines = emu.transcript[from..].to_vec();
     println!("flood: {pre} STATUS, MORPH 38 paper, (bend) {k} STATUS, ABORT, {post} STATUS");
 
-    let (mut statuses, mut bare_ok, mut dropped, mut overruns) = (0usize, Vec::new(), 0usize, 0usize);
+    let (mut statuses, mut bare_ok, mut dropped, mut overruns) =
+        (0usize, Vec::new(), 0usize, 0usize);
     let mut range_replies = 0;
     for (i, l) in lines.iter().enumerate() {
         if l.starts_with("ok phase=") {
@@ -492,12 +523,20 @@ fn a_status_flood_loses_no_abort_and_merges_no_lines() {
         } else if l.starts_with("event: phase ") || l.starts_with("event: done ") {
         } else if let Some(rest) = l.strip_prefix("error: busy ") {
             let count = rest.split(' ').next().and_then(|c| c.parse::<usize>().ok());
-            check!(emu, rest.contains(" replies dropped") && count.is_some(), "reply {i}: {l}");
+            check!(
+                emu,
+                rest.contains(" replies dropped") && count.is_some(),
+                "reply {i}: {l}"
+            );
             dropped += count.unwrap();
         } else if l.starts_with("error: overrun ") {
             overruns += 1;
         } else {
-            check!(emu, false, "reply {i} is no expected form (two lines merged?): {l}");
+            check!(
+                emu,
+                false,
+                "reply {i} is no expected form (two lines merged?): {l}"
+            );
         }
     }
     let (ticks, late, period_max_us) = stats(&mut emu);
@@ -516,10 +555,17 @@ fn a_status_flood_loses_no_abort_and_merges_no_lines() {
                 || l.starts_with("event: phase release")
                 || l.starts_with("event: done")),
         "the ABORT must land in bend: events before it {:?}",
-        before.iter().filter(|l| l.starts_with("event:")).collect::<Vec<_>>()
+        before
+            .iter()
+            .filter(|l| l.starts_with("event:"))
+            .collect::<Vec<_>>()
     );
     for l in &lines[abort_at + 1..] {
-        check!(emu, !l.starts_with("event: phase"), "a phase after ABORT: {l}");
+        check!(
+            emu,
+            !l.starts_with("event: phase"),
+            "a phase after ABORT: {l}"
+        );
         if l.starts_with("ok phase=") {
             check!(
                 emu,
@@ -543,10 +589,16 @@ fn a_status_flood_loses_no_abort_and_merges_no_lines() {
     check!(emu, emu.exited().is_none(), "QEMU ended during the flood");
     check!(
         emu,
-        !emu.transcript[1..].iter().any(|l| l.starts_with("event: boot")),
+        !emu.transcript[1..]
+            .iter()
+            .any(|l| l.starts_with("event: boot")),
         "the firmware reset during the flood"
     );
-    check!(emu, period_max_us < FLOOD_PERIOD_MAX_US, "period_max_us={period_max_us}");
+    check!(
+        emu,
+        period_max_us < FLOOD_PERIOD_MAX_US,
+        "period_max_us={period_max_us}"
+    );
     assert_idle_and_off(&mut emu, "after the flood");
 }
 
@@ -572,7 +624,11 @@ fn a_help_flood_does_not_starve_the_control_task() {
         } else if l == "ok" {
             oks += 1;
         } else if let Some(rest) = l.strip_prefix("error: busy ") {
-            dropped += rest.split(' ').next().and_then(|c| c.parse::<usize>().ok()).unwrap_or(0);
+            dropped += rest
+                .split(' ')
+                .next()
+                .and_then(|c| c.parse::<usize>().ok())
+                .unwrap_or(0);
         } else {
             check!(emu, l.starts_with("data: "), "{l}");
         }
@@ -588,11 +644,21 @@ fn a_help_flood_does_not_starve_the_control_task() {
         "{oks} HELP + {range_replies} RANGE answered + {dropped} dropped != {}",
         n + ranges
     );
-    check!(emu, emu.exited().is_none(), "QEMU ended during the HELP flood");
     check!(
         emu,
-        !emu.transcript[1..].iter().any(|l| l.starts_with("event: boot")),
+        emu.exited().is_none(),
+        "QEMU ended during the HELP flood"
+    );
+    check!(
+        emu,
+        !emu.transcript[1..]
+            .iter()
+            .any(|l| l.starts_with("event: boot")),
         "the watchdog reset the firmware during the HELP flood"
     );
-    check!(emu, period_max_us < FLOOD_PERIOD_MAX_US, "period_max_us={period_max_us}");
+    check!(
+        emu,
+        period_max_us < FLOOD_PERIOD_MAX_US,
+        "period_max_us={period_max_us}"
+    );
 }

@@ -558,10 +558,11 @@ mod tests {
             "SIM WAIT",
             "SIM WAIT 1 x",
         ];
-        let errors = lines
-            .iter()
-            .map(|l| parse_line(l).unwrap_err())
-            .chain([ERR_LINE_TOO_LONG, ERR_INVALID_LINE, reply::ERR_OVERRUN]);
+        let errors = lines.iter().map(|l| parse_line(l).unwrap_err()).chain([
+            ERR_LINE_TOO_LONG,
+            ERR_INVALID_LINE,
+            reply::ERR_OVERRUN,
+        ]);
         for err in errors {
             let text = err.text;
             assert!(
@@ -645,7 +646,10 @@ mod tests {
 
     /// Feeds `bytes` with [`LineAssembler::overrun`] called before the byte at each index in
     /// `lost_before`; `Err(None)` marks an overrun line.
-    fn assemble_checked(bytes: &[u8], lost_before: &[usize]) -> Vec<Result<String, Option<Assembled<'static>>>> {
+    fn assemble_checked(
+        bytes: &[u8],
+        lost_before: &[usize],
+    ) -> Vec<Result<String, Option<Assembled<'static>>>> {
         let mut asm = LineAssembler::new();
         let mut out = Vec::new();
         for (i, &b) in bytes.iter().enumerate() {
@@ -687,7 +691,10 @@ mod tests {
         // `push` (sources that cannot overrun) reports a marked line as invalid, not a line.
         let mut asm = LineAssembler::new();
         asm.overrun();
-        let r: Vec<_> = b"STATUS\n".iter().filter_map(|&b| asm.push(b).map(|a| a == Assembled::Invalid)).collect();
+        let r: Vec<_> = b"STATUS\n"
+            .iter()
+            .filter_map(|&b| asm.push(b).map(|a| a == Assembled::Invalid))
+            .collect();
         assert_eq!(r, [true]);
     }
 

@@ -65,7 +65,8 @@ pub const ERR_SIM_WAIT_UNSUPPORTED: ProtoError = ProtoError {
 /// content may be pieces of two lines, so it was not run.
 pub const ERR_OVERRUN: ProtoError = ProtoError {
     code: ErrorCode::Overrun,
-    text: "Input was lost while this line arrived (receive overrun); it was not run, send it again.",
+    text:
+        "Input was lost while this line arrived (receive overrun); it was not run, send it again.",
 };
 
 /// Replies the serial task dropped because commands arrived faster than the line could carry
@@ -518,7 +519,10 @@ mod tests {
         assert!(l.ends_with("xx\""), "{l}");
         let l = line(|l| replies_dropped(l, 37));
         assert!(l.starts_with("error: busy 37 replies dropped"), "{l}");
-        assert_eq!(format_error(&ERR_OVERRUN).split(' ').nth(1), Some("overrun"));
+        assert_eq!(
+            format_error(&ERR_OVERRUN).split(' ').nth(1),
+            Some("overrun")
+        );
     }
 
     #[test]
