@@ -47,13 +47,15 @@ pub const TCA_CHANNEL: Channel = Channel::Ch2;
 pub type SerialTx = BufferedUartTx<'static>;
 /// The buffered UART's receive half, reporting lost input.
 ///
-/// embassy-stm32 0.6's buffered UART drops a byte that finds its ring full and only logs an
-/// overrun (ORE), so both are detected here: a read that drains a full ring (as many bytes as
-/// the ring holds: the firmware reads with a buffer that large) may have lost input after
-/// them, and any read error (`usart::Error::Overrun`, and framing, noise and parity errors,
-/// which later embassy versions return) is input lost or corrupt. Either marks the line in
-/// progress as an overrun; a full ring that lost nothing costs one needless error, never a
-/// wrong command.
+/// embassy-stm32 0.6's buffered UART drops a byte that finds its ring full, and for an overrun
+/// in the UART itself (ORE) it clears the flag in its interrupt and only logs it; its `read`
+/// returns no error for either. The full ring is detected here: a read that drains a full ring
+/// (as many bytes as the ring holds: the firmware reads with a buffer that large) may have lost
+/// input after them, so the line in progress there is marked; a full ring that lost nothing
+/// costs one needless error, never a wrong command. Any read error (`usart::Error::Overrun`, and
+/// framing, noise and parity errors, should an embassy version return them) marks it too. An
+/// ORE (a byte lost because the interrupt was held off for more than one byte time, 87 µs) is
+/// NOT detected with embassy 0.6; the firmware masks no interrupts for that long.
 pub struct SerialRx(BufferedUartRx<'static>);
 
 impl SerialReceive for SerialRx {
