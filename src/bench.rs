@@ -263,6 +263,9 @@ impl<P: Plant> Bench<P> {
             SimCommand::Panic => {
                 l = format_error(&reply::ERR_SIM_PANIC_UNSUPPORTED);
             }
+            SimCommand::Stall => {
+                l = format_error(&reply::ERR_SIM_STALL_UNSUPPORTED);
+            }
             SimCommand::Wait(_) => {
                 l = format_error(&reply::ERR_SIM_WAIT_UNSUPPORTED);
             }

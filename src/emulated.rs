@@ -85,10 +85,18 @@ pub fn init() -> &'static Link {
 }
 
 /// Carries out a `SIM` command on the simulated link at firmware time `now_ms`; `SIM PANIC`
-/// panics on purpose, to prove the panic path.
+/// panics on purpose, to prove the panic path, and `SIM STALL` stops the tasks, to prove the
+/// watchdog.
 pub fn sim_command(_: &mut Controller, now_ms: u64, cmd: SimCommand, out: &mut impl FnMut(&str)) {
     if cmd == SimCommand::Panic {
         panic!("SIM PANIC asked for a panic");
+    }
+    if cmd == SimCommand::Stall {
+        // Thread mode stops here: neither task runs again, so the control task stops feeding
+        // the watchdog, which fires from the SysTick interrupt (heaters off, reset).
+        loop {
+            cortex_m::asm::nop();
+        }
     }
     with_state(|s| {
         s.advance_to(now_ms);

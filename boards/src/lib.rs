@@ -77,6 +77,73 @@ pub struct ResetFlags {
     pub pin: bool,
 }
 
+/// Received-byte buffer of every board's serial port, bytes: four maximal lines. The firmware
+/// reads with a buffer at least this long, so a read that returns this many bytes drained a
+/// full buffer.
+pub const SERIAL_RX_BYTES: usize = 256;
+
+/// What one [`SerialReceive::receive`] gave.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Received {
+    /// Bytes copied into the caller's buffer, oldest first.
+    pub len: usize,
+    /// Input may have been lost right after these bytes (the receive buffer was full, or the
+    /// UART overran): the line in progress there must not be run.
+    pub lost_after: bool,
+}
+
+/// A serial receiver that never loses input silently.
+#[allow(async_fn_in_trait)]
+pub trait SerialReceive {
+    /// Waits for received bytes and copies them into `buf` (at least [`SERIAL_RX_BYTES`]
+    /// long), saying whether input was lost after them. Cancel-safe: dropped before it
+    /// completes, it has taken nothing.
+    async fn receive(&mut self, buf: &mut [u8]) -> Received;
+}
+
+/// Why the previous run ended, as the firmware recorded it in RAM that survives a reset.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FatalKind {
+    /// A panic or HardFault (or another fatal error the firmware named).
+    Fault,
+    /// The (emulated) watchdog: the control task stopped feeding it.
+    Watchdog,
+}
+
+/// Longest recorded fatal-error reason, bytes (longer reasons are cut).
+pub const FATAL_REASON_BYTES: usize = 120;
+
+/// The fatal error that ended the previous run: its kind and its reason, ASCII.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LastFatal {
+    /// What ended it.
+    pub kind: FatalKind,
+    reason: [u8; FATAL_REASON_BYTES],
+    len: usize,
+}
+
+impl LastFatal {
+    /// A record of `kind` with `reason` (cut at [`FATAL_REASON_BYTES`]; non-ASCII bytes
+    /// become `?`).
+    pub fn new(kind: FatalKind, reason: &[u8]) -> Self {
+        let mut r = LastFatal {
+            kind,
+            reason: [0; FATAL_REASON_BYTES],
+            len: 0,
+        };
+        for &b in reason.iter().take(FATAL_REASON_BYTES) {
+            r.reason[r.len] = if b.is_ascii() { b } else { b'?' };
+            r.len += 1;
+        }
+        r
+    }
+
+    /// The reason text.
+    pub fn reason(&self) -> &str {
+        core::str::from_utf8(&self.reason[..self.len.min(FATAL_REASON_BYTES)]).unwrap_or("?")
+    }
+}
+
 /// A board's peripherals, configured and ready for the tasks: heaters at 0 % duty.
 pub struct Parts<S, H, W, Tx, Rx> {
     /// Thermistor and supply inputs.
@@ -91,7 +158,13 @@ pub struct Parts<S, H, W, Tx, Rx> {
     pub rx: Rx,
     /// Reset flags read (and cleared) at boot.
     pub reset_flags: ResetFlags,
+    /// The fatal error that ended the previous run, if the firmware recorded one (read once:
+    /// the record is cleared at boot).
+    pub last_fatal: Option<LastFatal>,
 }
+
+#[cfg(target_os = "none")]
+pub mod reset_record;
 
 #[cfg(all(target_os = "none", feature = "_stm32"))]
 pub mod stm32;

@@ -2,7 +2,10 @@
 //! PA7 = D11, pins without a pull-up at reset), the four analog inputs on ADC1, the independent
 //! watchdog, the buffered UART, the DWT cycle counter and the reset that ends a fatal error.
 
-use crate::{AnalogInputs, HeaterOutputs, Parts, ResetFlags, Watchdog, INPUTS};
+use crate::{
+    AnalogInputs, FatalKind, HeaterOutputs, Parts, Received, ResetFlags, SerialReceive, Watchdog,
+    INPUTS,
+};
 use embassy_stm32::adc::{Adc, AnyAdcChannel, SampleTime};
 use embassy_stm32::gpio::OutputType;
 use embassy_stm32::peripherals::{ADC1, IWDG, PA6, PA7, TIM3};
@@ -25,9 +28,11 @@ pub const PWM_FREQUENCY: Hertz = Hertz(1_000);
 /// A stalled control task resets the chip, and the reset leaves both heaters off.
 pub const WATCHDOG_TIMEOUT_US: u32 = 500_000;
 
-/// UART receive buffer, bytes: four maximal lines; more is a flood, and the assembler
-/// reports an over-long line once rather than per byte.
-pub const UART_RX_BYTES: usize = 256;
+/// UART receive buffer, bytes: four maximal lines. The serial task drains it at once and
+/// never waits on its output while input is waiting, so at 115 200 baud (87 µs a byte) it
+/// fills only if the task is held off for 22 ms; a read that finds it full reports input
+/// lost after its bytes ([`SerialRx`]).
+pub const UART_RX_BYTES: usize = crate::SERIAL_RX_BYTES;
 /// UART transmit buffer, bytes: holds a whole HELP reply, so replies rarely wait.
 pub const UART_TX_BYTES: usize = 1024;
 
@@ -40,8 +45,40 @@ pub const TCA_CHANNEL: Channel = Channel::Ch2;
 
 /// The buffered UART's transmit half.
 pub type SerialTx = BufferedUartTx<'static>;
-/// The buffered UART's receive half.
-pub type SerialRx = BufferedUartRx<'static>;
+/// The buffered UART's receive half, reporting lost input.
+///
+/// embassy-stm32 0.6's buffered UART drops a byte that finds its ring full, and for an overrun
+/// in the UART itself (ORE) it clears the flag in its interrupt and only logs it; its `read`
+/// returns no error for either. The full ring is detected here: a read that drains a full ring
+/// (as many bytes as the ring holds: the firmware reads with a buffer that large) may have lost
+/// input after them, so the line in progress there is marked; a full ring that lost nothing
+/// costs one needless error, never a wrong command. Any read error (`usart::Error::Overrun`, and
+/// framing, noise and parity errors, should an embassy version return them) marks it too. An
+/// ORE (a byte lost because the interrupt was held off for more than one byte time, 87 µs) is
+/// NOT detected with embassy 0.6; the firmware masks no interrupts for that long.
+pub struct SerialRx(BufferedUartRx<'static>);
+
+impl SerialReceive for SerialRx {
+    async fn receive(&mut self, buf: &mut [u8]) -> Received {
+        match embedded_io_async::Read::read(&mut self.0, buf).await {
+            Ok(len) => Received {
+                len,
+                lost_after: len >= UART_RX_BYTES,
+            },
+            Err(e) => {
+                if e == usart::Error::Overrun {
+                    defmt::warn!("UART overrun: the line in progress is dropped");
+                } else {
+                    defmt::warn!("UART receive error {}: the line in progress is dropped", e);
+                }
+                Received {
+                    len: 0,
+                    lost_after: true,
+                }
+            }
+        }
+    }
+}
 
 /// A hardware board's parts.
 pub type HardwareParts = Parts<Sensors, Heaters, Iwdg, SerialTx, SerialRx>;
@@ -70,9 +107,10 @@ pub fn cycles() -> u32 {
     cortex_m::peripheral::DWT::cycle_count()
 }
 
-/// Ends a fatal error (heaters already off): a system reset, reported at the next boot as
-/// `reset=software`.
-pub fn fatal(_reason: core::fmt::Arguments) -> ! {
+/// Ends a fatal error (heaters already off): records `reason` where the next boot finds it,
+/// then a system reset, reported at the next boot as `reset=software panic="<reason>"`.
+pub fn fatal(reason: core::fmt::Arguments) -> ! {
+    crate::reset_record::record(FatalKind::Fault, reason);
     cortex_m::peripheral::SCB::sys_reset()
 }
 
@@ -212,7 +250,8 @@ pub fn parts(
         heaters: PwmHeaters::new(pwm, PLA_CHANNEL, TCA_CHANNEL),
         watchdog: Iwdg(IndependentWatchdog::new(iwdg, WATCHDOG_TIMEOUT_US)),
         tx,
-        rx,
+        rx: SerialRx(rx),
         reset_flags,
+        last_fatal: crate::reset_record::take(),
     }
 }

@@ -260,27 +260,405 @@ fn overlong_and_garbage_lines_get_errors() {
     check!(emu, r.last().unwrap().starts_with("ok phase=idle"), "{r:?}");
 }
 
+/// Reads `STATUS` and asserts the controller is idle with both heaters at 0 W.
+fn assert_idle_and_off(emu: &mut Emulator, when: &str) {
+    let s = emu.command("STATUS", REPLY).unwrap();
+    let s = s.last().unwrap().clone();
+    check!(
+        emu,
+        field(&s, "phase").as_deref() == Some("idle")
+            && field(&s, "p_pla_w").as_deref() == Some("0.000")
+            && field(&s, "p_tca_w").as_deref() == Some("0.000"),
+        "{when}: {s}"
+    );
+}
+
+/// Waits for the boot line of the next run (after a reset), returns it.
+fn next_boot_line(emu: &mut Emulator) -> String {
+    let lines = emu
+        .wait_for("event: boot ", Duration::from_secs(10))
+        .unwrap_or_else(|e| panic!("no reboot: {e}"));
+    lines.last().unwrap().clone()
+}
+
 #[test]
-fn a_panic_turns_heaters_off_and_ends_qemu_with_failure() {
+fn a_panic_turns_heaters_off_resets_and_the_next_boot_names_it() {
     let Some((_one, mut emu)) = boot() else {
         return;
     };
     emu.command("MORPH 38", REPLY).unwrap();
     emu.wait_for("event: phase bend", MORPH_WALL).unwrap();
     emu.write_raw(b"SIM PANIC\n").unwrap();
-    let mut status = None;
-    for _ in 0..100 {
-        if let Some(s) = emu.exited() {
-            status = Some(s);
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let status = status.expect("QEMU must exit after a panic");
-    check!(emu, status.code() == Some(1), "exit status {status}");
+    let boot_line = next_boot_line(&mut emu);
+    check!(
+        emu,
+        boot_line.contains(" reset=software ")
+            && boot_line.contains(" panic=\"panic at src/emulated.rs:")
+            && boot_line.contains("SIM PANIC asked for a panic; heaters off\"")
+            && boot_line.len() <= morphlink::protocol::reply::BOOT_LINE_MAX,
+        "boot line after the panic: {boot_line}"
+    );
+    check!(
+        emu,
+        emu.exited().is_none(),
+        "QEMU must keep running: the machine resets"
+    );
+    emu.wait_ready(REPLY).unwrap();
+    assert_idle_and_off(&mut emu, "after the panic reset");
+    // The reason is reported once: a RESET-free second look at STATS shows the software reset.
+    let stats = emu.command("STATS", REPLY).unwrap();
+    check!(
+        emu,
+        field(stats.last().unwrap(), "reset").as_deref() == Some("software"),
+        "{stats:?}"
+    );
+    let report = emu.report();
+    assert!(report.contains("panic at src/emulated.rs"), "{report}");
+}
+
+#[test]
+fn a_stalled_control_task_is_reset_by_the_watchdog_with_heaters_off() {
+    let Some((_one, mut emu)) = boot() else {
+        return;
+    };
+    emu.command("MORPH 38", REPLY).unwrap();
+    emu.wait_for("event: phase bend", MORPH_WALL).unwrap();
+    let stalled = std::time::Instant::now();
+    emu.write_raw(b"SIM STALL\n").unwrap();
+    let boot_line = next_boot_line(&mut emu);
+    let wall = stalled.elapsed();
+    check!(
+        emu,
+        boot_line.contains(" reset=watchdog ") && boot_line.contains("panic=\"watchdog: "),
+        "boot line after the stall: {boot_line}"
+    );
+    // 500 ms of firmware time is 25 ms of wall time at 20x; allow a loaded machine 100x that.
+    println!("SIM STALL to the watchdog's reboot line: {wall:?} wall");
+    check!(
+        emu,
+        wall < Duration::from_millis(2500),
+        "watchdog took {wall:?}"
+    );
+    emu.wait_ready(REPLY).unwrap();
+    assert_idle_and_off(&mut emu, "after the watchdog reset");
     let report = emu.report();
     assert!(
-        report.contains("panic:") && report.contains("heaters off"),
+        report.contains("watchdog: the control task stopped"),
         "{report}"
+    );
+}
+
+/// Nothing heats after a boot: the controller starts idle, and the simulated link stays at
+/// ambient for a minute of firmware time (checked after power-on and after a reset).
+#[test]
+fn a_boot_never_heats() {
+    let Some((_one, mut emu)) = boot() else {
+        return;
+    };
+    let watch = |emu: &mut Emulator, when: &str| {
+        let t0 = emu.command("SIM STATE", REPLY).unwrap();
+        let t0: f64 = field(t0.last().unwrap(), "time_s")
+            .unwrap()
+            .parse()
+            .unwrap();
+        let started = std::time::Instant::now();
+        loop {
+            assert_idle_and_off(emu, when);
+            let st = emu.command("SIM STATE", REPLY).unwrap();
+            let st = st.last().unwrap().clone();
+            let t: f64 = field(&st, "time_s").unwrap().parse().unwrap();
+            for key in ["t_pla_c", "t_tca_c"] {
+                let c: f64 = field(&st, key).unwrap().parse().unwrap();
+                check!(emu, c < 23.0, "{when}: {key} rose to {c} C: {st}");
+            }
+            if t > t0 + 60.0 || started.elapsed() > MORPH_WALL {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
+    };
+    watch(&mut emu, "after power-on");
+    emu.command("MORPH 38", REPLY).unwrap();
+    emu.wait_for("event: phase bend", MORPH_WALL).unwrap();
+    emu.write_raw(b"SIM PANIC\n").unwrap();
+    next_boot_line(&mut emu);
+    emu.wait_ready(REPLY).unwrap();
+    watch(&mut emu, "after a reset mid-bend");
+}
+
+#[test]
+fn cr_only_and_crlf_line_endings_run_abort_and_status() {
+    let Some((_one, mut emu)) = boot() else {
+        return;
+    };
+    for ending in ["\r", "\r\n"] {
+        emu.write_raw(format!("MORPH 36{ending}").as_bytes())
+            .unwrap();
+        emu.wait_for("event: phase soften", MORPH_WALL).unwrap();
+        emu.write_raw(format!("ABORT{ending}").as_bytes()).unwrap();
+        let a = emu.wait_for("ok", REPLY).unwrap();
+        check!(
+            emu,
+            a.last().map(String::as_str) == Some("ok"),
+            "{ending:?}: {a:?}"
+        );
+        emu.write_raw(format!("STATUS{ending}").as_bytes()).unwrap();
+        let s = emu.next_line(REPLY).unwrap();
+        check!(
+            emu,
+            s.starts_with("ok phase=idle ") && field(&s, "p_tca_w").as_deref() == Some("0.000"),
+            "{ending:?}: {s}"
+        );
+    }
+    // CRLF makes no empty line: exactly one reply per line, nothing after it.
+    emu.write_raw(b"VERSION\r\nVERSION\r\n").unwrap();
+    for _ in 0..2 {
+        let l = emu.next_line(REPLY).unwrap();
+        check!(emu, l.starts_with("ok version="), "{l}");
+    }
+    let r = emu.command("STATUS", REPLY).unwrap();
+    check!(emu, r.len() == 1 && r[0].starts_with("ok phase="), "{r:?}");
+}
+
+/// Waits until the firmware has worked through everything written so far: sends RANGE until
+/// one is answered (while the output is congested, replies are dropped and counted, or come
+/// late), then until the line has been quiet for a second; returns how many RANGE lines it sent.
+fn drain(emu: &mut Emulator, limit: Duration) -> usize {
+    let end = std::time::Instant::now() + limit;
+    let mut sent = 0;
+    loop {
+        emu.write_raw(b"RANGE\n").unwrap();
+        sent += 1;
+        if emu.wait_for("ok min_mm=", Duration::from_secs(2)).is_ok() {
+            break;
+        }
+        check!(
+            emu,
+            std::time::Instant::now() < end,
+            "the firmware did not drain the flood in {limit:?}"
+        );
+    }
+    while emu.next_line(Duration::from_secs(1)).is_ok() {}
+    sent
+}
+
+/// `STATS` as (ticks, late, period_max_us).
+fn stats(emu: &mut Emulator) -> (u64, u64, u64) {
+    let s = emu.command("STATS", REPLY).unwrap();
+    parse_stats(s.last().unwrap())
+}
+
+fn parse_stats(line: &str) -> (u64, u64, u64) {
+    let n = |k: &str| {
+        field(line, k)
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(u64::MAX)
+    };
+    (n("ticks"), n("late"), n("period_max_us"))
+}
+
+/// Longest tick period a flood may cause, µs: three ticks, well inside the 500 ms watchdog.
+/// (The emulator's `late` count, ticks over 110 ms, is reported: QEMU's per-byte serial
+/// round trips stall the emulated CPU, see docs/emulation.md.)
+const FLOOD_PERIOD_MAX_US: u64 = 300_000;
+
+/// Lines of the STATUS flood (`MORPHLINK_FLOOD_LINES` overrides, e.g. 100000).
+fn flood_lines() -> usize {
+    std::env::var("MORPHLINK_FLOOD_LINES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(20_000)
+}
+
+/// A flood of STATUS lines written as fast as TCP takes them, with a paper-mode morph and, while
+/// it is in bend, an ABORT in the middle: the ABORT is acted on (heaters off), every reply is
+/// one of the expected forms (no command formed from two lines), every line is accounted for
+/// (answered, or counted in an `error: busy ... replies dropped` notice), and the control task
+/// keeps its timing.
+#[test]
+fn a_status_flood_loses_no_abort_and_merges_no_lines() {
+    let Some((_one, mut emu)) = boot() else {
+        return;
+    };
+    let n = flood_lines();
+    let (_, late_before, _) = stats(&mut emu);
+    // The first half of the flood, then the morph; once it is in bend (20..70 s of firmware
+    // time after MORPH in paper mode), a few hundred more STATUS lines, the ABORT and the second
+    // half: the ABORT lands a few firmware seconds into bend.
+    let k = 200;
+    let pre = n / 2 - k;
+    let post = n - pre - k;
+    let from = emu.transcript.len();
+    let started = std::time::Instant::now();
+    let mut blob = "STATUS\n".repeat(pre);
+    blob.push_str("MORPH 38 paper\n");
+    emu.write_raw(blob.as_bytes()).unwrap();
+    emu.wait_for(
+        "event: phase bend",
+        Duration::from_secs(60) + Duration::from_millis(20) * n as u32,
+    )
+    .unwrap();
+    let mut blob = "STATUS\n".repeat(k);
+    blob.push_str("ABORT\n");
+    blob.push_str(&"STATUS\n".repeat(post));
+    emu.write_raw(blob.as_bytes()).unwrap();
+    let ranges = drain(
+        &mut emu,
+        Duration::from_secs(60) + Duration::from_millis(20) * n as u32,
+    );
+    let wall = started.elapsed();
+    let lines = emu.transcript[from..].to_vec();
+    println!("flood: {pre} STATUS, MORPH 38 paper, (bend) {k} STATUS, ABORT, {post} STATUS");
+
+    let (mut statuses, mut bare_ok, mut dropped, mut overruns) =
+        (0usize, Vec::new(), 0usize, 0usize);
+    let mut range_replies = 0;
+    for (i, l) in lines.iter().enumerate() {
+        if l.starts_with("ok phase=") {
+            statuses += 1;
+        } else if l.starts_with("ok min_mm=") {
+            range_replies += 1;
+        } else if l == "ok" {
+            bare_ok.push(i);
+        } else if l.starts_with("event: phase ") || l.starts_with("event: done ") {
+        } else if let Some(rest) = l.strip_prefix("error: busy ") {
+            let count = rest.split(' ').next().and_then(|c| c.parse::<usize>().ok());
+            check!(
+                emu,
+                rest.contains(" replies dropped") && count.is_some(),
+                "reply {i}: {l}"
+            );
+            dropped += count.unwrap();
+        } else if l.starts_with("error: overrun ") {
+            overruns += 1;
+        } else {
+            check!(
+                emu,
+                false,
+                "reply {i} is no expected form (two lines merged?): {l}"
+            );
+        }
+    }
+    let (ticks, late, period_max_us) = stats(&mut emu);
+    println!(
+        "flood of {n} STATUS lines: {wall:.1?} wall; {statuses} STATUS replies, {dropped} replies \
+         dropped (counted), {overruns} overrun errors; STATS ticks={ticks} late={late} \
+         (before the flood {late_before}) period_max_us={period_max_us}"
+    );
+    // The ABORT's reply (never dropped: it may use the room kept for events) is the last bare ok.
+    let abort_at = *bare_ok.last().expect("the ABORT's ok");
+    let before = &lines[..abort_at];
+    check!(
+        emu,
+        before.iter().any(|l| l.starts_with("event: phase bend"))
+            && !before.iter().any(|l| l.starts_with("event: phase lock")
+                || l.starts_with("event: phase release")
+                || l.starts_with("event: done")),
+        "the ABORT must land in bend: events before it {:?}",
+        before
+            .iter()
+            .filter(|l| l.starts_with("event:"))
+            .collect::<Vec<_>>()
+    );
+    for l in &lines[abort_at + 1..] {
+        check!(
+            emu,
+            !l.starts_with("event: phase"),
+            "a phase after ABORT: {l}"
+        );
+        if l.starts_with("ok phase=") {
+            check!(
+                emu,
+                l.starts_with("ok phase=idle ")
+                    && field(l, "p_pla_w").as_deref() == Some("0.000")
+                    && field(l, "p_tca_w").as_deref() == Some("0.000"),
+                "after ABORT: {l}"
+            );
+        }
+    }
+    if overruns == 0 {
+        // Nothing lost: every STATUS, the MORPH and the ABORT answered or counted as dropped.
+        check!(
+            emu,
+            statuses + bare_ok.len() + range_replies + dropped == n + 2 + ranges,
+            "{statuses} STATUS + {} ok + {range_replies} RANGE + {dropped} dropped != {} lines",
+            bare_ok.len(),
+            n + 2 + ranges
+        );
+    }
+    check!(emu, emu.exited().is_none(), "QEMU ended during the flood");
+    check!(
+        emu,
+        !emu.transcript[1..]
+            .iter()
+            .any(|l| l.starts_with("event: boot")),
+        "the firmware reset during the flood"
+    );
+    check!(
+        emu,
+        period_max_us < FLOOD_PERIOD_MAX_US,
+        "period_max_us={period_max_us}"
+    );
+    assert_idle_and_off(&mut emu, "after the flood");
+}
+
+/// 300 HELP lines in a row (each 11 data lines and an ok, about 1 KiB) do not starve the
+/// control task: no watchdog reset, the tick period stays bounded, and the replies that did
+/// not fit are counted in `error: busy` notices.
+#[test]
+fn a_help_flood_does_not_starve_the_control_task() {
+    let Some((_one, mut emu)) = boot() else {
+        return;
+    };
+    let n = 300;
+    let started = std::time::Instant::now();
+    let from = emu.transcript.len();
+    emu.write_raw("HELP\n".repeat(n).as_bytes()).unwrap();
+    let ranges = drain(&mut emu, MORPH_WALL);
+    let wall = started.elapsed();
+    let lines = emu.transcript[from..].to_vec();
+    let (mut oks, mut dropped, mut range_replies) = (0usize, 0usize, 0usize);
+    for l in &lines {
+        if l.starts_with("ok min_mm=") {
+            range_replies += 1;
+        } else if l == "ok" {
+            oks += 1;
+        } else if let Some(rest) = l.strip_prefix("error: busy ") {
+            dropped += rest
+                .split(' ')
+                .next()
+                .and_then(|c| c.parse::<usize>().ok())
+                .unwrap_or(0);
+        } else {
+            check!(emu, l.starts_with("data: "), "{l}");
+        }
+    }
+    let (ticks, late, period_max_us) = stats(&mut emu);
+    println!(
+        "HELP flood of {n}: {wall:.1?} wall; {oks} answered, {dropped} dropped (counted); \
+         STATS ticks={ticks} late={late} period_max_us={period_max_us}"
+    );
+    check!(
+        emu,
+        oks + range_replies + dropped == n + ranges,
+        "{oks} HELP + {range_replies} RANGE answered + {dropped} dropped != {}",
+        n + ranges
+    );
+    check!(
+        emu,
+        emu.exited().is_none(),
+        "QEMU ended during the HELP flood"
+    );
+    check!(
+        emu,
+        !emu.transcript[1..]
+            .iter()
+            .any(|l| l.starts_with("event: boot")),
+        "the watchdog reset the firmware during the HELP flood"
+    );
+    check!(
+        emu,
+        period_max_us < FLOOD_PERIOD_MAX_US,
+        "period_max_us={period_max_us}"
     );
 }

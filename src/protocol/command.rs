@@ -115,7 +115,7 @@ fn parse_morph<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<Command, P
 /// `SIM <subcommand> ...` after the command word.
 fn parse_sim<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<SimCommand, ProtoError> {
     const NEEDS_SUB: &str =
-        "SIM needs STATE, FAULT, SUPPLY, AMBIENT, MEDIUM, WAIT, CLEAR or PANIC.";
+        "SIM needs STATE, FAULT, SUPPLY, AMBIENT, MEDIUM, WAIT, CLEAR, PANIC or STALL.";
     let sub = args.next().ok_or(bad(NEEDS_SUB))?;
     let is = |word: &str| sub.eq_ignore_ascii_case(word);
     let sim = if is("STATE") {
@@ -124,6 +124,8 @@ fn parse_sim<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<SimCommand, 
         SimCommand::Clear
     } else if is("PANIC") {
         SimCommand::Panic
+    } else if is("STALL") {
+        SimCommand::Stall
     } else if is("FAULT") {
         parse_sim_fault(&mut args)?
     } else if is("SUPPLY") {
@@ -157,6 +159,7 @@ fn parse_sim<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<SimCommand, 
         SimCommand::State => "SIM STATE takes no arguments.",
         SimCommand::Clear => "SIM CLEAR takes no arguments.",
         SimCommand::Panic => "SIM PANIC takes no arguments.",
+        SimCommand::Stall => "SIM STALL takes no arguments.",
         SimCommand::Fault(..) => "SIM FAULT takes a kind and an optional target (pla, tca or amb).",
         SimCommand::Supply(_) => "SIM SUPPLY takes one voltage.",
         SimCommand::Ambient(_) => "SIM AMBIENT takes one temperature.",

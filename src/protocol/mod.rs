@@ -3,7 +3,7 @@
 //! client side's line classifier in [`client`]. No other module writes wire text (checked by
 //! `tests/wire_text.rs`).
 //!
-//! ASCII lines ending in `\n` (a `\r` before it is ignored), at most [`MAX_LINE`] characters,
+//! ASCII lines ending in `\n`, `\r` or `\r\n`, at most [`MAX_LINE`] characters,
 //! commands case-insensitive. Every command line gets exactly one final reply (`ok ...` or
 //! `error: <code> <text>`), optionally preceded by `data: ...` lines. Unsolicited lines are
 //! `event: ...` and `alarm: <code> <text>`.
@@ -98,6 +98,10 @@ pub enum SimCommand {
     /// `SIM PANIC`: the emulated image panics on purpose, to prove the panic path (heaters
     /// off, failing exit); the host simulator refuses it.
     Panic,
+    /// `SIM STALL`: the emulated image stops running its tasks on purpose (a busy loop in
+    /// thread mode), to prove the watchdog: it fires within its timeout, heaters off, and the
+    /// next boot says `reset=watchdog`; the host simulator refuses it.
+    Stall,
 }
 
 /// A parsed command line.
@@ -149,6 +153,9 @@ pub enum ErrorCode {
     LineTooLong,
     /// The command exists but this build cannot do it (e.g. `SIM` on hardware).
     Unsupported,
+    /// Input was lost while the line arrived (receive buffer full, UART overrun); the line
+    /// was not run.
+    Overrun,
 }
 
 /// A protocol error: a code and a sentence for the user.
@@ -172,6 +179,7 @@ impl ErrorCode {
             ErrorCode::FaultActive => "fault-active",
             ErrorCode::LineTooLong => "line-too-long",
             ErrorCode::Unsupported => "unsupported",
+            ErrorCode::Overrun => "overrun",
         }
     }
 }
@@ -232,16 +240,28 @@ pub enum Assembled<'a> {
     Invalid,
 }
 
+/// What [`LineAssembler::push_checked`] reports for a line that lost bytes: the receiver
+/// dropped input ([`LineAssembler::overrun`]) while it was in progress, so its content (which
+/// may be pieces of two lines) was dropped. Answered with
+/// [`reply::ERR_OVERRUN`](crate::protocol::reply::ERR_OVERRUN), never run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Overrun;
+
 /// Collects bytes into lines in a fixed [`MAX_LINE`]-byte buffer, without allocation.
 ///
-/// `\n` ends a line, `\r` is ignored anywhere. Bytes past [`MAX_LINE`] are discarded and the
-/// line reports [`Assembled::TooLong`] once, at its `\n`, so a flood of garbage costs one error
-/// reply, not one per byte.
+/// `\n`, `\r` and `\r\n` each end a line (the `\n` of a `\r\n` ends nothing more, so CRLF
+/// makes no empty line). Bytes past [`MAX_LINE`] are discarded and the line reports
+/// [`Assembled::TooLong`] once, at its end, so a flood of garbage costs one error reply, not
+/// one per byte. A receiver that drops bytes calls [`LineAssembler::overrun`]: the line in
+/// progress then ends as [`Overrun`] (from [`LineAssembler::push_checked`]) instead of being
+/// joined with whatever follows the gap.
 #[derive(Clone, Debug)]
 pub struct LineAssembler {
     buf: [u8; MAX_LINE],
     len: usize,
     overflow: bool,
+    overrun: bool,
+    after_cr: bool,
 }
 
 impl Default for LineAssembler {
@@ -257,27 +277,62 @@ impl LineAssembler {
             buf: [0; MAX_LINE],
             len: 0,
             overflow: false,
+            overrun: false,
+            after_cr: false,
         }
     }
 
-    /// Feeds one received byte; returns the finished line when `byte` is `\n`.
+    /// True between lines: nothing of a line received yet, and no overrun marked.
+    pub fn at_line_start(&self) -> bool {
+        self.len == 0 && !self.overflow && !self.overrun
+    }
+
+    /// Marks input lost at this point (a full receive buffer, a UART overrun): the line in
+    /// progress, whatever its bytes so far, ends as [`Overrun`].
+    pub fn overrun(&mut self) {
+        self.overrun = true;
+        // The lost bytes may have held the `\n` of a `\r\n`, or a whole line: the next `\n`
+        // is not known to belong to the last `\r`.
+        self.after_cr = false;
+    }
+
+    /// Feeds one received byte; returns the finished line when `byte` ends one. For sources
+    /// that never call [`LineAssembler::overrun`]; a line marked so is reported as
+    /// [`Assembled::Invalid`] (its content dropped).
     pub fn push(&mut self, byte: u8) -> Option<Assembled<'_>> {
+        self.push_checked(byte)
+            .map(|r| r.unwrap_or(Assembled::Invalid))
+    }
+
+    /// Feeds one received byte; returns the finished line when `byte` ends one, or
+    /// [`Overrun`] if input was lost while it was in progress.
+    pub fn push_checked(&mut self, byte: u8) -> Option<Result<Assembled<'_>, Overrun>> {
         match byte {
-            b'\r' => None,
-            b'\n' => {
+            b'\r' | b'\n' => {
+                let crlf = byte == b'\n' && self.after_cr;
+                self.after_cr = byte == b'\r';
+                if crlf {
+                    return None;
+                }
                 let len = self.len;
                 let overflow = self.overflow;
+                let overrun = self.overrun;
                 self.len = 0;
                 self.overflow = false;
-                if overflow {
-                    return Some(Assembled::TooLong);
+                self.overrun = false;
+                if overrun {
+                    return Some(Err(Overrun));
                 }
-                Some(match core::str::from_utf8(&self.buf[..len]) {
+                if overflow {
+                    return Some(Ok(Assembled::TooLong));
+                }
+                Some(Ok(match core::str::from_utf8(&self.buf[..len]) {
                     Ok(line) => Assembled::Line(line),
                     Err(_) => Assembled::Invalid,
-                })
+                }))
             }
             _ => {
+                self.after_cr = false;
                 if self.len < MAX_LINE {
                     self.buf[self.len] = byte;
                     self.len += 1;
@@ -347,6 +402,7 @@ mod tests {
         assert_eq!(ErrorCode::FaultActive.as_str(), "fault-active");
         assert_eq!(ErrorCode::LineTooLong.as_str(), "line-too-long");
         assert_eq!(ErrorCode::Unsupported.as_str(), "unsupported");
+        assert_eq!(ErrorCode::Overrun.as_str(), "overrun");
         assert_eq!(Mode::Paper.as_str(), "paper");
         assert_eq!(Sensor::Amb.as_str(), "amb");
         assert_eq!(Heater::Tca.as_str(), "tca");
@@ -411,6 +467,7 @@ mod tests {
     fn sim_commands() {
         assert_eq!(sim("SIM STATE"), SimCommand::State);
         assert_eq!(sim("sim clear"), SimCommand::Clear);
+        assert_eq!(sim("SIM STALL"), SimCommand::Stall);
         assert_eq!(
             sim("SIM FAULT thermistor-open"),
             SimCommand::Fault(SimFault::ThermistorOpen, Sensor::Pla)
@@ -436,6 +493,7 @@ mod tests {
             "SIM NOTHING",
             "SIM STATE now",
             "SIM CLEAR all",
+            "SIM STALL now",
             "SIM FAULT",
             "SIM FAULT melted",
             "SIM FAULT heater-open amb",
@@ -500,10 +558,11 @@ mod tests {
             "SIM WAIT",
             "SIM WAIT 1 x",
         ];
-        let errors = lines
-            .iter()
-            .map(|l| parse_line(l).unwrap_err())
-            .chain([ERR_LINE_TOO_LONG, ERR_INVALID_LINE]);
+        let errors = lines.iter().map(|l| parse_line(l).unwrap_err()).chain([
+            ERR_LINE_TOO_LONG,
+            ERR_INVALID_LINE,
+            reply::ERR_OVERRUN,
+        ]);
         for err in errors {
             let text = err.text;
             assert!(
@@ -550,8 +609,93 @@ mod tests {
         let got = assemble(b"STATUS\r\n\nabc\rdef\nno end");
         assert_eq!(
             got,
-            [Ok("STATUS".into()), Ok("".into()), Ok("abcdef".into())]
+            [
+                Ok("STATUS".into()),
+                Ok("".into()),
+                Ok("abc".into()),
+                Ok("def".into())
+            ]
         );
+    }
+
+    #[test]
+    fn assembler_cr_lf_and_crlf_each_end_one_line() {
+        for ending in [&b"\n"[..], b"\r", b"\r\n"] {
+            let mut stream = Vec::new();
+            for cmd in [&b"ABORT"[..], b"STATUS", b"STATS"] {
+                stream.extend_from_slice(cmd);
+                stream.extend_from_slice(ending);
+            }
+            let got = assemble(&stream);
+            assert_eq!(
+                got,
+                [Ok("ABORT".into()), Ok("STATUS".into()), Ok("STATS".into())],
+                "{ending:?}"
+            );
+        }
+        // CRLF makes no empty line, but an empty line in any ending is one.
+        assert_eq!(assemble(b"\r\n\r\n").len(), 2);
+        assert_eq!(assemble(b"\r\r"), [Ok("".into()), Ok("".into())]);
+        assert_eq!(assemble(b"\n\r"), [Ok("".into()), Ok("".into())]);
+        // LF CR: the CR ends a second (empty) line; CR LF LF: the second LF does too.
+        assert_eq!(
+            assemble(b"A\r\n\nB\n"),
+            [Ok("A".into()), Ok("".into()), Ok("B".into())]
+        );
+    }
+
+    /// Feeds `bytes` with [`LineAssembler::overrun`] called before the byte at each index in
+    /// `lost_before`; `Err(None)` marks an overrun line.
+    fn assemble_checked(
+        bytes: &[u8],
+        lost_before: &[usize],
+    ) -> Vec<Result<String, Option<Assembled<'static>>>> {
+        let mut asm = LineAssembler::new();
+        let mut out = Vec::new();
+        for (i, &b) in bytes.iter().enumerate() {
+            if lost_before.contains(&i) {
+                asm.overrun();
+            }
+            match asm.push_checked(b) {
+                None => {}
+                Some(Err(Overrun)) => out.push(Err(None)),
+                Some(Ok(Assembled::Line(l))) => out.push(Ok(String::from(l))),
+                Some(Ok(other)) => out.push(Err(Some(match other {
+                    Assembled::TooLong => Assembled::TooLong,
+                    _ => Assembled::Invalid,
+                }))),
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn assembler_overrun_marks_the_line_in_progress() {
+        // Bytes lost in the middle of STATUS and the start of STATS ("STAT" + "S\n" ... gone):
+        // the joined remains are one overrun line, never a command; the next line is clean.
+        let got = assemble_checked(b"STATS\nABORT\n", &[3]);
+        assert_eq!(got, [Err(None), Ok("ABORT".into())]);
+        // Marked at a line start: the next line may be the tail of a lost one, so it is an error.
+        let got = assemble_checked(b"US\nSTATUS\n", &[0]);
+        assert_eq!(got, [Err(None), Ok("STATUS".into())]);
+        // Overrun wins over too-long, and a lost CRLF's LF is not assumed.
+        let mut long = vec![b'x'; 100];
+        long.extend_from_slice(b"\rOK\r\n");
+        let got = assemble_checked(&long, &[50]);
+        assert_eq!(got, [Err(None), Ok("OK".into())]);
+        let got = assemble_checked(b"A\r\nB\n", &[2]);
+        assert_eq!(got, [Ok("A".into()), Err(None), Ok("B".into())]);
+        // Once per line: the error is reported at the line's end, then cleared.
+        let got = assemble_checked(b"ABC\nDEF\n", &[1, 2]);
+        assert_eq!(got, [Err(None), Ok("DEF".into())]);
+        // `push` (sources that cannot overrun) reports a marked line as invalid, not a line.
+        let mut asm = LineAssembler::new();
+        asm.overrun();
+        let r: Vec<_> = b"STATUS\n"
+            .iter()
+            .filter_map(|&b| asm.push(b).map(|a| a == Assembled::Invalid))
+            .collect();
+        assert_eq!(r, [true]);
     }
 
     #[test]
@@ -578,14 +722,28 @@ mod tests {
         );
     }
 
-    /// What the assembler should report for each `\n`-terminated segment of `bytes`.
+    /// What the assembler should report for each segment of `bytes` ended by `\n`, `\r` or
+    /// `\r\n`.
     fn model(bytes: &[u8]) -> Vec<Result<String, Assembled<'static>>> {
-        let mut segments: Vec<&[u8]> = bytes.split(|&b| b == b'\n').collect();
-        segments.pop(); // the unterminated tail
+        let mut segments: Vec<Vec<u8>> = Vec::new();
+        let mut seg = Vec::new();
+        let mut after_cr = false;
+        for &b in bytes {
+            match b {
+                b'\n' if after_cr => after_cr = false,
+                b'\r' | b'\n' => {
+                    segments.push(core::mem::take(&mut seg));
+                    after_cr = b == b'\r';
+                }
+                _ => {
+                    seg.push(b);
+                    after_cr = false;
+                }
+            }
+        }
         segments
             .into_iter()
-            .map(|seg| {
-                let kept: Vec<u8> = seg.iter().copied().filter(|&b| b != b'\r').collect();
+            .map(|kept| {
                 if kept.len() > MAX_LINE {
                     Err(Assembled::TooLong)
                 } else {

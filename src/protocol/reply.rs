@@ -27,7 +27,7 @@ pub const HELP: [&str; 11] = [
     "VERSION                         firmware and protocol version",
     "HELP                            this list",
     "STATS                           control-loop timing (us) and reset cause; hardware only",
-    "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|WAIT|CLEAR|PANIC  simulated builds only",
+    "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|WAIT|CLEAR|PANIC|STALL  simulated builds only",
     "SIM WAIT <s>                    run <s> of simulated time, then ok; morph-sim only",
 ];
 
@@ -49,11 +49,60 @@ pub const ERR_SIM_PANIC_UNSUPPORTED: ProtoError = ProtoError {
     text: "SIM PANIC exists only in the emulated image",
 };
 
+/// `SIM STALL` on the host simulator.
+pub const ERR_SIM_STALL_UNSUPPORTED: ProtoError = ProtoError {
+    code: ErrorCode::Unsupported,
+    text: "SIM STALL exists only in the emulated image",
+};
+
 /// `SIM WAIT` where the clock cannot be skipped (the emulated image runs at firmware time).
 pub const ERR_SIM_WAIT_UNSUPPORTED: ProtoError = ProtoError {
     code: ErrorCode::Unsupported,
     text: "SIM WAIT needs a simulator that owns its clock (morph-sim); firmware time cannot be skipped",
 };
+
+/// A line that lost bytes on the way in (the receive buffer was full, or the UART overran): its
+/// content may be pieces of two lines, so it was not run.
+pub const ERR_OVERRUN: ProtoError = ProtoError {
+    code: ErrorCode::Overrun,
+    text:
+        "Input was lost while this line arrived (receive overrun); it was not run, send it again.",
+};
+
+/// Replies the serial task dropped because commands arrived faster than the line could carry
+/// their replies (each command was run): `error: busy <n> replies dropped; ...`. Sent once the
+/// output has room again, so a flood costs one notice, and input is never what is lost.
+pub fn replies_dropped(l: &mut OutLine, n: u32) {
+    error(
+        l,
+        ErrorCode::Busy,
+        format_args!(
+            "{n} replies dropped: commands came faster than the serial line could answer; \
+             they were run"
+        ),
+    );
+}
+
+/// Longest boot line, bytes: the [`OutLine`] bound less room for the line ending.
+pub const BOOT_LINE_MAX: usize = 190;
+
+/// Appends the reason of the fatal error that ended the previous run to a [`boot`] line:
+/// ` panic="<reason>"`, the reason truncated so the line stays within [`BOOT_LINE_MAX`], and
+/// any `"`, `\\` or non-printable character shown as `'`/`/`/`?`.
+pub fn boot_panic(l: &mut OutLine, reason: &str) {
+    let _ = l.push_str(" panic=\"");
+    let room = BOOT_LINE_MAX.saturating_sub(l.len() + 1);
+    for c in reason.chars().take(room) {
+        let c = match c {
+            '"' => '\'',
+            '\\' => '/',
+            ' '..='~' => c,
+            _ => '?',
+        };
+        let _ = l.push(c);
+    }
+    let _ = l.push('"');
+}
 
 /// `error: <code> <detail>`.
 pub fn error(l: &mut OutLine, code: ErrorCode, detail: fmt::Arguments<'_>) {
@@ -448,6 +497,32 @@ mod tests {
         let mut l = OutLine::new();
         f(&mut l);
         l
+    }
+
+    #[test]
+    fn boot_line_with_a_panic_reason_stays_in_bounds() {
+        let l = line(|l| {
+            boot(l, ResetCause::Software, "nucleo-f401re", "0.1.0");
+            boot_panic(l, "panicked at src/x.rs:1:2: \"quoted\" \\ é\n");
+        });
+        assert_eq!(
+            l.as_str(),
+            "event: boot reset=software board=nucleo-f401re version=0.1.0 \
+             panic=\"panicked at src/x.rs:1:2: 'quoted' / ??\""
+        );
+        let long = "x".repeat(500);
+        let l = line(|l| {
+            boot(l, ResetCause::Watchdog, "b-l475e-iot01a-emulated", "0.1.0");
+            boot_panic(l, &long);
+        });
+        assert_eq!(l.len(), BOOT_LINE_MAX);
+        assert!(l.ends_with("xx\""), "{l}");
+        let l = line(|l| replies_dropped(l, 37));
+        assert!(l.starts_with("error: busy 37 replies dropped"), "{l}");
+        assert_eq!(
+            format_error(&ERR_OVERRUN).split(' ').nth(1),
+            Some("overrun")
+        );
     }
 
     #[test]

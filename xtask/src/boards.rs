@@ -115,11 +115,36 @@ pub fn image_sizes(elf: &[u8]) -> Result<(u64, u64), String> {
 }
 
 /// The initial stack pointer the image was linked with (cortex-m-rt's `_stack_start`): the
-/// end of the RAM region of the `memory.x` it was linked against.
+/// end of the RAM region of the `memory.x` it was linked against, or with flip-link the top of
+/// the stack at the bottom of that region.
 pub fn stack_start(elf: &[u8]) -> Option<u64> {
     let file = object::File::parse(elf).ok()?;
     let sym = file.symbols().find(|s| s.name() == Ok("_stack_start"))?;
     Some(sym.address())
+}
+
+/// True if the image's RAM layout is that of the RAM region `(origin, length)`: linked by
+/// flip-link (`.cargo/config.toml`), the stack sits at the bottom of the region (`_stack_end`
+/// at its origin, `_stack_start` above it) and the statics above the stack end at the region's
+/// end (cortex-m-rt's `__sheap`, within its 8-byte alignment); linked plainly, `_stack_start` is
+/// the region's end.
+fn linked_against(elf: &[u8], ram: Option<(u64, u64)>) -> bool {
+    let Some((origin, len)) = ram else {
+        return false;
+    };
+    let end = origin + len;
+    let sym = |name: &str| {
+        let file = object::File::parse(elf).ok()?;
+        let s = file.symbols().find(|s| s.name() == Ok(name))?;
+        Some(s.address())
+    };
+    match (stack_start(elf), sym("_stack_end"), sym("__sheap")) {
+        (Some(start), _, _) if start == end => true,
+        (Some(start), Some(bottom), Some(heap)) => {
+            bottom == origin && origin < start && start < heap && heap <= end && end - heap < 8
+        }
+        _ => false,
+    }
 }
 
 fn build(ws: &Workspace, board: &str) -> Result<PathBuf, String> {
@@ -152,8 +177,8 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
         };
         // The linker takes `memory.x` from the package directory before the search path; make
         // sure this image really was linked against its board's layout.
-        let ram_end = region_origin(&mem, "RAM").zip(region_length(&mem, "RAM"));
-        if stack_start(&elf) != ram_end.map(|(o, l)| o + l) {
+        let ram = region_origin(&mem, "RAM").zip(region_length(&mem, "RAM"));
+        if !linked_against(&elf, ram) {
             return Err(format!(
                 "{board}: image not linked against {} (stack start {:x?})",
                 mem_path.display(),

@@ -8,15 +8,16 @@
 //! | ADC1 thermistors and supply | [`Sensors`]: the firmware's [`SimulatedLink`] | QEMU's ADC never becomes ready |
 //! | TIM3 PWM heaters | [`Heaters`]: duties into the [`SimulatedLink`] | no timers |
 //! | buffered USART1 (embassy) | [`usart`]: register-level USART1 with an RX interrupt | QEMU's USART needs 32-bit accesses and never sets IDLE |
-//! | IWDG | [`Iwdg`]: the same 500 ms rule checked in the SysTick interrupt | no IWDG model |
-//! | panic/HardFault → reset | heaters off, message on the semihosting console, QEMU exits 1 | a test must see it |
+//! | IWDG | [`Iwdg`]: the same 500 ms rule checked in the SysTick interrupt, then a system reset | no IWDG model |
+//! | panic/HardFault → reset | heaters off, message on the semihosting console, then the same reset | a test must see it |
+//! | `RCC_CSR` reset flags | the firmware's reset record (`.uninit` RAM) names a software or watchdog reset | QEMU's RCC sets no reset flags |
 //!
 //! The simulated link is the firmware's (a plant from `morphlink-plant` on the core's simulated
 //! board, `morphlink::bench`): the very code `morph-sim` and the host tests run. This module
 //! only calls it through [`SimulatedLink`], at firmware time, so a whole morph runs
 //! [`SPEEDUP`] times faster than real time.
 
-use crate::{AnalogInputs, HeaterOutputs, ResetFlags, Watchdog, INPUTS};
+use crate::{AnalogInputs, FatalKind, HeaterOutputs, ResetFlags, Watchdog, INPUTS};
 use core::cell::Cell;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use critical_section::Mutex;
@@ -95,7 +96,7 @@ static WDG_ARMED: AtomicBool = AtomicBool::new(false);
 static WDG_LAST_PET_MS: AtomicU32 = AtomicU32::new(0);
 
 /// Watchdog with the hardware IWDG's rule: once started, a control task that stops feeding it
-/// for [`WATCHDOG_MS`] ends the run (heaters off, QEMU exits with failure).
+/// for [`WATCHDOG_MS`] resets the machine (heaters off; the next boot says `reset=watchdog`).
 pub struct Iwdg(());
 
 impl Watchdog for Iwdg {
@@ -114,9 +115,13 @@ fn watchdog_check(now_ms: u64) {
     let since_pet = (now_ms as u32).wrapping_sub(WDG_LAST_PET_MS.load(Ordering::Relaxed));
     if WDG_ARMED.load(Ordering::Relaxed) && u64::from(since_pet) > WATCHDOG_MS {
         heater_pins_low();
-        fatal(format_args!(
-            "watchdog: the control task stopped feeding the watchdog; heaters off"
-        ));
+        end(
+            FatalKind::Watchdog,
+            format_args!(
+                "watchdog: the control task stopped feeding the watchdog for {} ms; heaters off",
+                since_pet
+            ),
+        );
     }
 }
 
@@ -127,14 +132,17 @@ pub fn cycles() -> u32 {
     (embassy_time::Instant::now().as_micros() * u64::from(CPU_HZ / 1_000_000)) as u32
 }
 
-/// Prints `reason` on the semihosting console and ends QEMU with exit code 1 (heaters are
-/// already off).
+/// Ends a fatal error (heaters already off): prints `reason` on the semihosting console,
+/// records it for the next boot and resets the machine, as the hardware boards do. QEMU keeps
+/// RAM over the reset (it reloads only the image), so the record survives.
 pub fn fatal(reason: core::fmt::Arguments) -> ! {
+    end(FatalKind::Fault, reason)
+}
+
+fn end(kind: FatalKind, reason: core::fmt::Arguments) -> ! {
     cortex_m_semihosting::hprintln!("{}", reason);
-    cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);
-    loop {
-        cortex_m::asm::wfi();
-    }
+    crate::reset_record::record(kind, reason);
+    cortex_m::peripheral::SCB::sys_reset()
 }
 
 /// USART1 transmit half.
@@ -148,7 +156,8 @@ pub type Parts = crate::Parts<Sensors, Heaters, Iwdg, SerialTx, SerialRx>;
 /// Sets up the time source and USART1 around the firmware's simulated `link`.
 pub fn init(link: &'static dyn SimulatedLink) -> Parts {
     let csr = pac::RCC.csr().read();
-    let reset_flags = ResetFlags {
+    let last_fatal = crate::reset_record::take();
+    let mut reset_flags = ResetFlags {
         watchdog: csr.iwdgrstf(),
         window_watchdog: csr.wwdgrstf(),
         software: csr.sftrstf(),
@@ -156,6 +165,12 @@ pub fn init(link: &'static dyn SimulatedLink) -> Parts {
         power_on: csr.borrstf(),
         pin: csr.pinrstf(),
     };
+    // QEMU sets no reset flags; the record says which reset the firmware asked for.
+    match last_fatal.map(|f| f.kind) {
+        Some(FatalKind::Watchdog) => reset_flags.watchdog = true,
+        Some(FatalKind::Fault) => reset_flags.software = true,
+        None => {}
+    }
     critical_section::with(|cs| LINK.borrow(cs).set(Some(link)));
     heater_pins_low();
     time_driver::start(CPU_HZ, SPEEDUP, watchdog_check);
@@ -167,5 +182,6 @@ pub fn init(link: &'static dyn SimulatedLink) -> Parts {
         tx,
         rx,
         reset_flags,
+        last_fatal,
     }
 }
