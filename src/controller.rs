@@ -246,7 +246,7 @@ impl Controller {
             self.outputs = Outputs::default();
             return self.outputs;
         }
-        let m = match self.sup.check(now_ms, &frame, self.powers) {
+        let m = match self.sup.check(now_ms, &frame, self.powers, self.seq.phase()) {
             Ok(m) => m,
             Err(f) => {
                 self.trip(f);
