@@ -24,6 +24,8 @@ pub enum FaultCode {
     OverTemperature,
     /// A heater was commanded but its temperature did not rise.
     HeaterNotHeating,
+    /// A heater's sensor kept rising with both heaters commanded off (a stuck MOSFET).
+    HeatingWhileOff,
     /// No fresh sensor frame arrived in time.
     StaleSensor,
     /// The heater supply is outside its allowed range.
@@ -41,6 +43,7 @@ impl FaultCode {
             FaultCode::UnderTemperature => "under-temperature",
             FaultCode::OverTemperature => "over-temperature",
             FaultCode::HeaterNotHeating => "heater-not-heating",
+            FaultCode::HeatingWhileOff => "heating-while-off",
             FaultCode::StaleSensor => "stale-sensor",
             FaultCode::SupplyOutOfRange => "supply-out-of-range",
             FaultCode::PhaseTimeout => "phase-timeout",
@@ -95,6 +98,7 @@ impl Fault {
                 "PLA_LIMITS, TCA_LIMITS, AMB_LIMITS"
             }
             (FaultCode::HeaterNotHeating, _) => "HEATING_MIN_GAIN_K, HEATING_MAX_FALL_K",
+            (FaultCode::HeatingWhileOff, _) => "OFF_GRACE_S, OFF_MAX_RISE_K",
             (FaultCode::StaleSensor, _) => "STALE_AFTER_MS",
             (FaultCode::SupplyOutOfRange, _) => "SUPPLY_MIN_V, SUPPLY_MAX_V",
             (FaultCode::PhaseTimeout, Subject::Phase(phase)) => match phase {
@@ -192,6 +196,17 @@ pub const HEATING_BAND_MIN_OWN_SHARE: f32 = 2.0;
 pub const HEATING_POWER_STEP_FRACTION: f32 = 0.1;
 // A dead heater must trip within a soften phase, before it can time out.
 const _: () = assert!(HEATING_WINDOW_S < 20.0);
+/// Heating-while-off: how long both heaters must have been commanded off before a heater's
+/// sensor is watched, s. The heat already in the link keeps a lagging bead rising for a few
+/// seconds after turn-off (the hifi PLA bead, 10 s behind its rod, for about 3 s after the 4 W
+/// soften); 15 s covers it with margin.
+pub const OFF_GRACE_S: f32 = 15.0;
+/// Heating-while-off: a sensor that rises this far above its lowest reading (relative to the
+/// ambient sensor, so a warming bath does not count) while both heaters are off trips, K. A
+/// cooling link only falls; 3 K is 60 times the sensor noise, and a stuck PLA heater at 10 V
+/// (3.3 W) gains it within a few seconds, long before the 130 °C limit.
+pub const OFF_MAX_RISE_K: f32 = 3.0;
+
 /// One sensor frame as the supervisor sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frame {
@@ -225,6 +240,20 @@ struct HeatWatch {
     phase: Option<Phase>,
 }
 
+/// Every fault one frame can show at once: one per sensor, the supply, the two heater checks,
+/// with room to spare.
+pub type Faults = heapless::Vec<Fault, 8>;
+
+/// One heater's heating-while-off watch: since when both heaters are off, and the sensor's
+/// lowest rise above ambient since the grace ended.
+#[derive(Clone, Copy, Debug, Default)]
+struct OffWatch {
+    off_since_ms: Option<u64>,
+    min_rise_k: Option<f32>,
+    /// The condition holds now (RESET is refused while it does).
+    heating: bool,
+}
+
 /// The supervisor's state: consecutive-sample counters, last good temperatures and the
 /// heater watches.
 #[derive(Clone, Copy, Debug)]
@@ -232,7 +261,9 @@ pub struct Supervisor {
     range: [RangeCheck; 3],
     limit_count: [u8; 3],
     last_c: [f32; 3],
+    live_c: [f32; 3],
     watch: [HeatWatch; 2],
+    off: [OffWatch; 2],
 }
 
 impl Default for Supervisor {
@@ -248,7 +279,9 @@ impl Supervisor {
             range: [RangeCheck::new(RangeCheck::DEFAULT_CONSECUTIVE); 3],
             limit_count: [0; 3],
             last_c: [f32::NAN; 3],
+            live_c: [f32::NAN; 3],
             watch: [HeatWatch::default(); 2],
+            off: [OffWatch::default(); 2],
         }
     }
 
@@ -259,7 +292,7 @@ impl Supervisor {
 
     /// Checks one frame with the powers commanded in the previous tick, in `phase` (the phase
     /// they were commanded in: a new phase re-arms the heater watches). Returns the
-    /// temperatures to control from, or the fault to latch.
+    /// temperatures to control from, or the first fault found (see [`Supervisor::check_all`]).
     pub fn check(
         &mut self,
         now_ms: u64,
@@ -267,24 +300,56 @@ impl Supervisor {
         commanded: Powers,
         phase: Phase,
     ) -> Result<Measurements, Fault> {
-        fresh(now_ms, frame)?;
+        let mut faults = Faults::new();
+        let m = self.check_all(now_ms, frame, commanded, phase, &mut faults);
+        match faults.first() {
+            Some(f) => Err(*f),
+            None => Ok(m),
+        }
+    }
+
+    /// Runs every check on one frame, whatever the phase (a latched fault included: the
+    /// controller calls it every tick), and collects every fault present into `faults`, in
+    /// check order. Returns the last good temperatures. Every sensor is read even when an
+    /// earlier one is faulty, so [`Supervisor::live`] stays live.
+    pub fn check_all(
+        &mut self,
+        now_ms: u64,
+        frame: &Frame,
+        commanded: Powers,
+        phase: Phase,
+        faults: &mut Faults,
+    ) -> Measurements {
+        let mut found = |f: Fault| {
+            let _ = faults.push(f);
+        };
+        if let Err(f) = fresh(now_ms, frame) {
+            // An old frame says nothing about now: nothing else is judged from it.
+            found(f);
+            return self.measurements();
+        }
         for sensor in Sensor::ALL {
             let i = sensor.index();
             let reading = frame.readings[i];
+            self.live_c[i] = match reading {
+                Reading::Ok(t) => t,
+                _ => f32::NAN,
+            };
             // Open/short: latched once the ADC range check has seen it often enough in a row.
             if let Some(r) = self.range[i].update(reading) {
-                return Err(reading_fault(sensor, r).unwrap_or(Fault {
+                found(reading_fault(sensor, r).unwrap_or(Fault {
                     code: FaultCode::ThermistorOpen,
                     subject: Subject::Sensor(sensor),
                     value: f32::NAN,
                 }));
+                continue;
             }
             if let Reading::Ok(t) = reading {
                 match reading_fault(sensor, reading) {
                     Some(f) => {
                         self.limit_count[i] = self.limit_count[i].saturating_add(1);
                         if self.limit_count[i] >= LIMIT_CONSECUTIVE {
-                            return Err(f);
+                            found(f);
                         }
                     }
                     None => {
@@ -294,9 +359,22 @@ impl Supervisor {
                 }
             }
         }
-        supply_ok(frame)?;
-        self.check_heating(now_ms, commanded, phase)?;
-        Ok(self.measurements())
+        if let Err(f) = supply_ok(frame) {
+            found(f);
+        }
+        if let Err(f) = self.check_heating(now_ms, commanded, phase) {
+            found(f);
+        }
+        if let Err(f) = self.check_off(now_ms, commanded) {
+            found(f);
+        }
+        self.measurements()
+    }
+
+    /// This frame's temperatures as read, °C: NaN for a sensor that reads open or short (what
+    /// STATUS shows; [`Supervisor::measurements`] keeps the last good ones for control).
+    pub fn live(&self) -> Measurements {
+        Measurements::from_array(self.live_c)
     }
 
     /// Heater-not-heating, Klipper's `verify_heater` on this link's model. Each heater commanded
@@ -366,7 +444,9 @@ impl Supervisor {
             // the model cannot reach the floor either.
             if in_band || above_steady || own_rise_k < HEATING_BAND_MIN_OWN_SHARE * cross_rise_k {
                 w.below_since_ms = None;
-            } else if w.below_since_ms.is_none() || own_w > w.last_w * (1.0 + HEATING_POWER_STEP_FRACTION) {
+            } else if w.below_since_ms.is_none()
+                || own_w > w.last_w * (1.0 + HEATING_POWER_STEP_FRACTION)
+            {
                 w.below_since_ms = Some(now_ms);
             }
             w.last_w = own_w;
@@ -397,6 +477,39 @@ impl Supervisor {
         Ok(())
     }
 
+    /// Heating-while-off: once both heaters have been commanded off for [`OFF_GRACE_S`], a
+    /// heater's sensor that rises [`OFF_MAX_RISE_K`] above its lowest reading (above ambient)
+    /// trips: the heater is on although nothing commands it (a stuck MOSFET).
+    fn check_off(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
+        let m = self.measurements();
+        let both_off = !(cmd.pla_w > 0.0) && !(cmd.tca_w > 0.0);
+        for heater in Heater::ALL {
+            let w = &mut self.off[heater.index()];
+            let rise_k = m.of(heater.sensor()) - m.t_amb_c;
+            if !both_off || !rise_k.is_finite() {
+                *w = OffWatch::default();
+                continue;
+            }
+            let since = *w.off_since_ms.get_or_insert(now_ms);
+            if (now_ms.saturating_sub(since) as f32) / 1000.0 < OFF_GRACE_S {
+                continue;
+            }
+            let min_k = w.min_rise_k.map_or(rise_k, |k| k.min(rise_k));
+            w.min_rise_k = Some(min_k);
+            // Measured from the lowest reading, or from ambient if it was below it (a link
+            // warming up to a warmer bath is not heating).
+            w.heating = rise_k - min_k.max(0.0) > OFF_MAX_RISE_K;
+            if w.heating {
+                return Err(Fault {
+                    code: FaultCode::HeatingWhileOff,
+                    subject: Subject::Heater(heater),
+                    value: rise_k - min_k.max(0.0),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// Whether a latched fault's condition has cleared on this frame (RESET is allowed), or
     /// the fault that is still present. Sensor checks need a good reading now, not four.
     pub fn condition_clear(&self, now_ms: u64, frame: &Frame) -> Result<(), Fault> {
@@ -406,14 +519,25 @@ impl Supervisor {
                 return Err(f);
             }
         }
+        for heater in Heater::ALL {
+            if self.off[heater.index()].heating {
+                return Err(Fault {
+                    code: FaultCode::HeatingWhileOff,
+                    subject: Subject::Heater(heater),
+                    value: f32::NAN,
+                });
+            }
+        }
         supply_ok(frame)
     }
 
-    /// Forgets counters and heater watches (after RESET), keeping last temperatures.
+    /// Forgets counters and heater watches (after RESET), keeping last temperatures (the
+    /// heating-while-off watch too: RESET is only allowed once it no longer sees a rise).
     pub fn rearm(&mut self) {
         self.range = [RangeCheck::new(RangeCheck::DEFAULT_CONSECUTIVE); 3];
         self.limit_count = [0; 3];
         self.watch = [HeatWatch::default(); 2];
+        self.off = [OffWatch::default(); 2];
     }
 }
 
@@ -483,7 +607,8 @@ mod tests {
             let ms = tick * 100;
             let warming = 22.0 + 30.0 * (1.0 - libm::expf(-(ms as f32) / 5000.0));
             assert!(
-                good.check(ms, &frame(ms, 22.0, warming), on, Phase::Bend).is_ok(),
+                good.check(ms, &frame(ms, 22.0, warming), on, Phase::Bend)
+                    .is_ok(),
                 "good heater tripped at {ms} ms"
             );
             let r = dead.check(ms, &frame(ms, 22.0, 22.5), on, Phase::Bend);
@@ -506,14 +631,21 @@ mod tests {
         let mut s = Supervisor::new();
         let off = Powers::default();
         for i in 0..(LIMIT_CONSECUTIVE as u64 - 1) {
-            assert!(s.check(i * 100, &frame(i * 100, 140.0, 30.0), off, Phase::Idle).is_ok());
+            assert!(s
+                .check(i * 100, &frame(i * 100, 140.0, 30.0), off, Phase::Idle)
+                .is_ok());
         }
-        let f = s.check(400, &frame(400, 140.0, 30.0), off, Phase::Idle).unwrap_err();
+        let f = s
+            .check(400, &frame(400, 140.0, 30.0), off, Phase::Idle)
+            .unwrap_err();
         assert_eq!(f.code, FaultCode::OverTemperature);
         let mut nan = frame(0, 30.0, 30.0);
         nan.supply_v = f32::NAN;
         assert_eq!(
-            Supervisor::new().check(0, &nan, off, Phase::Idle).unwrap_err().code,
+            Supervisor::new()
+                .check(0, &nan, off, Phase::Idle)
+                .unwrap_err()
+                .code,
             FaultCode::SupplyOutOfRange
         );
         assert!(Supervisor::new().condition_clear(0, &nan).is_err());

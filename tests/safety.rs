@@ -127,6 +127,27 @@ fn checked(link: Link, test: &str, cases: usize) {
     assert!(cases > 0, "{test} on {link:?} checked nothing");
 }
 
+/// [`expect_alarm`] for an alarm with any of `codes`.
+fn expect_alarm_of(b: &mut Bench, codes: &[&str], max_s: f64) -> String {
+    let end = b.rig.now_ms() + (max_s * 1000.0) as u64;
+    while b.rig.now_ms() < end {
+        let (out, ev) = b.tick();
+        if let Some(a) = ev.iter().find(|l| classify(l) == LineKind::Alarm) {
+            assert!(
+                codes.iter().any(|c| a.starts_with(&format!("alarm: {c} "))),
+                "expected one of {codes:?}, got {a}"
+            );
+            assert_eq!(
+                out, ZERO,
+                "the tripping tick must turn both heaters off: {a}"
+            );
+            assert_eq!(b.phase(), Phase::Fault);
+            return a.clone();
+        }
+    }
+    panic!("no {codes:?} alarm within {max_s} s; lines: {:?}", b.lines);
+}
+
 /// Ticks until an alarm appears (within `max_s`); asserts the tick that raised it output zero
 /// duties and returns the alarm line.
 fn expect_alarm(b: &mut Bench, code: &str, max_s: f64) -> String {
@@ -291,7 +312,10 @@ fn a_dead_heater_trips_heater_not_heating_wherever_it_is_on(link: Link) {
             // bead keeps gaining from the PLA's heat (at 2–3 W) that long: neither the 2 K gain
             // nor the band timeout (`HEATING_BAND_TIMEOUT_S`) can tell it yet. The next morph
             // trips it (the next test, TCA dead in bend).
-            if link == Link::Hifi && matches!(mode, "auto" | "closed") && (heater, phase) == ("tca", Phase::Bend) {
+            if link == Link::Hifi
+                && matches!(mode, "auto" | "closed")
+                && (heater, phase) == ("tca", Phase::Bend)
+            {
                 continue;
             }
             {
@@ -335,12 +359,12 @@ fn a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph(lin
             &[]
         };
         // A dead TCA in closed's (auto's) short hifi bend: see the previous test.
-        let hifi_bend: &[(Phase, &str)] =
-            if link == Link::Hifi && matches!(mode, "auto" | "closed") {
-                &[(Phase::Bend, "tca")]
-            } else {
-                &[]
-            };
+        let hifi_bend: &[(Phase, &str)] = if link == Link::Hifi && matches!(mode, "auto" | "closed")
+        {
+            &[(Phase::Bend, "tca")]
+        } else {
+            &[]
+        };
         for (phase, heater) in [
             (Phase::Idle, "pla"),
             (Phase::Release, "pla"),
@@ -385,7 +409,9 @@ fn a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph(lin
             if b.phase() == Phase::Fault {
                 let a = b.alarms_since(n);
                 assert!(
-                    a.len() == 1 && a[0].starts_with("alarm: heater-not-heating ") && a[0].contains(heater),
+                    a.len() == 1
+                        && a[0].starts_with("alarm: heater-not-heating ")
+                        && a[0].contains(heater),
                     "{mode} {phase:?} {heater}: {a:?}"
                 );
                 continue;
@@ -416,9 +442,29 @@ fn a_stuck_heater_trips_over_temperature_in_every_phase(link: Link) {
                 };
                 cases += 1;
                 assert!(b.send(&format!("SIM FAULT heater-stuck {heater}"))[0].starts_with("ok"));
-                let a = expect_alarm(&mut b, "over-temperature", 120.0);
-                assert!(a.contains(heater), "{a}");
-                assert_latched(&mut b, "over-temperature");
+                // With both heaters commanded off for a while (idle), heating-while-off sees the
+                // stuck heater first; the over-temperature still alarms when the limit is
+                // crossed (the supervisor watches a latched link too).
+                let n = b.lines.len();
+                let first =
+                    expect_alarm_of(&mut b, &["over-temperature", "heating-while-off"], 120.0);
+                assert!(first.contains(heater), "{first}");
+                let code = if first.starts_with("alarm: heating-while-off") {
+                    assert!(
+                        b.run_until(120.0, |b| b.alarms_since(n).len() >= 2),
+                        "{phase:?} {heater}: {:?}",
+                        &b.lines[n..]
+                    );
+                    let a = b.alarms_since(n);
+                    assert!(
+                        a[1].starts_with("alarm: over-temperature ") && a[1].contains(heater),
+                        "{a:?}"
+                    );
+                    "heating-while-off"
+                } else {
+                    "over-temperature"
+                };
+                assert_latched(&mut b, code);
                 // Still hot: refused. After the MOSFET is replaced (SIM CLEAR) and the link cooled: ok.
                 assert_reset_rules(&mut b, &["SIM CLEAR"], 120.0);
             }
@@ -546,7 +592,99 @@ fn a_stalled_controller_cannot_leave_a_heater_on(link: Link) {
     checked(link, "a_stalled_controller_cannot_leave_a_heater_on", cases);
 }
 
+fn a_stuck_heater_below_the_limit_trips_heating_while_off(link: Link) {
+    // 10 V: the PLA wrap stuck on gives 3.3 W and would settle under the 130 °C limit, so
+    // over-temperature never trips; the heater is on with both commanded off.
+    let mut b = Bench::on(link);
+    assert!(b.send("SIM SUPPLY 10")[0].starts_with("ok"));
+    b.run_for(20.0);
+    assert!(b.alarms_since(0).is_empty(), "{:?}", b.lines);
+    assert!(b.send("SIM FAULT heater-stuck pla")[0].starts_with("ok"));
+    let t0 = b.rig.now_ms();
+    let a = expect_alarm(&mut b, "heating-while-off", 60.0);
+    assert!(a.contains("pla"), "{a}");
+    println!(
+        "{link:?}: stuck PLA heater at 10 V tripped after {:.1} s, at {:.1} °C true",
+        (b.rig.now_ms() - t0) as f64 / 1000.0,
+        b.rig.plant().truth().pla_c
+    );
+    assert!(b.rig.plant().truth().pla_c < 100.0);
+    assert_latched(&mut b, "heating-while-off");
+}
+
+fn cool_downs_after_a_morph_or_an_abort_raise_no_alarm(link: Link) {
+    let mut cases = 0;
+    for mode in ["auto", "paper", "gated"] {
+        // A whole morph, then 90 s of cooling with both heaters off.
+        let mut b = Bench::on(link);
+        b.morph(38.0, mode);
+        b.run_for(90.0);
+        assert!(b.alarms_since(0).is_empty(), "{mode}: {:?}", b.lines);
+        cases += 1;
+        // ABORT with a heater hot (its bead still rising for a moment), then 60 s.
+        for phase in [Phase::Soften, Phase::Bend, Phase::Lock] {
+            let Some(mut b) = bench_in(link, phase, 38.0, mode, 60.0) else {
+                continue;
+            };
+            cases += 1;
+            let n = b.lines.len();
+            assert_eq!(b.send("ABORT"), ["ok"]);
+            b.run_for(60.0);
+            assert!(
+                b.alarms_since(n).is_empty(),
+                "{mode} {phase:?}: {:?}",
+                &b.lines[n..]
+            );
+        }
+    }
+    checked(
+        link,
+        "cool_downs_after_a_morph_or_an_abort_raise_no_alarm",
+        cases,
+    );
+}
+
+fn a_latched_link_stays_supervised(link: Link) {
+    let mut b = Bench::on(link);
+    b.run_for(2.0);
+    assert!(b.send("SIM SUPPLY 20")[0].starts_with("ok"));
+    expect_alarm(&mut b, "supply-out-of-range", 0.3);
+    // STATUS shows live values, not the trip's: the bath warms and the readings follow.
+    assert!(b.send("SIM AMBIENT 30")[0].starts_with("ok"));
+    b.run_for(5.0);
+    let s = b.send("STATUS");
+    let amb: f32 = Bench::field(&s[0], "t_amb_c").unwrap().parse().unwrap();
+    assert!(amb > 25.0, "{s:?}");
+    // The supply sense saturates at 18.8 V: still well above the limit.
+    let supply: f32 = Bench::field(&s[0], "supply_v").unwrap().parse().unwrap();
+    assert!(supply > 15.0, "{s:?}");
+    // A second fault alarms too, once, however long it stays; the first stays latched.
+    let n = b.lines.len();
+    assert!(b.send("SIM FAULT thermistor-open tca")[0].starts_with("ok"));
+    b.run_for(5.0);
+    let a = b.alarms_since(n);
+    assert_eq!(a.len(), 1, "{a:?}");
+    assert!(a[0].starts_with("alarm: thermistor-open tca "), "{a:?}");
+    assert_latched(&mut b, "supply-out-of-range");
+    assert_eq!(b.alarms_since(n).len(), 1);
+    // RESET rules unchanged: refused while either holds, cleared once both have gone.
+    assert!(b.send("SIM SUPPLY 12")[0].starts_with("ok"));
+    b.tick();
+    assert!(b.send("RESET")[0].starts_with("error: fault-active thermistor-open"));
+    assert!(b.send("SIM CLEAR")[0].starts_with("ok"));
+    b.tick();
+    assert!(b.send("RESET")[0].starts_with("ok cleared=supply-out-of-range"));
+    // After RESET a fault alarms afresh.
+    let n = b.lines.len();
+    assert!(b.send("SIM SUPPLY 20")[0].starts_with("ok"));
+    expect_alarm(&mut b, "supply-out-of-range", 0.3);
+    assert_eq!(b.alarms_since(n).len(), 1);
+}
+
 on_both_links!(
+    a_latched_link_stays_supervised,
+    a_stuck_heater_below_the_limit_trips_heating_while_off,
+    cool_downs_after_a_morph_or_an_abort_raise_no_alarm,
     thermistor_open_and_short_trip_in_every_phase,
     supply_out_of_range_trips_in_every_phase,
     stale_sensor_frames_trip_in_every_phase,
