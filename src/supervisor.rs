@@ -145,7 +145,9 @@ pub const SUPPLY_MAX_V: f32 = 15.0;
 /// A sensor frame older than this counts as stale, ms. Klipper allows 7 s for hot ends with
 /// time constants of minutes; the TCA's fast thermal part is about 1 s, so 1 s (10 ticks).
 pub const STALE_AFTER_MS: u64 = 1000;
-/// Consecutive out-of-limit readings before a temperature trip (Klipper: 4 samples).
+/// Out-of-limit readings before a temperature trip (Klipper: 4 samples), counted by a leaky
+/// counter: +1 for a reading out of limits, −1 for one within, so one noisy reading never trips
+/// but an intermittent excursion (every other reading) does.
 pub const LIMIT_CONSECUTIVE: u8 = 4;
 // The same 4-sample rule for open/short (thermistor::RangeCheck) and for the limits.
 const _: () = assert!(LIMIT_CONSECUTIVE == RangeCheck::DEFAULT_CONSECUTIVE);
@@ -345,15 +347,16 @@ impl Supervisor {
                 continue;
             }
             if let Reading::Ok(t) = reading {
+                // A leaky count: +1 out of limits, −1 within (intermittent faults add up).
                 match reading_fault(sensor, reading) {
                     Some(f) => {
-                        self.limit_count[i] = self.limit_count[i].saturating_add(1);
+                        self.limit_count[i] = (self.limit_count[i] + 1).min(LIMIT_CONSECUTIVE);
                         if self.limit_count[i] >= LIMIT_CONSECUTIVE {
                             found(f);
                         }
                     }
                     None => {
-                        self.limit_count[i] = 0;
+                        self.limit_count[i] = self.limit_count[i].saturating_sub(1);
                         self.last_c[i] = t;
                     }
                 }
@@ -624,6 +627,27 @@ mod tests {
             }
         }
         panic!("dead heater never tripped");
+    }
+
+    #[test]
+    fn an_intermittent_excursion_adds_up_and_a_rare_one_never_does() {
+        let off = Powers::default();
+        // Out of limits two readings in three: the leaky count reaches 4.
+        let mut s = Supervisor::new();
+        let tripped = (0..30u64).any(|i| {
+            let t = if i % 3 == 2 { 30.0 } else { 140.0 };
+            s.check(i * 100, &frame(i * 100, t, 30.0), off, Phase::Idle)
+                .is_err()
+        });
+        assert!(tripped);
+        // Every other reading: the count never climbs past 1.
+        let mut s = Supervisor::new();
+        for i in 0..100u64 {
+            let t = if i % 2 == 0 { 140.0 } else { 30.0 };
+            assert!(s
+                .check(i * 100, &frame(i * 100, t, 30.0), off, Phase::Idle)
+                .is_ok());
+        }
     }
 
     #[test]
