@@ -9,7 +9,7 @@ use crate::heater::HeaterConfig;
 use crate::protocol::{self, reply, Command, Mode, OutLine, SimCommand};
 use crate::sequencer::{SeqEvent, Sequencer};
 use crate::stats::LoopTiming;
-use crate::supervisor::{Fault, Frame, Supervisor};
+use crate::supervisor::{Fault, FaultCode, Faults, Frame, Subject, Supervisor};
 use crate::table;
 use crate::thermistor::ThermistorConfig;
 use crate::vocab::{Phase, Powers};
@@ -143,7 +143,14 @@ pub struct Controller {
     supply_v: f32,
     events: Deque<Event, EVENT_QUEUE>,
     timing: Option<LoopTiming>,
+    /// The faults alarmed since the last RESET (code and subject): each alarms once, however
+    /// long it stays present.
+    alarmed: heapless::Vec<(FaultCode, Subject), ALARMED_MAX>,
 }
+
+/// How many distinct faults are remembered as alarmed until RESET; beyond it the oldest is
+/// forgotten (and would alarm again).
+pub const ALARMED_MAX: usize = 8;
 
 /// Firmware version reported by VERSION (defined in [`crate::vocab`]; here for the firmware).
 pub use crate::vocab::VERSION;
@@ -161,6 +168,7 @@ impl Controller {
             supply_v: f32::NAN,
             events: Deque::new(),
             timing: None,
+            alarmed: heapless::Vec::new(),
         }
     }
 
@@ -233,10 +241,25 @@ impl Controller {
         self.seq.latch(fault);
         self.powers = Powers::default();
         self.outputs = Outputs::default();
+        self.alarm_once(fault);
+    }
+
+    /// Raises `fault`'s alarm unless the same code and subject has alarmed since RESET.
+    fn alarm_once(&mut self, fault: Fault) {
+        let key = (fault.code, fault.subject);
+        if self.alarmed.contains(&key) {
+            return;
+        }
+        if self.alarmed.is_full() {
+            self.alarmed.remove(0);
+        }
+        let _ = self.alarmed.push(key);
         self.push(Event::Alarm(fault));
     }
 
     /// One control tick at `now_ms` with this tick's inputs; returns the duties to apply.
+    /// The supervisor runs every tick, a latched fault included: STATUS stays live and a new
+    /// fault alarms too (the first one found stays latched).
     pub fn step(&mut self, now_ms: u64, inputs: &Inputs) -> Outputs {
         let frame = self.frame_of(inputs);
         self.frame = Some(frame);
@@ -244,15 +267,21 @@ impl Controller {
         if self.fault().is_some() {
             self.powers = Powers::default();
             self.outputs = Outputs::default();
+        }
+        let mut faults = Faults::new();
+        let m = self
+            .sup
+            .check_all(now_ms, &frame, self.powers, self.seq.phase(), &mut faults);
+        for f in faults {
+            if self.fault().is_none() {
+                self.trip(f);
+            } else {
+                self.alarm_once(f);
+            }
+        }
+        if self.fault().is_some() {
             return self.outputs;
         }
-        let m = match self.sup.check(now_ms, &frame, self.powers) {
-            Ok(m) => m,
-            Err(f) => {
-                self.trip(f);
-                return self.outputs;
-            }
-        };
         let mut seq_events: heapless::Vec<SeqEvent, 4> = heapless::Vec::new();
         self.seq.set_supply_v(frame.supply_v);
         let result = self.seq.step(now_ms, &m, &mut |e| {
@@ -405,6 +434,7 @@ impl Controller {
             Ok(()) => {
                 self.seq.clear_fault();
                 self.sup.rearm();
+                self.alarmed.clear();
                 reply::reset_cleared(&mut l, latched.code);
                 out(&l);
             }
@@ -416,7 +446,7 @@ impl Controller {
     }
 
     fn write_status(&self, l: &mut OutLine) {
-        let m = self.sup.measurements();
+        let m = self.sup.live();
         let status = reply::StatusReport {
             phase: self.phase(),
             target_mm: self.seq.target_mm(),

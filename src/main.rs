@@ -166,6 +166,10 @@ mod firmware {
                 continue;
             }
             let start = board::cycles();
+            // The frame is stamped when its ADC burst starts, not when the step runs: a burst
+            // that stalls (a hung ADC, a starved task) then arrives old, and the supervisor's
+            // stale-sensor check (`STALE_AFTER_MS`) refuses it.
+            let sample_ms = Instant::now().as_millis();
             let sums = read_burst(&mut sensors).await;
             let adc_done = board::cycles();
             let now_ms = Instant::now().as_millis();
@@ -176,7 +180,7 @@ mod firmware {
                     sums[Input::AmbThermistor as usize],
                 ],
                 supply_counts: sums[Input::Supply as usize],
-                sample_ms: now_ms,
+                sample_ms,
             };
             let o = with_controller(|c| c.step(now_ms, &inputs));
             heaters.apply(o.pla_duty, o.tca_duty);

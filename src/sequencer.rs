@@ -22,7 +22,7 @@ pub const RELEASE_TIMEOUT_S: f32 = 10.0;
 // Release is fixed-length: it must end well before its timeout.
 const _: () = assert!(RELEASE_S < RELEASE_TIMEOUT_S);
 // The heater-not-heating check judges a heater during soften, before soften can time out.
-const _: () = assert!(crate::supervisor::HEATING_CHECK_S < SOFTEN_TIMEOUT_S);
+const _: () = assert!(crate::supervisor::HEATING_WINDOW_S < SOFTEN_TIMEOUT_S);
 
 /// Something the sequencer reports to the user.
 #[derive(Clone, Copy, Debug, PartialEq)]

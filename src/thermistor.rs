@@ -199,20 +199,15 @@ impl ThermistorConfig {
     }
 }
 
-/// Which out-of-range class the last samples were in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Fault {
-    Open,
-    Short,
-}
-
-/// Debounces open/short readings: a fault is reported only after the same out-of-range class
-/// occurs on several consecutive samples, so one noisy conversion does not stop a morph.
+/// Debounces open/short readings with a leaky counter: +1 for an out-of-range sample, −1 for
+/// a good one (never below 0, never above the trip count), a fault reported once the count
+/// reaches the trip count. One noisy conversion does not stop a morph, and an intermittent
+/// fault (a loose crimp reading open every other sample) adds up where a consecutive count
+/// would restart for ever.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RangeCheck {
     consecutive: u8,
     count: u8,
-    last: Option<Fault>,
 }
 
 impl Default for RangeCheck {
@@ -222,40 +217,33 @@ impl Default for RangeCheck {
 }
 
 impl RangeCheck {
-    /// Samples in a row that make a fault, as Klipper's ADC range check uses (4): at our 10 Hz
-    /// control rate a real fault is caught within 0.4 s, well inside the heaters' seconds-long
-    /// time constants.
+    /// The trip count, as Klipper's ADC range check uses (4 samples): at our 10 Hz control rate
+    /// a real fault is caught within 0.4 s, well inside the heaters' seconds-long time
+    /// constants; an intermittent one that is bad at least every other sample within 0.8 s.
     pub const DEFAULT_CONSECUTIVE: u8 = 4;
 
-    /// A check that faults after `consecutive` equal out-of-range samples (0 is treated as 1).
+    /// A check that faults once its leaky count reaches `consecutive` (0 is treated as 1).
     pub const fn new(consecutive: u8) -> Self {
         RangeCheck {
             consecutive: if consecutive == 0 { 1 } else { consecutive },
             count: 0,
-            last: None,
         }
     }
 
-    /// Feeds one classified sample. Returns `Some(Open)`/`Some(Short)` on every sample once that
-    /// class has been seen `consecutive` times in a row (so a persisting fault keeps being
-    /// reported); an in-range sample or a change of class restarts the count.
+    /// Feeds one classified sample. Returns `Some(Open)`/`Some(Short)` (this sample's class)
+    /// on every out-of-range sample once the leaky count has reached the trip count (so a
+    /// persisting fault keeps being reported); a good sample takes one off the count.
     pub fn update(&mut self, reading: Reading) -> Option<Reading> {
-        let fault = match reading {
+        match reading {
             Reading::Ok(_) => {
-                self.count = 0;
-                self.last = None;
-                return None;
+                self.count = self.count.saturating_sub(1);
+                None
             }
-            Reading::Open => Fault::Open,
-            Reading::Short => Fault::Short,
-        };
-        if self.last == Some(fault) {
-            self.count = self.count.saturating_add(1);
-        } else {
-            self.last = Some(fault);
-            self.count = 1;
+            Reading::Open | Reading::Short => {
+                self.count = (self.count + 1).min(self.consecutive);
+                (self.count >= self.consecutive).then_some(reading)
+            }
         }
-        (self.count >= self.consecutive).then_some(reading)
     }
 }
 
@@ -539,7 +527,7 @@ mod tests {
     }
 
     #[test]
-    fn range_check_needs_consecutive_equal_faults() {
+    fn range_check_counts_intermittent_faults() {
         let mut rc = RangeCheck::default();
         for _ in 0..3 {
             assert_eq!(rc.update(Reading::Open), None);
@@ -547,47 +535,42 @@ mod tests {
         assert_eq!(rc.update(Reading::Open), Some(Reading::Open));
         assert_eq!(rc.update(Reading::Open), Some(Reading::Open)); // still reported
         assert_eq!(rc.update(Reading::Ok(20.0)), None);
-        // Alternating classes never add up.
-        for i in 0..20 {
-            let r = if i % 2 == 0 {
-                Reading::Open
-            } else {
-                Reading::Short
-            };
-            assert_eq!(rc.update(r), None);
-        }
-        assert_eq!(rc.update(Reading::Ok(20.0)), None);
-        // Interrupted by a good sample: restart.
-        for _ in 0..3 {
-            assert_eq!(rc.update(Reading::Short), None);
-        }
-        assert_eq!(rc.update(Reading::Ok(20.0)), None);
-        for _ in 0..3 {
-            assert_eq!(rc.update(Reading::Short), None);
-        }
+        // One good sample takes one off: the next bad one trips again.
         assert_eq!(rc.update(Reading::Short), Some(Reading::Short));
+        let mut rc = RangeCheck::default();
+        // A single noisy sample now and then never adds up.
+        for _ in 0..20 {
+            assert_eq!(rc.update(Reading::Open), None);
+            assert_eq!(rc.update(Reading::Ok(20.0)), None);
+        }
+        // Bad two samples out of three: adds up (a consecutive count would restart for ever).
+        let mut tripped = false;
+        for _ in 0..10 {
+            tripped |= rc.update(Reading::Open).is_some();
+            tripped |= rc.update(Reading::Short).is_some();
+            assert_eq!(rc.update(Reading::Ok(20.0)), None);
+        }
+        assert!(tripped);
         let mut one = RangeCheck::new(0);
         assert_eq!(one.update(Reading::Short), Some(Reading::Short));
     }
 
     proptest! {
         #[test]
-        fn range_check_matches_run_length(
+        fn range_check_matches_leaky_count(
             seq in prop::collection::vec(0u8..3, 0..300),
             n in 1u8..8,
         ) {
             let mut rc = RangeCheck::new(n);
-            let mut run = 0usize;
-            let mut prev = 255u8;
+            let mut count = 0usize;
             for kind in seq {
                 let reading = match kind {
                     0 => Reading::Ok(25.0),
                     1 => Reading::Open,
                     _ => Reading::Short,
                 };
-                run = if kind != 0 && kind == prev { run + 1 } else if kind != 0 { 1 } else { 0 };
-                prev = kind;
-                let want = (run >= n as usize).then_some(reading);
+                count = if kind == 0 { count.saturating_sub(1) } else { (count + 1).min(n as usize) };
+                let want = (kind != 0 && count >= n as usize).then_some(reading);
                 prop_assert_eq!(rc.update(reading), want);
             }
         }

@@ -9,11 +9,11 @@ use super::{
     EVENT_TAG, OK, PROTOCOL_VERSION,
 };
 use crate::fixed::Fixed;
-use crate::vocab::Phase;
-use crate::vocab::ResetCause;
 use crate::supervisor::{
     Fault, FaultCode, Subject, SAFETY_README_SECTION, SUPPLY_MAX_V, SUPPLY_MIN_V,
 };
+use crate::vocab::Phase;
+use crate::vocab::ResetCause;
 use core::fmt::{self, Write};
 
 /// HELP text, one `data:` line each.
@@ -476,6 +476,10 @@ impl fmt::Display for FaultText<'_> {
                 l,
                 "heater-not-heating {s} heater rose only {v} K; check heater wiring and MOSFET"
             ),
+            FaultCode::HeatingWhileOff => write!(
+                l,
+                "heating-while-off {s} sensor rose {v} K with both heaters off; check its MOSFET"
+            ),
             FaultCode::StaleSensor => write!(l, "stale-sensor no sensor frame for {v} s"),
             FaultCode::SupplyOutOfRange => write!(
                 l,
@@ -631,12 +635,13 @@ mod alarm_tests {
         let sensors = Sensor::ALL.map(Subject::Sensor);
         let phases = [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release].map(Subject::Phase);
         let heaters = Heater::ALL.map(Subject::Heater);
-        let cases: [(FaultCode, &[Subject]); 8] = [
+        let cases: [(FaultCode, &[Subject]); 9] = [
             (FaultCode::ThermistorOpen, &sensors),
             (FaultCode::ThermistorShort, &sensors),
             (FaultCode::UnderTemperature, &sensors),
             (FaultCode::OverTemperature, &sensors),
             (FaultCode::HeaterNotHeating, &heaters),
+            (FaultCode::HeatingWhileOff, &heaters),
             (FaultCode::StaleSensor, &[Subject::Frame]),
             (FaultCode::SupplyOutOfRange, &[Subject::Supply]),
             (FaultCode::PhaseTimeout, &phases),
