@@ -57,6 +57,8 @@ pub struct Bench<P> {
     board: Config,
     noise: Noise,
     thermistor_fault: [Option<SimFault>; 3],
+    /// The counts a stuck thermistor reads (taken at its first frame after the fault).
+    stuck_counts: [Option<u32>; 3],
     heater_open: [bool; 2],
     heater_stuck: [bool; 2],
     output: [CommandWatchdog; 2],
@@ -71,6 +73,7 @@ impl<P: Plant> Bench<P> {
             board,
             noise,
             thermistor_fault: [None; 3],
+            stuck_counts: [None; 3],
             heater_open: [false; 2],
             heater_stuck: [false; 2],
             output: [CommandWatchdog::default(); 2],
@@ -160,10 +163,12 @@ impl<P: Plant> Bench<P> {
         let mut counts = [0u32; 3];
         for (i, c) in counts.iter_mut().enumerate() {
             let t = beads[i] + self.noise_c();
+            let live = self.board.thermistor.counts_for_temp(t as f32);
             *c = match self.thermistor_fault[i] {
                 Some(SimFault::ThermistorOpen) => self.board.thermistor.adc_full_scale,
                 Some(SimFault::ThermistorShort) => 0,
-                _ => self.board.thermistor.counts_for_temp(t as f32),
+                Some(SimFault::ThermistorStuck) => *self.stuck_counts[i].get_or_insert(live),
+                _ => live,
             };
         }
         Inputs {
@@ -177,8 +182,9 @@ impl<P: Plant> Bench<P> {
     /// index (an ambient target counts as the TCA heater).
     pub fn inject(&mut self, fault: SimFault, index: usize) {
         match fault {
-            SimFault::ThermistorOpen | SimFault::ThermistorShort => {
-                self.thermistor_fault[index.min(2)] = Some(fault)
+            SimFault::ThermistorOpen | SimFault::ThermistorShort | SimFault::ThermistorStuck => {
+                self.thermistor_fault[index.min(2)] = Some(fault);
+                self.stuck_counts[index.min(2)] = None;
             }
             SimFault::HeaterOpen => self.heater_open[index.min(1)] = true,
             SimFault::HeaterStuck => self.heater_stuck[index.min(1)] = true,
@@ -188,6 +194,7 @@ impl<P: Plant> Bench<P> {
     /// Removes every injected fault.
     pub fn clear_faults(&mut self) {
         self.thermistor_fault = [None; 3];
+        self.stuck_counts = [None; 3];
         self.heater_open = [false; 2];
         self.heater_stuck = [false; 2];
     }
@@ -223,7 +230,13 @@ impl<P: Plant> Bench<P> {
             SimCommand::State => {
                 let t = self.plant.truth();
                 let radius_mm = self.radius_mm() as f32;
-                reply::sim_state(&mut l, t.time_s as f32, radius_mm, t.pla_c as f32, t.tca_c as f32);
+                reply::sim_state(
+                    &mut l,
+                    t.time_s as f32,
+                    radius_mm,
+                    t.pla_c as f32,
+                    t.tca_c as f32,
+                );
             }
             SimCommand::Fault(kind, target) => {
                 self.inject(kind, target.index());

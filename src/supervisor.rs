@@ -390,7 +390,8 @@ impl Supervisor {
     /// - in its band, its sensor must not fall [`HEATING_MAX_FALL_K`] below its highest reading;
     /// - above the model's equilibrium it may fall freely (the window follows it down).
     ///
-    /// The watch starts again with every phase and every switch-on.
+    /// The watch starts again with every switch-on and every phase in which the heater's power
+    /// drops; in a phase at no less power its window runs on.
     fn check_heating(&mut self, now_ms: u64, cmd: Powers, phase: Phase) -> Result<(), Fault> {
         let m = self.measurements();
         for heater in Heater::ALL {
@@ -405,15 +406,27 @@ impl Supervisor {
                 Heater::Tca => (R_TT_K_PER_W, HeaterConfig::TCA.max_power_w),
             };
             let w = &mut self.watch[heater.index()];
+            // A new phase re-arms the watch, unless the heater stays on at no less power: its
+            // window then runs on (closed's phases can each be shorter than one window).
             if w.phase != Some(phase) {
-                *w = HeatWatch {
-                    phase: Some(phase),
-                    ..HeatWatch::default()
+                let carries_on =
+                    own_w >= w.last_w * (1.0 - HEATING_POWER_STEP_FRACTION) && w.last_w > 0.0;
+                *w = if carries_on {
+                    HeatWatch {
+                        phase: Some(phase),
+                        ..*w
+                    }
+                } else {
+                    HeatWatch {
+                        phase: Some(phase),
+                        ..HeatWatch::default()
+                    }
                 };
             }
             if !(own_w >= HEATING_MIN_POWER_FRACTION * cap_w) || !temp_c.is_finite() {
                 w.window = None;
                 w.below_since_ms = None;
+                w.last_w = 0.0;
                 continue;
             }
             // The model's steady rise of this sensor: its own heater's and the other's share.

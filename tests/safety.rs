@@ -681,7 +681,35 @@ fn a_latched_link_stays_supervised(link: Link) {
     assert_eq!(b.alarms_since(n).len(), 1);
 }
 
+fn a_stuck_thermistor_trips_once_its_heater_is_on(link: Link) {
+    let mut cases = 0;
+    for mode in ["auto", "gated", "closed"] {
+        for sensor in ["pla", "tca"] {
+            let mut b = Bench::on(link);
+            b.run_for(2.0);
+            // The reading freezes at the link's resting temperature.
+            let r = b.send(&format!("SIM FAULT thermistor-stuck {sensor}"));
+            assert_eq!(r, [format!("ok fault=thermistor-stuck target={sensor}")]);
+            assert_eq!(b.send(&format!("MORPH 35 {mode}")), ["ok"]);
+            let t0 = b.rig.now_ms();
+            let a = expect_alarm(&mut b, "heater-not-heating", 60.0);
+            assert!(a.contains(sensor), "{mode} {sensor}: {a}");
+            println!(
+                "{link:?} {mode}: {sensor} thermistor stuck, tripped {:.1} s after MORPH",
+                (b.rig.now_ms() - t0) as f64 / 1000.0
+            );
+            cases += 1;
+        }
+    }
+    checked(
+        link,
+        "a_stuck_thermistor_trips_once_its_heater_is_on",
+        cases,
+    );
+}
+
 on_both_links!(
+    a_stuck_thermistor_trips_once_its_heater_is_on,
     a_latched_link_stays_supervised,
     a_stuck_heater_below_the_limit_trips_heating_while_off,
     cool_downs_after_a_morph_or_an_abort_raise_no_alarm,

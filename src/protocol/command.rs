@@ -7,9 +7,10 @@ const SENSORS: [Sensor; 3] = [Sensor::Pla, Sensor::Tca, Sensor::Amb];
 /// Every [`Medium`], for matching wire words.
 const MEDIA: [Medium; 2] = [Medium::Water, Medium::Air];
 /// Every [`SimFault`], for matching wire words.
-const SIM_FAULTS: [SimFault; 4] = [
+const SIM_FAULTS: [SimFault; 5] = [
     SimFault::ThermistorOpen,
     SimFault::ThermistorShort,
+    SimFault::ThermistorStuck,
     SimFault::HeaterOpen,
     SimFault::HeaterStuck,
 ];
@@ -176,7 +177,7 @@ fn parse_sim_fault<'a>(args: &mut impl Iterator<Item = &'a str>) -> Result<SimCo
         .next()
         .and_then(|word| lookup(&SIM_FAULTS, word, SimFault::as_str))
         .ok_or(bad(
-            "SIM FAULT needs thermistor-open, thermistor-short, heater-open or heater-stuck.",
+            "SIM FAULT needs thermistor-open, thermistor-short, thermistor-stuck, heater-open or heater-stuck.",
         ))?;
     let target = match args.next() {
         None => Sensor::Pla,

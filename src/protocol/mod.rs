@@ -69,6 +69,9 @@ pub enum SimFault {
     ThermistorOpen,
     /// Thermistor shorted: the divider reads zero.
     ThermistorShort,
+    /// Thermistor stuck: its reading freezes at the value it had when the fault was injected
+    /// (a hung ADC channel, a bead glued to something else).
+    ThermistorStuck,
     /// Heater wire broken: commanded power produces no heat.
     HeaterOpen,
     /// MOSFET shorted: the heater runs at full supply power whatever is commanded.
@@ -208,12 +211,13 @@ impl Medium {
 }
 
 impl SimFault {
-    /// The lowercase wire word (`thermistor-open`, `thermistor-short`, `heater-open`,
-    /// `heater-stuck`).
+    /// The lowercase wire word (`thermistor-open`, `thermistor-short`, `thermistor-stuck`,
+    /// `heater-open`, `heater-stuck`).
     pub fn as_str(self) -> &'static str {
         match self {
             SimFault::ThermistorOpen => "thermistor-open",
             SimFault::ThermistorShort => "thermistor-short",
+            SimFault::ThermistorStuck => "thermistor-stuck",
             SimFault::HeaterOpen => "heater-open",
             SimFault::HeaterStuck => "heater-stuck",
         }
@@ -410,6 +414,7 @@ mod tests {
         assert_eq!(Medium::Water.as_str(), "water");
         assert_eq!(SimFault::ThermistorShort.as_str(), "thermistor-short");
         assert_eq!(SimFault::HeaterStuck.as_str(), "heater-stuck");
+        assert_eq!(SimFault::ThermistorStuck.as_str(), "thermistor-stuck");
     }
 
     #[test]
