@@ -8,7 +8,6 @@
 use crate::protocol::{reply, OutLine};
 pub use crate::vocab::{ResetCause, ResetFlags};
 
-
 /// Writes the line the firmware sends once at boot:
 /// `event: boot reset=<cause> board=<name> version=<v>`.
 pub fn write_boot_line(l: &mut OutLine, cause: ResetCause, board: &str) {

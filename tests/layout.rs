@@ -50,7 +50,11 @@ fn no_module_is_included_by_path() {
         if p.ends_with("tests/layout.rs") {
             continue;
         }
-        assert!(!s.contains("#[path"), "{} uses a #[path] attribute", p.display());
+        assert!(
+            !s.contains("#[path"),
+            "{} uses a #[path] attribute",
+            p.display()
+        );
     }
 }
 
@@ -77,7 +81,11 @@ fn the_plant_knows_no_controller() {
     let deps = dependencies("plant/Cargo.toml");
     assert!(!deps.iter().any(|d| d == "morphlink"), "{deps:?}");
     for (p, s) in sources("plant") {
-        assert!(!code(&s).contains("morphlink::"), "{} names the controller", p.display());
+        assert!(
+            !code(&s).contains("morphlink::"),
+            "{} names the controller",
+            p.display()
+        );
     }
 }
 
@@ -86,7 +94,11 @@ fn the_boards_know_no_controller() {
     let deps = dependencies("boards/Cargo.toml");
     assert!(!deps.iter().any(|d| d == "morphlink"), "{deps:?}");
     for (p, s) in sources("boards") {
-        assert!(!code(&s).contains("morphlink::"), "{} names the controller", p.display());
+        assert!(
+            !code(&s).contains("morphlink::"),
+            "{} names the controller",
+            p.display()
+        );
     }
 }
 
@@ -108,7 +120,12 @@ fn core_imports() -> std::collections::BTreeMap<String, std::collections::BTreeS
     let mut graph = std::collections::BTreeMap::new();
     for (p, s) in sources("src") {
         let rel = p.strip_prefix(root().join("src")).unwrap();
-        let top = rel.iter().next().unwrap().to_string_lossy().replace(".rs", "");
+        let top = rel
+            .iter()
+            .next()
+            .unwrap()
+            .to_string_lossy()
+            .replace(".rs", "");
         if ["main", "emulated", "lib"].contains(&top.as_str()) {
             continue;
         }
@@ -130,7 +147,10 @@ fn core_imports() -> std::collections::BTreeMap<String, std::collections::BTreeS
 #[test]
 fn the_core_has_no_import_cycle() {
     let graph = core_imports();
-    assert!(graph.contains_key("controller") && graph.contains_key("vocab"), "{graph:?}");
+    assert!(
+        graph.contains_key("controller") && graph.contains_key("vocab"),
+        "{graph:?}"
+    );
     // Depth-first search for a back edge.
     fn visit(
         m: &str,
@@ -164,5 +184,9 @@ fn the_supervisor_imports_no_strategy_and_the_vocabulary_nothing() {
     for m in ["strategy", "sequencer", "controller"] {
         assert!(!sup.contains(m), "the supervisor imports {m}: {sup:?}");
     }
-    assert!(graph["vocab"].is_empty(), "vocab imports {:?}", graph["vocab"]);
+    assert!(
+        graph["vocab"].is_empty(),
+        "vocab imports {:?}",
+        graph["vocab"]
+    );
 }

@@ -22,11 +22,11 @@
 //! Clocks: HSI 16 MHz → PLL (/1 ×10 /2) → 80 MHz core, APB1 = APB2 = 80 MHz; ADC kernel
 //! clock SYSCLK. TIM2 is the embassy time driver.
 
+use crate::stm32 as common;
 pub use crate::stm32::{
     cycles, fatal, heater_pins_low, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx,
     SerialTx,
 };
-use crate::stm32 as common;
 use crate::ResetFlags;
 use embassy_stm32::adc::{Adc, AdcChannel, SampleTime};
 use embassy_stm32::peripherals::USART1;

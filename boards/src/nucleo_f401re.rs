@@ -19,11 +19,11 @@
 //! Clocks: HSI 16 MHz → PLL (/8 ×168 /4) → 84 MHz core, APB1 42 MHz, APB2 84 MHz; ADC clock
 //! PCLK2/4 = 21 MHz. TIM2 is the embassy time driver.
 
+use crate::stm32 as common;
 pub use crate::stm32::{
     cycles, fatal, heater_pins_low, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx,
     SerialTx,
 };
-use crate::stm32 as common;
 use crate::ResetFlags;
 use embassy_stm32::adc::{Adc, AdcChannel, SampleTime};
 use embassy_stm32::peripherals::USART2;

@@ -21,11 +21,11 @@
 //! ADC12 kernel clock SYSCLK/4 = 42.5 MHz. TIM2 is the embassy time driver. (A2 is PA4, which
 //! only ADC2 reads, so the ambient thermistor sits on A3 on every board.)
 
+use crate::stm32 as common;
 pub use crate::stm32::{
     cycles, fatal, heater_pins_low, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx,
     SerialTx,
 };
-use crate::stm32 as common;
 use crate::ResetFlags;
 use embassy_stm32::adc::vals::{Rovsm, Trovs};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, SampleTime};

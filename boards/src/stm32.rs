@@ -9,8 +9,8 @@ use crate::{
 use embassy_stm32::adc::{Adc, AnyAdcChannel, SampleTime};
 use embassy_stm32::gpio::OutputType;
 use embassy_stm32::peripherals::{ADC1, IWDG, PA6, PA7, TIM3};
-use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel, SimplePwmChannels};
 use embassy_stm32::timer::{Channel, GeneralInstance4Channel};
 use embassy_stm32::usart::{self, BufferedUart, BufferedUartRx, BufferedUartTx};

@@ -2,8 +2,8 @@
 //! radius versus power, firmware table size, thermal grid convergence. Writes SVG charts and a
 //! CSV of the numbers, and prints a summary.
 
-use indicatif::{ProgressBar, ProgressStyle};
 use crate::plot::{self, prelude::*};
+use indicatif::{ProgressBar, ProgressStyle};
 use morphlink_model::reference::fv_thermal::{CrossSection, Inclusion, Layout};
 use morphlink_model::reference::levels::{self, Level, Scored, POWERS_W, REFERENCE_RINGS};
 use morphlink_model::LinkParams;

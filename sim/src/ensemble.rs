@@ -4,13 +4,13 @@
 //!
 //! Every range is a named default with the reason for it.
 
-use morphlink_model::draw::{splitmix, uniform};
 use crate::rig::{LinkSetup, Rig};
-use morphlink_plant::Plant;
 use morphlink::controller::{Outputs, TICK_MS};
 use morphlink::protocol::{Command, Mode};
 use morphlink::supervisor::FaultCode;
+use morphlink_model::draw::{splitmix, uniform};
 use morphlink_model::params::{H_AIR_W_M2K, H_WATER_W_M2K};
+use morphlink_plant::Plant;
 
 /// Convection coefficient relative to the model's, a factor range: ±30 % covers stirred to
 /// still water and the scatter of the paper's nine convection measurements.

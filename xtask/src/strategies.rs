@@ -9,11 +9,11 @@
 //! `strategies_timeline_lumped.svg`), and prints the summary tables of `docs/strategies.md`.
 
 use indicatif::{ProgressBar, ProgressStyle};
+use morphlink::bench::Noise;
 use morphlink::protocol::Mode;
 use morphlink::strategy::AUTO_STRATEGY;
 use morphlink::table;
 use morphlink_host::plot::{self, prelude::*};
-use morphlink::bench::Noise;
 use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
 use morphlink_plant::{Lumped, Medium};
 use morphlink_sim::ensemble::{run_morph_on, Mismatch, Outcome, RunResult, TracePoint};
@@ -296,15 +296,20 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
             }
         }
     }
-    let rows = parallel(&jobs, args.threads, "morphs", |&(i, target_mm, strategy)| {
-        let (link, noise, info) = &links[i];
-        Row {
-            strategy,
-            target_mm,
-            link: *info,
-            result: morph(link, *noise, target_mm, strategy, &mut |_| {}),
-        }
-    })?;
+    let rows = parallel(
+        &jobs,
+        args.threads,
+        "morphs",
+        |&(i, target_mm, strategy)| {
+            let (link, noise, info) = &links[i];
+            Row {
+                strategy,
+                target_mm,
+                link: *info,
+                result: morph(link, *noise, target_mm, strategy, &mut |_| {}),
+            }
+        },
+    )?;
     let mut oracle_jobs = Vec::new();
     for (i, (_, _, info)) in links.iter().enumerate() {
         if info.draw < args.oracle_draws {
@@ -426,10 +431,17 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<(), String> {
 }
 
 fn write_oracle_csv(path: &Path, rows: &[OracleRow]) -> Result<(), String> {
-    let mut s = String::from("plant,target_mm,time_s,final_mm,tca_hold_c,max_pla_c,max_tca_c,draw\n");
+    let mut s =
+        String::from("plant,target_mm,time_s,final_mm,tca_hold_c,max_pla_c,max_tca_c,draw\n");
     for r in rows {
         let (t, f, h, p, c) = match r.run {
-            Some(o) => (o.time_s, o.final_mm, o.tca_hold_c, o.max_true_c[0], o.max_true_c[1]),
+            Some(o) => (
+                o.time_s,
+                o.final_mm,
+                o.tca_hold_c,
+                o.max_true_c[0],
+                o.max_true_c[1],
+            ),
             None => (f64::NAN, f64::NAN, f64::NAN, f64::NAN, f64::NAN),
         };
         let _ = writeln!(
@@ -585,7 +597,9 @@ fn summarize(rows: &[&Row], oracle_rows: &[&OracleRow]) -> Summary {
             let orc: Vec<&OracleRow> = oracle_rows
                 .iter()
                 .copied()
-                .filter(|r| r.target_mm == t && !rows.iter().any(|x| x.link.draw == r.draw && x.link.air))
+                .filter(|r| {
+                    r.target_mm == t && !rows.iter().any(|x| x.link.draw == r.draw && x.link.air)
+                })
                 .collect();
             let (o50, _, _) = oracle_times(&orc);
             let _ = writeln!(

@@ -5,10 +5,10 @@
 //! ensemble (`morphlink-sim`'s `ensemble`). [`HifiSpec::draw`] is reproducible: draw `i` of
 //! seed `s` is the same link whatever else was drawn.
 
-use morphlink_model::draw::{splitmix, uniform};
 use super::tca::Tca;
 use super::thermal::cross_section;
 use crate::Medium;
+use morphlink_model::draw::{splitmix, uniform};
 use morphlink_model::mechanics::radius_mm;
 use morphlink_model::params::{H_AIR_W_M2K, H_WATER_W_M2K};
 use morphlink_model::reference::tca_physics::PhysicsLaw;
