@@ -19,6 +19,7 @@ pub mod link;
 pub mod mathf;
 pub mod protocol;
 pub mod sequencer;
+pub mod settings;
 pub mod stats;
 pub mod strategy;
 pub mod supervisor;

@@ -5,7 +5,7 @@
 //! every tick, before it).
 
 use crate::protocol::Mode;
-use crate::strategy::{AnyStrategy, Start, Strategy, Tick, RELEASE_S};
+use crate::strategy::{AnyStrategy, Start, Strategy, Thresholds, Tick, RELEASE_S};
 use crate::supervisor::{Fault, FaultCode, Subject};
 use crate::vocab::{Measurements, Phase, Powers};
 
@@ -23,6 +23,29 @@ pub const RELEASE_TIMEOUT_S: f32 = 10.0;
 const _: () = assert!(RELEASE_S < RELEASE_TIMEOUT_S);
 // The heater-not-heating check judges a heater during soften, before soften can time out.
 const _: () = assert!(crate::supervisor::HEATING_WINDOW_S < SOFTEN_TIMEOUT_S);
+
+/// The phase timeouts a morph runs with, s: the user-settable values of `crate::settings`
+/// (defaults [`SOFTEN_TIMEOUT_S`], [`BEND_TIMEOUT_S`], [`LOCK_TIMEOUT_S`]). Release keeps
+/// [`RELEASE_TIMEOUT_S`]: its length is fixed by the strategy ([`RELEASE_S`]). A strategy's
+/// own timeout (`paper`'s fixed schedule) still takes precedence.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhaseTimeouts {
+    /// Soften timeout, s.
+    pub soften_s: f32,
+    /// Bend timeout, s.
+    pub bend_s: f32,
+    /// Lock timeout, s.
+    pub lock_s: f32,
+}
+
+impl PhaseTimeouts {
+    /// The compiled-in values.
+    pub const DEFAULT: PhaseTimeouts = PhaseTimeouts {
+        soften_s: SOFTEN_TIMEOUT_S,
+        bend_s: BEND_TIMEOUT_S,
+        lock_s: LOCK_TIMEOUT_S,
+    };
+}
 
 /// Something the sequencer reports to the user.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -101,6 +124,8 @@ pub struct Sequencer {
     fault: Option<Fault>,
     strategy: Option<AnyStrategy>,
     supply_v: f32,
+    thresholds: Thresholds,
+    timeouts: PhaseTimeouts,
 }
 
 impl Default for Sequencer {
@@ -128,7 +153,17 @@ impl Sequencer {
             fault: None,
             strategy: None,
             supply_v: f32::NAN,
+            thresholds: Thresholds::DEFAULT,
+            timeouts: PhaseTimeouts::DEFAULT,
         }
+    }
+
+    /// Sets the thresholds and timeouts the next morphs run with (the controller passes the
+    /// live settings before each MORPH; a running morph keeps what it started with only in
+    /// that settings cannot change while one runs).
+    pub fn set_limits(&mut self, thresholds: Thresholds, timeouts: PhaseTimeouts) {
+        self.thresholds = thresholds;
+        self.timeouts = timeouts;
     }
 
     /// Tells the sequencer the measured heater supply, V, so the model strategies know what
@@ -213,9 +248,9 @@ impl Sequencer {
             .as_ref()
             .and_then(|s| s.get().timeout_s(phase));
         own.unwrap_or(match phase {
-            Phase::Soften => SOFTEN_TIMEOUT_S,
-            Phase::Bend => BEND_TIMEOUT_S,
-            Phase::Lock => LOCK_TIMEOUT_S,
+            Phase::Soften => self.timeouts.soften_s,
+            Phase::Bend => self.timeouts.bend_s,
+            Phase::Lock => self.timeouts.lock_s,
             _ => RELEASE_TIMEOUT_S,
         })
     }
@@ -256,6 +291,7 @@ impl Sequencer {
             in_phase_s: since_s(now_ms, at.phase_ms),
             since_start_s: since_s(now_ms, at.start_ms),
             supply_v: self.supply_v,
+            th: &self.thresholds,
         };
         if s.phase_done(&tick) {
             match at.phase {

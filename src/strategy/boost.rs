@@ -4,7 +4,7 @@
 
 use super::model::observer::HeatedNode;
 use super::model::{target, ModelDrive};
-use super::{Start, Strategy, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
+use super::{Start, Strategy, Tick, RELEASE_S};
 use crate::vocab::{Measurements, Phase, Powers};
 
 /// The `boost` strategy.
@@ -33,9 +33,9 @@ impl Strategy for Boost {
         let o = self.drive.observer();
         let (pla_c, tca_c) = (o.model_c(HeatedNode::Pla), o.model_c(HeatedNode::Tca));
         match t.phase {
-            Phase::Soften => t.m.t_pla_c >= SOFT_THRESHOLD_C,
+            Phase::Soften => t.m.t_pla_c >= t.th.soft_threshold_c,
             Phase::Bend => self.drive.bend_done(t, pla_c, tca_c, true),
-            Phase::Lock => t.m.t_pla_c < RIGID_THRESHOLD_C,
+            Phase::Lock => t.m.t_pla_c < t.th.rigid_threshold_c,
             Phase::Release => t.in_phase_s >= RELEASE_S,
             Phase::Idle | Phase::Fault => false,
         }

@@ -46,16 +46,18 @@ impl Closed {
     }
 
     /// Whether the PLA counts as rigid: see [`CLOSED_RIGID_LEAD_S`].
-    fn rigid(&self, m: &Measurements, pla_c: f32) -> bool {
+    fn rigid(&self, t: &Tick, pla_c: f32) -> bool {
+        let m = t.m;
+        let rigid_threshold_c = t.th.rigid_threshold_c;
         let rate = self.drive.observer().measured_rate_k_per_s(HeatedNode::Pla);
-        let cool_surroundings = m.t_amb_c < RIGID_THRESHOLD_C - CLOSED_LEAD_AMBIENT_MARGIN_K;
+        let cool_surroundings = m.t_amb_c < rigid_threshold_c - CLOSED_LEAD_AMBIENT_MARGIN_K;
         let (lead_c, rigid_c) = if cool_surroundings {
             (
                 m.t_pla_c + CLOSED_RIGID_LEAD_S * rate.min(0.0),
                 CLOSED_RIGID_COOL_C,
             )
         } else {
-            (m.t_pla_c, RIGID_THRESHOLD_C)
+            (m.t_pla_c, rigid_threshold_c)
         };
         pla_c < rigid_c && lead_c < rigid_c
     }
@@ -71,7 +73,7 @@ impl Strategy for Closed {
         let o = self.drive.observer();
         let (pla_c, tca_c) = (o.estimate_c(HeatedNode::Pla), o.estimate_c(HeatedNode::Tca));
         match t.phase {
-            Phase::Soften => pla_c >= SOFT_THRESHOLD_C,
+            Phase::Soften => pla_c >= t.th.soft_threshold_c,
             Phase::Bend => {
                 // Also waits for the TCA thermistor to slow down, so the observer has learnt the
                 // model's error before the PLA freezes the shape.
@@ -79,7 +81,7 @@ impl Strategy for Closed {
                     o.measured_rate_k_per_s(HeatedNode::Tca).abs() <= LEARN_MAX_RATE_K_PER_S;
                 self.drive.bend_done(t, pla_c, tca_c, learnt)
             }
-            Phase::Lock => self.rigid(t.m, pla_c),
+            Phase::Lock => self.rigid(t, pla_c),
             Phase::Release => t.in_phase_s >= RELEASE_S,
             Phase::Idle | Phase::Fault => false,
         }

@@ -3,7 +3,7 @@
 //! PLA reads rigid.
 
 use super::paper::table_powers;
-use super::{Start, Strategy, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
+use super::{Start, Strategy, Tick, RELEASE_S};
 use crate::link::{HOLD_POWER_W, R_TP_K_PER_W, R_TT_K_PER_W};
 use crate::table;
 use crate::vocab::{Measurements, Phase, Powers};
@@ -68,9 +68,9 @@ impl Strategy for Gated {
     fn phase_done(&mut self, t: &Tick) -> bool {
         let m = t.m;
         match t.phase {
-            Phase::Soften => m.t_pla_c >= SOFT_THRESHOLD_C,
+            Phase::Soften => m.t_pla_c >= t.th.soft_threshold_c,
             Phase::Bend => self.tca_settled(t.now_ms, m.t_tca_c) && t.in_phase_s >= MIN_BEND_S,
-            Phase::Lock => m.t_pla_c < RIGID_THRESHOLD_C,
+            Phase::Lock => m.t_pla_c < t.th.rigid_threshold_c,
             Phase::Release => t.in_phase_s >= RELEASE_S,
             Phase::Idle | Phase::Fault => false,
         }

@@ -43,6 +43,29 @@ const _: () = assert!(RIGID_THRESHOLD_C < SOFT_THRESHOLD_C);
 /// within about a second, so the spring-back has happened when `done` is reported.
 pub const RELEASE_S: f32 = 2.0;
 
+/// The temperatures a morph's phases end on and aim at, °C: the user-settable values of
+/// `crate::settings` (defaults [`SOFT_THRESHOLD_C`], [`RIGID_THRESHOLD_C`] and
+/// [`model::PLA_SOFT_TARGET_C`]); the settings' ranges keep every combination inside the
+/// constants' own margins.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Thresholds {
+    /// PLA temperature at which it counts as soft, °C.
+    pub soft_threshold_c: f32,
+    /// PLA temperature at which it counts as rigid again, °C.
+    pub rigid_threshold_c: f32,
+    /// PLA temperature the model strategies (`boost`, `closed`) drive the rod to, °C.
+    pub pla_soft_target_c: f32,
+}
+
+impl Thresholds {
+    /// The compiled-in values.
+    pub const DEFAULT: Thresholds = Thresholds {
+        soft_threshold_c: SOFT_THRESHOLD_C,
+        rigid_threshold_c: RIGID_THRESHOLD_C,
+        pla_soft_target_c: model::PLA_SOFT_TARGET_C,
+    };
+}
+
 /// What the sequencer tells the running strategy each tick.
 #[derive(Clone, Copy, Debug)]
 pub struct Tick<'a> {
@@ -58,6 +81,8 @@ pub struct Tick<'a> {
     pub since_start_s: f32,
     /// Measured heater supply, V (NaN if unknown).
     pub supply_v: f32,
+    /// The thresholds and targets this morph runs with.
+    pub th: &'a Thresholds,
 }
 
 /// What one strategy decides. The sequencer calls, each tick of a morph: [`Strategy::phase_done`]

@@ -143,7 +143,7 @@ impl ModelDrive {
                     >= deliverable_w(&HeaterConfig::TCA, TCA_BOOST_MAX_W, t.supply_v) - 1e-3
                 && self.observer.measured_rate_k_per_s(HeatedNode::Tca) < MODEL_STALL_RATE_K_PER_S
                 && t.since_start_s > STALL_AFTER_S);
-        let at_target = reached && pla_c >= SOFT_THRESHOLD_C && learnt;
+        let at_target = reached && pla_c >= t.th.soft_threshold_c && learnt;
         self.held(t.now_ms, at_target) && t.in_phase_s >= MODEL_SETTLE_S
     }
 
@@ -155,7 +155,11 @@ impl ModelDrive {
         let pla_on = matches!(phase, Phase::Soften | Phase::Bend);
         let tca_on = matches!(phase, Phase::Soften | Phase::Bend | Phase::Lock);
         let pla_w = if pla_on {
-            o.power_to_reach_w(HeatedNode::Pla, PLA_SOFT_TARGET_C - d_pla, PLA_BOOST_MAX_W)
+            o.power_to_reach_w(
+                HeatedNode::Pla,
+                t.th.pla_soft_target_c - d_pla,
+                PLA_BOOST_MAX_W,
+            )
         } else {
             0.0
         };
@@ -175,7 +179,11 @@ impl ModelDrive {
                 w.max(MODEL_KEEP_ALIVE_W)
             }
         };
-        let pla_w = keep(pla_on, pla_w, m.t_pla_c > PLA_SOFT_TARGET_C + MODEL_GUARD_K);
+        let pla_w = keep(
+            pla_on,
+            pla_w,
+            m.t_pla_c > t.th.pla_soft_target_c + MODEL_GUARD_K,
+        );
         let tca_w = keep(tca_on, tca_w, m.t_tca_c > self.tca_target_c + MODEL_GUARD_K);
         let p = Powers { pla_w, tca_w };
         self.applied = Powers {

@@ -1,0 +1,497 @@
+//! The named settings: every value a user may change on the device, with its unit, default,
+//! allowed range and a one-line doc, in one registry (`CONFIG` lists it, `CONFIG SET` changes
+//! it, `SAVE` keeps it in flash through [`store`]).
+//!
+//! Settings come in groups ([`Group`]): plain structs of values with a table of [`Spec`]s and
+//! get/set by index. The registry ([`Settings`]) is the list of groups; adding a group is a field
+//! in [`Settings`], one line in each of [`Settings::groups`] and [`Settings::groups_mut`], and a
+//! new [`codec::FORMAT_VERSION`] (the stored layout changed).
+//!
+//! The hard safety limits (the supervisor's temperature limits, supply bounds, heater caps) are
+//! not settings: the supervisor reads its own constants, and every setting's range lies inside
+//! them (the `const` assertions below), so no value a user can set widens a limit.
+
+pub mod codec;
+pub mod ram_flash;
+pub mod store;
+
+use crate::protocol::Mode;
+use crate::sequencer::{PhaseTimeouts, BEND_TIMEOUT_S, LOCK_TIMEOUT_S, SOFTEN_TIMEOUT_S};
+use crate::strategy::closed::CLOSED_RIGID_COOL_C;
+use crate::strategy::model::{MODEL_GUARD_K, PLA_SOFT_TARGET_C};
+use crate::strategy::{Thresholds, AUTO_STRATEGY, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
+use crate::supervisor::{HEATING_WINDOW_S, PLA_LIMITS, TCA_LIMITS};
+
+/// One setting: its wire name, unit, default, allowed range and doc.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Spec {
+    /// Wire name (snake_case, the unit as its suffix where it has one).
+    pub name: &'static str,
+    /// Unit as `CONFIG` shows it (`s`, `C`, `W`, ...; `-` for a choice).
+    pub unit: &'static str,
+    /// Compiled-in value (for a choice: the index into [`Spec::choices`]).
+    pub default: f32,
+    /// Smallest allowed value.
+    pub min: f32,
+    /// Largest allowed value.
+    pub max: f32,
+    /// Decimals `CONFIG` shows.
+    pub decimals: u8,
+    /// For a choice, its words (the value is an index); empty for a number.
+    pub choices: &'static [&'static str],
+    /// One line: what it does.
+    pub doc: &'static str,
+}
+
+impl Spec {
+    /// A number setting.
+    pub const fn number(
+        name: &'static str,
+        unit: &'static str,
+        default: f32,
+        (min, max): (f32, f32),
+        decimals: u8,
+        doc: &'static str,
+    ) -> Spec {
+        Spec {
+            name,
+            unit,
+            default,
+            min,
+            max,
+            decimals,
+            choices: &[],
+            doc,
+        }
+    }
+
+    /// True if `v` is allowed (finite, within `min..=max`, and a whole index for a choice).
+    pub fn allows(&self, v: f32) -> bool {
+        v.is_finite()
+            && v >= self.min
+            && v <= self.max
+            && (self.choices.is_empty() || v == (v as u32) as f32)
+    }
+
+    /// The word of choice value `v` (None for a number setting or an index out of range).
+    pub fn choice_word(&self, v: f32) -> Option<&'static str> {
+        if self.choices.is_empty() || !self.allows(v) {
+            return None;
+        }
+        self.choices.get(v as usize).copied()
+    }
+}
+
+/// A group of settings: a plain struct of values with a [`Spec`] per value, read and written
+/// by index. Values handed to [`Group::set`] have passed [`Spec::allows`].
+pub trait Group {
+    /// One spec per value, in index order.
+    fn specs(&self) -> &'static [Spec];
+    /// Value `i`.
+    fn get(&self, i: usize) -> f32;
+    /// Sets value `i` (already range-checked).
+    fn set(&mut self, i: usize, v: f32);
+}
+
+/// The words of [`MorphSettings::auto_mode`], in index order.
+pub const AUTO_MODE_CHOICES: [&str; 4] = ["paper", "gated", "boost", "closed"];
+const AUTO_MODES: [Mode; 4] = [Mode::Paper, Mode::Gated, Mode::Boost, Mode::Closed];
+
+const fn mode_index(m: Mode) -> usize {
+    match m {
+        Mode::Paper => 0,
+        Mode::Gated => 1,
+        Mode::Boost => 2,
+        Mode::Closed | Mode::Auto => 3,
+    }
+}
+
+/// Allowed soften timeout, s: above the heater check's window (a dead heater trips before its
+/// phase can time out) and at most twice the default.
+pub const SOFTEN_TIMEOUT_RANGE_S: (f32, f32) = (HEATING_WINDOW_S + 10.0, 120.0);
+/// Allowed bend timeout, s: the slowest healthy bend settles in about 40 s.
+pub const BEND_TIMEOUT_RANGE_S: (f32, f32) = (30.0, 300.0);
+/// Allowed lock timeout, s: lock takes about 15 s under water and minutes in still air.
+pub const LOCK_TIMEOUT_RANGE_S: (f32, f32) = (30.0, 900.0);
+/// Allowed soft threshold, °C: from 2 K to 8 K above the PLA's 62 °C glass transition (the
+/// lagging thermistor must not call the rod soft before it is), and so above `closed`'s
+/// rigid-cool threshold.
+pub const SOFT_THRESHOLD_RANGE_C: (f32, f32) = (64.0, 70.0);
+/// Allowed rigid threshold, °C: at most `closed`'s rigid-cool threshold, at least 10 K above
+/// a warm bath.
+pub const RIGID_THRESHOLD_RANGE_C: (f32, f32) = (35.0, CLOSED_RIGID_COOL_C);
+/// Allowed PLA target of the model strategies, °C: at least 5 K above the highest soft
+/// threshold, and with its guard at least 10 K below the PLA's hard limit.
+pub const PLA_SOFT_TARGET_RANGE_C: (f32, f32) = (
+    SOFT_THRESHOLD_RANGE_C.1 + 5.0,
+    PLA_LIMITS.max_c - MODEL_GUARD_K - 10.0,
+);
+
+// The hard limits bound every range: no setting can reach a trip limit or widen it.
+const _: () = assert!(PLA_SOFT_TARGET_RANGE_C.1 + MODEL_GUARD_K + 10.0 <= PLA_LIMITS.max_c);
+const _: () = assert!(SOFT_THRESHOLD_RANGE_C.1 + 5.0 <= PLA_SOFT_TARGET_RANGE_C.0);
+const _: () = assert!(RIGID_THRESHOLD_RANGE_C.1 < SOFT_THRESHOLD_RANGE_C.0);
+const _: () = assert!(CLOSED_RIGID_COOL_C < SOFT_THRESHOLD_RANGE_C.0);
+const _: () = assert!(RIGID_THRESHOLD_RANGE_C.0 > PLA_LIMITS.min_c);
+const _: () = assert!(PLA_SOFT_TARGET_RANGE_C.1 < TCA_LIMITS.max_c);
+const _: () = assert!(SOFTEN_TIMEOUT_RANGE_S.0 > HEATING_WINDOW_S);
+
+/// The morph's settings: what `auto` runs, the phase thresholds and the phase timeouts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MorphSettings {
+    /// The strategy `MORPH <r>` and `MORPH <r> auto` run.
+    pub auto_mode: Mode,
+    /// PLA temperature at which soften ends, °C.
+    pub soft_threshold_c: f32,
+    /// PLA temperature at which lock ends, °C.
+    pub rigid_threshold_c: f32,
+    /// PLA temperature `boost` and `closed` hold the rod at, °C.
+    pub pla_soft_target_c: f32,
+    /// Soften timeout, s.
+    pub soften_timeout_s: f32,
+    /// Bend timeout, s.
+    pub bend_timeout_s: f32,
+    /// Lock timeout, s.
+    pub lock_timeout_s: f32,
+}
+
+/// The specs of [`MorphSettings`], in its index order.
+pub const MORPH_SPECS: [Spec; 7] = [
+    Spec {
+        name: "auto_mode",
+        unit: "-",
+        default: mode_index(AUTO_STRATEGY) as f32,
+        min: 0.0,
+        max: (AUTO_MODE_CHOICES.len() - 1) as f32,
+        decimals: 0,
+        choices: &AUTO_MODE_CHOICES,
+        doc: "strategy MORPH runs without a mode and with auto",
+    },
+    Spec::number(
+        "soft_threshold_c",
+        "C",
+        SOFT_THRESHOLD_C,
+        SOFT_THRESHOLD_RANGE_C,
+        1,
+        "PLA temperature that ends soften",
+    ),
+    Spec::number(
+        "rigid_threshold_c",
+        "C",
+        RIGID_THRESHOLD_C,
+        RIGID_THRESHOLD_RANGE_C,
+        1,
+        "PLA temperature that ends lock",
+    ),
+    Spec::number(
+        "pla_soft_target_c",
+        "C",
+        PLA_SOFT_TARGET_C,
+        PLA_SOFT_TARGET_RANGE_C,
+        1,
+        "PLA temperature boost and closed hold during soften and bend",
+    ),
+    Spec::number(
+        "soften_timeout_s",
+        "s",
+        SOFTEN_TIMEOUT_S,
+        SOFTEN_TIMEOUT_RANGE_S,
+        0,
+        "soften longer than this is a phase-timeout fault",
+    ),
+    Spec::number(
+        "bend_timeout_s",
+        "s",
+        BEND_TIMEOUT_S,
+        BEND_TIMEOUT_RANGE_S,
+        0,
+        "bend longer than this is a phase-timeout fault",
+    ),
+    Spec::number(
+        "lock_timeout_s",
+        "s",
+        LOCK_TIMEOUT_S,
+        LOCK_TIMEOUT_RANGE_S,
+        0,
+        "lock longer than this is a phase-timeout fault",
+    ),
+];
+
+impl MorphSettings {
+    /// The compiled-in values.
+    pub const DEFAULT: MorphSettings = MorphSettings {
+        auto_mode: AUTO_STRATEGY,
+        soft_threshold_c: SOFT_THRESHOLD_C,
+        rigid_threshold_c: RIGID_THRESHOLD_C,
+        pla_soft_target_c: PLA_SOFT_TARGET_C,
+        soften_timeout_s: SOFTEN_TIMEOUT_S,
+        bend_timeout_s: BEND_TIMEOUT_S,
+        lock_timeout_s: LOCK_TIMEOUT_S,
+    };
+
+    /// The thresholds a morph runs with.
+    pub fn thresholds(&self) -> Thresholds {
+        Thresholds {
+            soft_threshold_c: self.soft_threshold_c,
+            rigid_threshold_c: self.rigid_threshold_c,
+            pla_soft_target_c: self.pla_soft_target_c,
+        }
+    }
+
+    /// The phase timeouts a morph runs with.
+    pub fn timeouts(&self) -> PhaseTimeouts {
+        PhaseTimeouts {
+            soften_s: self.soften_timeout_s,
+            bend_s: self.bend_timeout_s,
+            lock_s: self.lock_timeout_s,
+        }
+    }
+
+    /// The strategy `mode` runs (`auto` resolved to [`MorphSettings::auto_mode`]).
+    pub fn resolve(&self, mode: Mode) -> Mode {
+        match mode {
+            Mode::Auto => self.auto_mode,
+            m => m,
+        }
+    }
+}
+
+impl Group for MorphSettings {
+    fn specs(&self) -> &'static [Spec] {
+        &MORPH_SPECS
+    }
+
+    fn get(&self, i: usize) -> f32 {
+        match i {
+            0 => mode_index(self.auto_mode) as f32,
+            1 => self.soft_threshold_c,
+            2 => self.rigid_threshold_c,
+            3 => self.pla_soft_target_c,
+            4 => self.soften_timeout_s,
+            5 => self.bend_timeout_s,
+            6 => self.lock_timeout_s,
+            _ => f32::NAN,
+        }
+    }
+
+    fn set(&mut self, i: usize, v: f32) {
+        match i {
+            0 => self.auto_mode = AUTO_MODES[(v as usize).min(AUTO_MODES.len() - 1)],
+            1 => self.soft_threshold_c = v,
+            2 => self.rigid_threshold_c = v,
+            3 => self.pla_soft_target_c = v,
+            4 => self.soften_timeout_s = v,
+            5 => self.bend_timeout_s = v,
+            6 => self.lock_timeout_s = v,
+            _ => {}
+        }
+    }
+}
+
+/// How many groups [`Settings`] has.
+pub const GROUPS: usize = 1;
+
+/// Every setting the device has, in groups. [`Settings::DEFAULT`] is the compiled-in set.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    /// What a morph runs with.
+    pub morph: MorphSettings,
+}
+
+/// Where one setting sits in the registry: its group and its index in the group.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SettingId {
+    /// Group index (order of [`Settings::groups`]).
+    pub group: usize,
+    /// Index in the group.
+    pub index: usize,
+}
+
+/// Why `CONFIG SET` refused a value (nothing was changed).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SetError {
+    /// No setting has that name.
+    UnknownName,
+    /// The value is not a number (or, for a choice, not one of its words).
+    Malformed(Spec),
+    /// The value is outside the setting's range.
+    OutOfRange(Spec, f32),
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+impl Settings {
+    /// The compiled-in values.
+    pub const DEFAULT: Settings = Settings {
+        morph: MorphSettings::DEFAULT,
+    };
+
+    /// The groups, in registry (and storage) order.
+    pub fn groups(&self) -> [&dyn Group; GROUPS] {
+        [&self.morph]
+    }
+
+    /// The groups, mutable, in the same order.
+    pub fn groups_mut(&mut self) -> [&mut dyn Group; GROUPS] {
+        [&mut self.morph]
+    }
+
+    /// Every setting with its current value, in registry order.
+    pub fn for_each(&self, mut f: impl FnMut(&Spec, f32)) {
+        for g in self.groups() {
+            for (i, spec) in g.specs().iter().enumerate() {
+                f(spec, g.get(i));
+            }
+        }
+    }
+
+    /// How many settings there are.
+    pub fn count(&self) -> usize {
+        self.groups().iter().map(|g| g.specs().len()).sum()
+    }
+
+    /// The setting named `name` (ASCII case ignored).
+    pub fn find(&self, name: &str) -> Option<(SettingId, Spec)> {
+        for (group, g) in self.groups().iter().enumerate() {
+            for (index, spec) in g.specs().iter().enumerate() {
+                if spec.name.eq_ignore_ascii_case(name) {
+                    return Some((SettingId { group, index }, *spec));
+                }
+            }
+        }
+        None
+    }
+
+    /// The value of `id`.
+    pub fn get(&self, id: SettingId) -> f32 {
+        self.groups()[id.group].get(id.index)
+    }
+
+    /// Sets `name` from its wire text `value` (a decimal number, or for a choice one of its
+    /// words); refuses an unknown name, a malformed value or one out of range and then changes
+    /// nothing. Returns the setting's spec and the value now set.
+    pub fn set_text(&mut self, name: &str, value: &str) -> Result<(Spec, f32), SetError> {
+        let (id, spec) = self.find(name).ok_or(SetError::UnknownName)?;
+        let v = if spec.choices.is_empty() {
+            crate::fixed::parse_decimal(value)
+                .filter(|v| v.is_finite())
+                .ok_or(SetError::Malformed(spec))?
+        } else {
+            spec.choices
+                .iter()
+                .position(|w| w.eq_ignore_ascii_case(value))
+                .ok_or(SetError::Malformed(spec))? as f32
+        };
+        if !spec.allows(v) {
+            return Err(SetError::OutOfRange(spec, v));
+        }
+        self.groups_mut()[id.group].set(id.index, v);
+        Ok((spec, v))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    extern crate std;
+    use std::collections::BTreeSet;
+    use std::vec::Vec;
+
+    fn all_specs() -> Vec<Spec> {
+        let mut v = Vec::new();
+        Settings::DEFAULT.for_each(|s, _| v.push(*s));
+        v
+    }
+
+    #[test]
+    fn every_default_is_within_its_range_and_every_name_is_unique() {
+        let mut names = BTreeSet::new();
+        for s in all_specs() {
+            assert!(s.min < s.max, "{}", s.name);
+            assert!(s.allows(s.default), "{} default outside its range", s.name);
+            assert!(names.insert(s.name), "{} twice", s.name);
+            assert!(!s.doc.is_empty() && !s.unit.is_empty(), "{}", s.name);
+            assert!(s
+                .name
+                .bytes()
+                .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_'));
+        }
+        Settings::DEFAULT.for_each(|s, v| assert_eq!(v, s.default, "{}", s.name));
+    }
+
+    #[test]
+    fn no_setting_is_a_hard_limit() {
+        // The supervisor's named limits are not in the registry: nothing can change them.
+        for s in all_specs() {
+            for hard in [
+                "limit",
+                "supply",
+                "max_power",
+                "max_fraction",
+                "min_fraction",
+            ] {
+                assert!(!s.name.contains(hard), "{} looks like a hard limit", s.name);
+            }
+            if s.unit == "C" {
+                assert!(
+                    s.max + MODEL_GUARD_K + 10.0 <= PLA_LIMITS.max_c,
+                    "{}",
+                    s.name
+                );
+                assert!(s.max < TCA_LIMITS.max_c, "{}", s.name);
+            }
+        }
+    }
+
+    #[test]
+    fn set_refuses_bad_input_and_changes_nothing() {
+        let mut s = Settings::DEFAULT;
+        assert_eq!(s.set_text("no_such", "1"), Err(SetError::UnknownName));
+        assert!(matches!(
+            s.set_text("soften_timeout_s", "abc"),
+            Err(SetError::Malformed(_))
+        ));
+        assert!(matches!(
+            s.set_text("soften_timeout_s", "1e3"),
+            Err(SetError::Malformed(_))
+        ));
+        assert!(matches!(
+            s.set_text("soften_timeout_s", "500"),
+            Err(SetError::OutOfRange(_, v)) if v == 500.0
+        ));
+        assert!(matches!(
+            s.set_text("soften_timeout_s", "5"),
+            Err(SetError::OutOfRange(..))
+        ));
+        assert!(matches!(
+            s.set_text("auto_mode", "auto"),
+            Err(SetError::Malformed(_))
+        ));
+        assert_eq!(s, Settings::DEFAULT);
+    }
+
+    #[test]
+    fn set_changes_what_a_morph_runs_with() {
+        let mut s = Settings::DEFAULT;
+        s.set_text("SOFTEN_TIMEOUT_S", "45").unwrap();
+        assert_eq!(s.morph.timeouts().soften_s, 45.0);
+        s.set_text("auto_mode", "GATED").unwrap();
+        assert_eq!(s.morph.resolve(Mode::Auto), Mode::Gated);
+        assert_eq!(s.morph.resolve(Mode::Boost), Mode::Boost);
+        s.set_text("rigid_threshold_c", "40.5").unwrap();
+        assert_eq!(s.morph.thresholds().rigid_threshold_c, 40.5);
+        // Every range end is accepted.
+        for spec in all_specs() {
+            for v in [spec.min, spec.max] {
+                let mut s = Settings::DEFAULT;
+                let (id, _) = s.find(spec.name).unwrap();
+                s.groups_mut()[id.group].set(id.index, v);
+                assert_eq!(s.get(id), v, "{}", spec.name);
+            }
+        }
+    }
+}
