@@ -8,6 +8,9 @@
 use crate::heater::HeaterConfig;
 use crate::protocol::{self, reply, Command, Mode, OutLine, SimCommand};
 use crate::sequencer::{SeqEvent, Sequencer};
+use crate::settings::codec::{self, Blob, LoadError};
+use crate::settings::store::{SaveReport, StoreError};
+use crate::settings::{SetError, Settings, Spec};
 use crate::stats::LoopTiming;
 use crate::supervisor::{Fault, FaultCode, Faults, Frame, Subject, Supervisor};
 use crate::table;
@@ -122,6 +125,17 @@ pub enum Event {
     Seq(SeqEvent),
     /// A safety trip.
     Alarm(Fault),
+    /// What the boot did with the stored settings.
+    Config(ConfigEvent),
+}
+
+/// What the boot did with the stored settings ([`Controller::load_settings`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ConfigEvent {
+    /// The stored settings are in force.
+    Loaded,
+    /// The defaults are in force, and why.
+    Defaults(LoadError),
 }
 
 /// Depth of the unsolicited-line queue; a morph produces at most six events and a trip one.
@@ -129,8 +143,9 @@ pub const EVENT_QUEUE: usize = 16;
 
 /// Longest reply to one command line, bytes: its `data:` lines and final line, each with a
 /// `\n`. A bound for a shell that collects a reply before sending it; HELP, the longest, is
-/// about 730 (checked in `tests/protocol.rs`).
-pub const MAX_REPLY_BYTES: usize = 1024;
+/// about 1000 and CONFIG about 450 with the morph settings alone (checked in
+/// `tests/protocol.rs`); 1536 leaves room for more commands and setting groups.
+pub const MAX_REPLY_BYTES: usize = 1536;
 
 /// The controller state.
 pub struct Controller {
@@ -146,6 +161,12 @@ pub struct Controller {
     /// The faults alarmed since the last RESET (code and subject): each alarms once, however
     /// long it stays present.
     alarmed: heapless::Vec<(FaultCode, Subject), ALARMED_MAX>,
+    /// The live settings (what the next morph runs with).
+    settings: Settings,
+    /// Whether the shell has settings storage (SAVE is then passed to it).
+    storage: bool,
+    /// A SAVE the shell is to carry out ([`Controller::take_save_request`]).
+    save_request: Option<Blob>,
 }
 
 /// How many distinct faults are remembered as alarmed until RESET; beyond it the oldest is
@@ -169,6 +190,9 @@ impl Controller {
             events: Deque::new(),
             timing: None,
             alarmed: heapless::Vec::new(),
+            settings: Settings::DEFAULT,
+            storage: false,
+            save_request: None,
         }
     }
 
@@ -383,6 +407,8 @@ impl Controller {
                 None => out(&protocol::format_error(&reply::ERR_STATS_UNSUPPORTED)),
             },
             Command::Sim(_) => out(&protocol::format_error(&reply::ERR_SIM_UNSUPPORTED)),
+            Command::Config(c) => self.config(c, out),
+            Command::Save => self.save(out),
         }
     }
 
@@ -400,6 +426,11 @@ impl Controller {
             reply::busy_no_reading(&mut l);
             return out(&l);
         }
+        let mode = self.settings.morph.resolve(mode);
+        self.seq.set_limits(
+            self.settings.morph.thresholds(),
+            self.settings.morph.timeouts(),
+        );
         match table::power_for_radius_w(radius_mm) {
             Err(r) => {
                 reply::radius_out_of_range(&mut l, r.min_mm, r.max_mm);
@@ -475,7 +506,132 @@ impl Controller {
                 reply::done_event(&mut l, t_s, radius_mm)
             }
             Event::Alarm(f) => reply::alarm(&mut l, &f),
+            Event::Config(ConfigEvent::Loaded) => {
+                reply::config_loaded_event(&mut l, self.settings.count())
+            }
+            Event::Config(ConfigEvent::Defaults(why)) => {
+                let setting = match why {
+                    LoadError::OutOfRange(name) => Some(name),
+                    _ => None,
+                };
+                reply::config_defaults_event(&mut l, why.as_str(), setting)
+            }
         }
         Some(l)
+    }
+
+    // ---- Settings: the live values, CONFIG, SAVE and the stored settings at boot. ----
+
+    /// The live settings.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// Tells the controller the shell has settings storage: SAVE then queues a request the
+    /// shell takes with [`Controller::take_save_request`] and answers with
+    /// [`Controller::finish_save`]. Without it SAVE is `error: unsupported`.
+    pub fn enable_storage(&mut self) {
+        self.storage = true;
+    }
+
+    /// Puts the settings loaded at boot in force (or the defaults, if `loaded` says why not)
+    /// and queues `event: config loaded` or `event: config defaults reason=<why>`. Never
+    /// heats: it only changes what the next morph runs with.
+    pub fn load_settings(&mut self, loaded: Result<Settings, LoadError>) {
+        let e = match loaded {
+            Ok(s) => {
+                self.settings = s;
+                ConfigEvent::Loaded
+            }
+            Err(why) => {
+                self.settings = Settings::DEFAULT;
+                ConfigEvent::Defaults(why)
+            }
+        };
+        self.push(Event::Config(e));
+    }
+
+    /// The blob a SAVE asks the shell to write, once.
+    pub fn take_save_request(&mut self) -> Option<Blob> {
+        self.save_request.take()
+    }
+
+    /// The SAVE's final reply, once the shell has written (or failed to write) the blob.
+    pub fn finish_save(
+        &mut self,
+        result: Result<SaveReport, StoreError>,
+        out: &mut impl FnMut(&str),
+    ) {
+        let mut l = OutLine::new();
+        match result {
+            Ok(r) => reply::saved(&mut l, r.bytes, r.erases),
+            Err(e) => reply::save_failed(&mut l, e.as_str()),
+        }
+        out(&l);
+    }
+
+    fn config(&mut self, c: protocol::ConfigCommand, out: &mut impl FnMut(&str)) {
+        use protocol::ConfigCommand;
+        let mut l = OutLine::new();
+        if !matches!(c, ConfigCommand::List) && self.busy() {
+            reply::config_busy(&mut l, self.phase());
+            return out(&l);
+        }
+        match c {
+            ConfigCommand::List => {
+                self.settings.for_each(|spec, v| {
+                    l.clear();
+                    reply::config_row(&mut l, &row(spec, v));
+                    out(&l);
+                });
+                l.clear();
+                reply::config_end(&mut l, self.settings.count());
+            }
+            ConfigCommand::Reset => {
+                self.settings = Settings::DEFAULT;
+                reply::config_reset(&mut l);
+            }
+            ConfigCommand::Set { name, value } => {
+                match self.settings.set_text(name.as_str(), value.as_str()) {
+                    Ok((spec, v)) => reply::config_set(&mut l, &row(&spec, v)),
+                    Err(SetError::UnknownName) => reply::config_unknown(&mut l, name.as_str()),
+                    Err(SetError::Malformed(spec)) => {
+                        reply::config_malformed(&mut l, &row(&spec, spec.default))
+                    }
+                    Err(SetError::OutOfRange(spec, v)) => {
+                        reply::config_out_of_range(&mut l, &row(&spec, spec.default), v)
+                    }
+                }
+            }
+        }
+        out(&l);
+    }
+
+    /// SAVE: refused while a morph runs (a flash erase may stall the CPU for longer than a
+    /// control tick, so it happens only with the heaters off); otherwise the shell writes.
+    fn save(&mut self, out: &mut impl FnMut(&str)) {
+        let mut l = OutLine::new();
+        if !self.storage {
+            return out(&protocol::format_error(&reply::ERR_SAVE_UNSUPPORTED));
+        }
+        if self.busy() {
+            reply::config_busy(&mut l, self.phase());
+            return out(&l);
+        }
+        self.save_request = Some(codec::encode(&self.settings));
+    }
+}
+
+/// A setting and its value as `CONFIG` shows them.
+fn row(spec: &Spec, value: f32) -> reply::SettingRow<'static> {
+    reply::SettingRow {
+        name: spec.name,
+        unit: spec.unit,
+        value,
+        default: spec.default,
+        min: spec.min,
+        max: spec.max,
+        decimals: spec.decimals,
+        choices: spec.choices,
     }
 }

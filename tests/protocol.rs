@@ -176,8 +176,21 @@ proptest! {
 fn every_reply_fits_the_shell_reply_buffer() {
     let mut b = Bench::new();
     for cmd in [
-        "HELP", "TABLE", "STATUS", "RANGE", "VERSION", "STATS", "RESET", "ABORT", "MORPH 38",
-        "MORPH 1", "bogus",
+        "HELP",
+        "TABLE",
+        "STATUS",
+        "RANGE",
+        "VERSION",
+        "STATS",
+        "RESET",
+        "ABORT",
+        "MORPH 38",
+        "MORPH 1",
+        "bogus",
+        "CONFIG",
+        "CONFIG SET lock_timeout_s 300",
+        "CONFIG RESET",
+        "SAVE",
     ] {
         let bytes: usize = b
             .send(cmd)

@@ -5,6 +5,8 @@
 use morphlink::bench::{Bench, Noise, NOMINAL_LINK, SIM_WAIT_MAX_S};
 use morphlink::controller::{Config, Controller, Inputs, Outputs, TICK_MS};
 use morphlink::protocol::{reply, OutLine, SimCommand};
+use morphlink::settings::ram_flash::RamFlash;
+use morphlink::settings::store::{block_on_ready, SettingsStore};
 use morphlink_plant::{Lumped, LumpedSpec, Plant};
 
 /// A lumped link as the rig builds it: the plant's true values and the board's thermistor noise.
@@ -54,6 +56,12 @@ impl LinkSetup {
     }
 }
 
+/// The rig's settings flash: two 2 KiB pages written in 8-byte words, as the STM32G431's and
+/// STM32L475's settings areas (`morph-sim --flash-file` keeps its image in a file).
+pub type SimFlash = RamFlash<SIM_FLASH_BYTES, 2048, 8>;
+/// Size of [`SimFlash`], bytes (the size of a `--flash-file`).
+pub const SIM_FLASH_BYTES: usize = 4096;
+
 /// Controller plus a plant on the simulated board plus a clock.
 pub struct Rig<P = Lumped> {
     /// The controller under test.
@@ -63,6 +71,8 @@ pub struct Rig<P = Lumped> {
     pub bench: Bench<P>,
     now_ms: u64,
     waited_ms: u64,
+    store: Option<SettingsStore<SimFlash>>,
+    saves: u32,
 }
 
 impl Rig<Lumped> {
@@ -82,9 +92,40 @@ impl<P: Plant> Rig<P> {
             bench: Bench::new(plant, board, noise),
             now_ms: 0,
             waited_ms: 0,
+            store: None,
+            saves: 0,
         };
         rig.tick();
         rig
+    }
+
+    /// Boots the settings from `flash` as the firmware does: the stored settings or the
+    /// defaults (with `event: config defaults reason=<why>`), and SAVE from now on writes
+    /// `flash`.
+    /// `None` is a flash that could not be read (a damaged image): the defaults, `reason=
+    /// flash-error`, and SAVE starts over on an erased flash.
+    pub fn boot_storage(&mut self, flash: Option<SimFlash>) {
+        let readable = flash.is_some();
+        let mut store = SettingsStore::new(flash.unwrap_or_default(), 0..SIM_FLASH_BYTES as u32)
+            .expect("two whole pages");
+        let loaded = if readable {
+            block_on_ready(store.load())
+        } else {
+            Err(morphlink::settings::codec::LoadError::Flash)
+        };
+        self.ctrl.load_settings(loaded);
+        self.ctrl.enable_storage();
+        self.store = Some(store);
+    }
+
+    /// The settings flash, if [`Rig::boot_storage`] gave one.
+    pub fn flash(&self) -> Option<&SimFlash> {
+        self.store.as_ref().map(|s| s.flash())
+    }
+
+    /// SAVEs carried out (a shell keeping the flash in a file writes it when this grows).
+    pub fn saves(&self) -> u32 {
+        self.saves
     }
 
     /// Rig time, ms.
@@ -164,6 +205,13 @@ impl<P: Plant> Rig<P> {
     pub fn handle_line(&mut self, line: &str, out: &mut impl FnMut(&str)) {
         if let Some(sim) = self.ctrl.handle_line(self.now_ms, line, out) {
             self.sim_command(sim, out);
+        }
+        if let Some(blob) = self.ctrl.take_save_request() {
+            if let Some(store) = &mut self.store {
+                let r = block_on_ready(store.save(&blob));
+                self.saves += 1;
+                self.ctrl.finish_save(r, out);
+            }
         }
         // A command may change the duties (ABORT): applied at once, as the firmware does.
         let now = self.ctrl.outputs();

@@ -1,6 +1,9 @@
 //! Command parsing: one received line → a [`Command`] or a [`ProtoError`].
 
-use super::{Command, ErrorCode, Medium, Mode, ProtoError, Sensor, SimCommand, SimFault, MODES};
+use super::{
+    Command, ConfigCommand, ErrorCode, Medium, Mode, ProtoError, Sensor, SimCommand, SimFault,
+    Word, MODES,
+};
 
 /// Every [`Sensor`], for matching wire words.
 const SENSORS: [Sensor; 3] = [Sensor::Pla, Sensor::Tca, Sensor::Amb];
@@ -63,6 +66,7 @@ pub fn parse_line(line: &str) -> Result<Option<Command>, ProtoError> {
         ("VERSION", Command::Version, "VERSION takes no arguments."),
         ("HELP", Command::Help, "HELP takes no arguments."),
         ("STATS", Command::Stats, "STATS takes no arguments."),
+        ("SAVE", Command::Save, "SAVE takes no arguments."),
     ];
     for (word, command, extra) in simple {
         if first.eq_ignore_ascii_case(word) {
@@ -73,6 +77,8 @@ pub fn parse_line(line: &str) -> Result<Option<Command>, ProtoError> {
         parse_morph(args).map(Some)
     } else if first.eq_ignore_ascii_case("SIM") {
         parse_sim(args).map(|sim| Some(Command::Sim(sim)))
+    } else if first.eq_ignore_ascii_case("CONFIG") {
+        parse_config(args).map(|c| Some(Command::Config(c)))
     } else {
         Err(UNKNOWN)
     }
@@ -196,4 +202,29 @@ fn number(word: Option<&str>, text: &'static str) -> Result<f32, ProtoError> {
     word.and_then(crate::fixed::parse_decimal)
         .filter(|v| v.is_finite())
         .ok_or(bad(text))
+}
+
+/// `CONFIG [SET <name> <value> | RESET]` after the command word. The name and value are only
+/// split here; the settings registry judges them.
+fn parse_config<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<ConfigCommand, ProtoError> {
+    const USAGE: &str = "CONFIG takes nothing, SET <name> <value> or RESET.";
+    let Some(sub) = args.next() else {
+        return Ok(ConfigCommand::List);
+    };
+    if sub.eq_ignore_ascii_case("RESET") {
+        no_more(args, "CONFIG RESET takes no arguments.")?;
+        return Ok(ConfigCommand::Reset);
+    }
+    if !sub.eq_ignore_ascii_case("SET") {
+        return Err(bad(USAGE));
+    }
+    const NEEDS: &str = "CONFIG SET needs a setting name and a value, e.g. CONFIG SET lock_timeout_s 300; send CONFIG for the list.";
+    let name = args.next().ok_or(bad(NEEDS))?;
+    let value = args.next().ok_or(bad(NEEDS))?;
+    no_more(args, "CONFIG SET takes one name and one value.")?;
+    let name = Word::new(name).ok_or(bad(
+        "CONFIG SET: no setting has so long a name; send CONFIG for the list.",
+    ))?;
+    let value = Word::new(value).ok_or(bad("CONFIG SET: the value is too long."))?;
+    Ok(ConfigCommand::Set { name, value })
 }

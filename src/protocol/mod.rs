@@ -135,6 +135,63 @@ pub enum Command {
     Stats,
     /// `SIM ...` (simulated builds only).
     Sim(SimCommand),
+    /// `CONFIG`, `CONFIG SET <name> <value>`, `CONFIG RESET`: the named settings.
+    Config(ConfigCommand),
+    /// `SAVE`: write the settings to flash.
+    Save,
+}
+
+/// What `CONFIG` does.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ConfigCommand {
+    /// `CONFIG`: list every setting with its unit, value and range.
+    List,
+    /// `CONFIG SET <name> <value>`: the name and value as sent (checked by the settings).
+    Set {
+        /// Setting name.
+        name: Word,
+        /// Value text: a number, or a choice's word.
+        value: Word,
+    },
+    /// `CONFIG RESET`: every setting back to its default (not saved).
+    Reset,
+}
+
+/// Longest [`Word`], bytes.
+pub const WORD_MAX: usize = 32;
+
+/// One word of a command line, copied so a [`Command`] stays `Copy` and owns no borrow.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct Word {
+    bytes: [u8; WORD_MAX],
+    len: u8,
+}
+
+impl Word {
+    /// `w` as a word; `None` if longer than [`WORD_MAX`].
+    pub fn new(w: &str) -> Option<Word> {
+        if w.len() > WORD_MAX {
+            return None;
+        }
+        let mut bytes = [0; WORD_MAX];
+        bytes[..w.len()].copy_from_slice(w.as_bytes());
+        Some(Word {
+            bytes,
+            len: w.len() as u8,
+        })
+    }
+
+    /// The word's text.
+    pub fn as_str(&self) -> &str {
+        // Built from a `&str` cut at its own length: always valid UTF-8.
+        core::str::from_utf8(&self.bytes[..self.len as usize]).unwrap_or("")
+    }
+}
+
+impl core::fmt::Debug for Word {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{:?}", self.as_str())
+    }
 }
 
 /// Error codes of `error: <code> <text>` replies (kebab-case on the wire).
@@ -159,6 +216,8 @@ pub enum ErrorCode {
     /// Input was lost while the line arrived (receive buffer full, UART overrun); the line
     /// was not run.
     Overrun,
+    /// The settings storage failed (SAVE did not complete).
+    Storage,
 }
 
 /// A protocol error: a code and a sentence for the user.
@@ -183,6 +242,7 @@ impl ErrorCode {
             ErrorCode::LineTooLong => "line-too-long",
             ErrorCode::Unsupported => "unsupported",
             ErrorCode::Overrun => "overrun",
+            ErrorCode::Storage => "storage",
         }
     }
 }

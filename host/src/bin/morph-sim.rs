@@ -13,8 +13,10 @@ use morphlink::protocol::{
 use morphlink_host::plants::{self, PlantKind};
 use morphlink_host::remote_plant::RemotePlant;
 use morphlink_plant::Plant;
+use morphlink_sim::rig::{SimFlash, SIM_FLASH_BYTES};
 use morphlink_sim::{LinkSetup, Rig};
 use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
 use std::sync::mpsc::{self, TryRecvError};
 use std::time::{Duration, Instant};
 
@@ -45,6 +47,38 @@ struct Cli {
     #[arg(long, default_value_t = morphlink_host::remote_plant::REPLY_TIMEOUT.as_secs_f64(),
           value_parser = parse_timeout)]
     plant_timeout_s: f64,
+    /// Keep the simulated settings flash in this file (created at the first SAVE), so saved
+    /// settings survive a restart as on a board. Without it SAVE is unsupported.
+    #[arg(long, value_name = "PATH")]
+    flash_file: Option<PathBuf>,
+}
+
+/// The settings flash kept in `path`: its image, or `None` (with a note on stderr) if the file
+/// is there but is no flash image; an absent file is an erased flash.
+fn read_flash_file(path: &Path) -> Option<SimFlash> {
+    match std::fs::read(path) {
+        Ok(image) => {
+            let flash = SimFlash::from_image(&image);
+            if flash.is_none() {
+                eprintln!(
+                    "morph-sim: {} is not a {SIM_FLASH_BYTES}-byte flash image ({} bytes); \
+                     defaults, and SAVE writes a new one",
+                    path.display(),
+                    image.len()
+                );
+            }
+            flash
+        }
+        Err(_) => Some(SimFlash::new()),
+    }
+}
+
+/// Writes the flash image to `path` (through a temporary file, so a crash mid-write leaves
+/// the old file).
+fn write_flash_file(path: &Path, flash: &SimFlash) -> std::io::Result<()> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, flash.image())?;
+    std::fs::rename(&tmp, path)
 }
 
 fn parse_timeout(s: &str) -> Result<f64, String> {
@@ -133,6 +167,10 @@ fn run(cli: &Cli) -> Result<(), Stop> {
         ..LinkSetup::NOMINAL
     };
     let mut rig: SimRig = Rig::with_plant(plant(cli, &setup)?, setup.noise());
+    if let Some(path) = &cli.flash_file {
+        rig.boot_storage(read_flash_file(path));
+    }
+    let mut saves = rig.saves();
     let (tx, rx) = mpsc::channel::<Vec<u8>>();
     std::thread::spawn(move || {
         let mut stdin = std::io::stdin().lock();
@@ -168,6 +206,14 @@ fn run(cli: &Cli) -> Result<(), Stop> {
         }
         if let Some(why) = rig.plant_failure() {
             return Err(Stop::PlantFailed(why.to_string()));
+        }
+        if rig.saves() != saves {
+            saves = rig.saves();
+            if let (Some(path), Some(flash)) = (&cli.flash_file, rig.flash()) {
+                if let Err(e) = write_flash_file(path, flash) {
+                    eprintln!("morph-sim: cannot write {}: {e}", path.display());
+                }
+            }
         }
         rig.tick();
         rig.drain_events(&mut emit);
