@@ -658,4 +658,42 @@ mod tests {
             );
         }
     }
+
+    #[test]
+    fn set_limits_changes_the_timeouts_and_thresholds_a_morph_runs_with() {
+        let th = Thresholds {
+            soft_threshold_c: 64.0,
+            rigid_threshold_c: 40.0,
+            ..Thresholds::DEFAULT
+        };
+        let to = PhaseTimeouts {
+            soften_s: 25.0,
+            ..PhaseTimeouts::DEFAULT
+        };
+        // A PLA stuck at 63 °C: soften times out at the set 25 s, not the default 60 s.
+        let mut s = Sequencer::new();
+        s.set_limits(th, to);
+        let mut ev = Vec::new();
+        s.start(0, 38.0, 0.6, Mode::Gated, &mut |e| ev.push(e));
+        let mut t = 0;
+        let result = loop {
+            t += 100;
+            let r = s.step(t, &meas(63.0, 22.0), &mut |e| ev.push(e));
+            if r.is_err() || t > 70_000 {
+                break r;
+            }
+        };
+        assert_eq!(result, Err(PhaseTimeout(Phase::Soften)));
+        assert!((25_000..=25_200).contains(&t), "timed out at {t} ms");
+        // 66 °C ends soften with the set 64 °C threshold, not with the default 70 °C.
+        for (limits, ends) in [(Some((th, to)), true), (None, false)] {
+            let mut s = Sequencer::new();
+            if let Some((th, to)) = limits {
+                s.set_limits(th, to);
+            }
+            s.start(0, 38.0, 0.6, Mode::Gated, &mut |e| ev.push(e));
+            run(&mut s, 100, meas(66.0, 22.0), &mut ev);
+            assert_eq!(s.phase() == Phase::Bend, ends, "{limits:?}");
+        }
+    }
 }

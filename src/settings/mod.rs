@@ -196,7 +196,7 @@ pub const MORPH_SPECS: [Spec; 7] = [
         "s",
         SOFTEN_TIMEOUT_S,
         SOFTEN_TIMEOUT_RANGE_S,
-        0,
+        1,
         "soften longer than this is a phase-timeout fault",
     ),
     Spec::number(
@@ -204,7 +204,7 @@ pub const MORPH_SPECS: [Spec; 7] = [
         "s",
         BEND_TIMEOUT_S,
         BEND_TIMEOUT_RANGE_S,
-        0,
+        1,
         "bend longer than this is a phase-timeout fault",
     ),
     Spec::number(
@@ -212,7 +212,7 @@ pub const MORPH_SPECS: [Spec; 7] = [
         "s",
         LOCK_TIMEOUT_S,
         LOCK_TIMEOUT_RANGE_S,
-        0,
+        1,
         "lock longer than this is a phase-timeout fault",
     ),
 ];
@@ -386,11 +386,29 @@ impl Settings {
                 .position(|w| w.eq_ignore_ascii_case(value))
                 .ok_or(SetError::Malformed(spec))? as f32
         };
+        // What runs is what CONFIG shows: the value rounded to the decimals shown.
+        let v = round_to(v, spec.decimals);
         if !spec.allows(v) {
             return Err(SetError::OutOfRange(spec, v));
         }
         self.groups_mut()[id.group].set(id.index, v);
         Ok((spec, v))
+    }
+}
+
+/// `v` rounded to `decimals` places (half away from zero), as [`crate::fixed::Fixed`] shows it.
+fn round_to(v: f32, decimals: u8) -> f32 {
+    let scale = [1.0f32, 10.0, 100.0, 1000.0][(decimals as usize).min(3)];
+    let x = v * scale;
+    let r = if x >= 0.0 {
+        (x + 0.5) as i64
+    } else {
+        (x - 0.5) as i64
+    };
+    if x.abs() < 1e15 {
+        r as f32 / scale
+    } else {
+        v
     }
 }
 

@@ -131,6 +131,12 @@ impl<S: NorFlash> SettingsStore<S> {
 
     /// Writes `blob` as the settings in force from now on.
     pub async fn save(&mut self, blob: &Blob) -> Result<SaveReport, StoreError> {
+        self.save_bytes(blob.as_bytes()).await
+    }
+
+    /// Writes any bytes as the stored blob (what [`SettingsStore::save`] does with an encoded
+    /// one; the tests store damaged blobs with it).
+    pub async fn save_bytes(&mut self, bytes: &[u8]) -> Result<SaveReport, StoreError> {
         let mut buf = Buffer([0; BUFFER_BYTES]);
         let config = MapConfig::try_new(self.area.clone()).map_err(|_| StoreError::BadArea)?;
         let mut counting = Counting {
@@ -138,12 +144,21 @@ impl<S: NorFlash> SettingsStore<S> {
             erases: 0,
         };
         let mut map = MapStorage::<u8, _, _>::new(&mut counting, config, Cache::new_uncached());
-        map.store_item(&mut buf.0, &SETTINGS_KEY, &blob.as_bytes())
-            .await
-            .map_err(|_| StoreError::Flash)?;
+        match map.store_item(&mut buf.0, &SETTINGS_KEY, &bytes).await {
+            Ok(()) => {}
+            // An area the map cannot make sense of (never formatted, or written by something
+            // else) holds no settings worth keeping: start it afresh, once.
+            Err(sequential_storage::Error::Corrupted { .. }) => {
+                map.erase_all().await.map_err(|_| StoreError::Flash)?;
+                map.store_item(&mut buf.0, &SETTINGS_KEY, &bytes)
+                    .await
+                    .map_err(|_| StoreError::Flash)?;
+            }
+            Err(_) => return Err(StoreError::Flash),
+        }
         drop(map);
         Ok(SaveReport {
-            bytes: blob.as_bytes().len() as u32,
+            bytes: bytes.len() as u32,
             erases: counting.erases,
         })
     }

@@ -192,6 +192,8 @@ fn run(cli: &Cli) -> Result<(), Stop> {
         let _ = writeln!(out, "{l}");
         let _ = out.flush();
     };
+    // The boot's `event: config ...` comes before any reply, as on a board.
+    rig.drain_events(&mut emit);
     let mut asm = LineAssembler::new();
     let start = Instant::now();
     let mut input_open = true;
