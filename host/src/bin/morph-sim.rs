@@ -8,7 +8,7 @@
 use clap::Parser;
 use morphlink::controller::TICK_MS;
 use morphlink::protocol::{
-    format_error, Assembled, LineAssembler, ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
+    format_error, reply, Assembled, LineAssembler, OutLine, ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
 };
 use morphlink_host::plants::{self, PlantKind};
 use morphlink_host::remote_plant::RemotePlant;
@@ -109,14 +109,39 @@ fn parse_speed(s: &str) -> Result<Speed, String> {
 }
 
 /// Feeds received bytes through the protocol's bounded line assembler into the rig.
-/// Stops at a failed plant (the caller ends the run).
-fn feed(rig: &mut SimRig, asm: &mut LineAssembler, bytes: &[u8], emit: &mut impl FnMut(&str)) {
+/// Stops at a failed plant (the caller ends the run). A SAVE's reply goes out only once the
+/// flash file is written (`error: storage` if it could not be).
+fn feed(
+    rig: &mut SimRig,
+    asm: &mut LineAssembler,
+    bytes: &[u8],
+    flash_file: Option<&Path>,
+    emit: &mut impl FnMut(&str),
+) {
     for &b in bytes {
         if rig.plant_failure().is_some() {
             return;
         }
         match asm.push(b) {
-            Some(Assembled::Line(line)) => rig.handle_line(line, emit),
+            Some(Assembled::Line(line)) => {
+                let saves = rig.saves();
+                let mut replies: Vec<String> = Vec::new();
+                rig.handle_line(line, &mut |l: &str| replies.push(l.to_string()));
+                if rig.saves() != saves {
+                    if let (Some(path), Some(flash)) = (flash_file, rig.flash()) {
+                        if let Err(e) = write_flash_file(path, flash) {
+                            eprintln!("morph-sim: cannot write {}: {e}", path.display());
+                            let mut l = OutLine::new();
+                            reply::save_failed(&mut l, "file-error");
+                            replies.pop();
+                            replies.push(l.to_string());
+                        }
+                    }
+                }
+                for r in &replies {
+                    emit(r);
+                }
+            }
             Some(Assembled::TooLong) => emit(&format_error(&ERR_LINE_TOO_LONG)),
             Some(Assembled::Invalid) => emit(&format_error(&ERR_INVALID_LINE)),
             None => {}
@@ -170,7 +195,7 @@ fn run(cli: &Cli) -> Result<(), Stop> {
     if let Some(path) = &cli.flash_file {
         rig.boot_storage(read_flash_file(path));
     }
-    let mut saves = rig.saves();
+
     let (tx, rx) = mpsc::channel::<Vec<u8>>();
     std::thread::spawn(move || {
         let mut stdin = std::io::stdin().lock();
@@ -201,21 +226,19 @@ fn run(cli: &Cli) -> Result<(), Stop> {
         // Take everything that has arrived; at end of input, run on until idle or faulted.
         while input_open {
             match rx.try_recv() {
-                Ok(bytes) => feed(&mut rig, &mut asm, &bytes, &mut emit),
+                Ok(bytes) => feed(
+                    &mut rig,
+                    &mut asm,
+                    &bytes,
+                    cli.flash_file.as_deref(),
+                    &mut emit,
+                ),
                 Err(TryRecvError::Empty) => break,
                 Err(TryRecvError::Disconnected) => input_open = false,
             }
         }
         if let Some(why) = rig.plant_failure() {
             return Err(Stop::PlantFailed(why.to_string()));
-        }
-        if rig.saves() != saves {
-            saves = rig.saves();
-            if let (Some(path), Some(flash)) = (&cli.flash_file, rig.flash()) {
-                if let Err(e) = write_flash_file(path, flash) {
-                    eprintln!("morph-sim: cannot write {}: {e}", path.display());
-                }
-            }
         }
         rig.tick();
         rig.drain_events(&mut emit);
@@ -237,7 +260,13 @@ fn run(cli: &Cli) -> Result<(), Stop> {
             // Nothing running and input still open: wait for input instead of spinning.
             Speed::Max if input_open && !rig.ctrl.busy() => {
                 if let Ok(bytes) = rx.recv_timeout(Duration::from_millis(50)) {
-                    feed(&mut rig, &mut asm, &bytes, &mut emit);
+                    feed(
+                        &mut rig,
+                        &mut asm,
+                        &bytes,
+                        cli.flash_file.as_deref(),
+                        &mut emit,
+                    );
                 }
             }
             Speed::Max => {}

@@ -95,6 +95,8 @@ pub enum Target {
         program: PathBuf,
         /// Simulation speed, a factor of real time.
         speed: f64,
+        /// morph-sim's `--flash-file`: where the simulated settings flash is kept.
+        flash_file: Option<PathBuf>,
     },
 }
 
@@ -289,8 +291,16 @@ impl Link {
                     path.clone(),
                 ))
             }
-            Target::Sim { program, speed } => {
-                let mut child = Command::new(program)
+            Target::Sim {
+                program,
+                speed,
+                flash_file,
+            } => {
+                let mut command = Command::new(program);
+                if let Some(f) = flash_file {
+                    command.arg("--flash-file").arg(f);
+                }
+                let mut child = command
                     .arg("--speed")
                     .arg(format!("{speed}"))
                     .stdin(Stdio::piped())

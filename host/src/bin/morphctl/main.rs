@@ -1,6 +1,7 @@
 //! `morphctl`: drive a morphlink board over its serial port, or `morph-sim` as a child
 //! process, with protocol v1: morph to a radius and follow the phases, STATUS, ABORT, log
 //! telemetry to CSV and plot a run (SVG, or PNG without text).
+mod config;
 mod link;
 mod telemetry;
 
@@ -51,6 +52,10 @@ struct Cli {
     /// The morph-sim executable (default: beside morphctl, else on the PATH).
     #[arg(long)]
     sim_program: Option<PathBuf>,
+    /// Keep morph-sim's settings flash in this file (its `--flash-file`), so `config save`
+    /// survives a restart.
+    #[arg(long, requires = "sim")]
+    sim_flash_file: Option<PathBuf>,
     #[command(subcommand)]
     cmd: Cmd,
 }
@@ -97,6 +102,11 @@ enum Cmd {
         /// The plot (.svg, or .png without text).
         out: PathBuf,
     },
+    /// The device's settings: list, set one, reset all to defaults, save to flash.
+    Config {
+        #[command(subcommand)]
+        cmd: Option<config::ConfigCmd>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -120,6 +130,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
         Target::Sim {
             program: cli.sim_program.clone().unwrap_or_else(default_sim_program),
             speed: cli.sim_speed,
+            flash_file: cli.sim_flash_file.clone(),
         }
     } else {
         Target::Serial {
@@ -192,6 +203,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
             }
             Ok(code)
         }
+        Cmd::Config { cmd } => config::run(&mut link, cmd.unwrap_or(config::ConfigCmd::List)),
         Cmd::Plot { .. } => unreachable!("handled above"),
     }
 }
