@@ -103,3 +103,51 @@ pub fn sim_command(_: &mut Controller, now_ms: u64, cmd: SimCommand, out: &mut i
         s.bench.command(cmd, out);
     });
 }
+
+/// The emulated board's settings flash: QEMU's STM32L475 flash is read-only to the firmware (its
+/// model ignores the flash controller's program and erase commands), so the settings live in
+/// a RAM flash in cortex-m-rt's `.uninit` section, which the start-up code neither loads nor
+/// zeroes: SAVE survives a reset (`SIM PANIC`, the watchdog), not a restart of QEMU.
+pub type SettingsFlash = morphlink::settings::ram_flash::RamFlash<4096, 2048, 8>;
+
+/// The emulated settings area: the whole [`SettingsFlash`], two 2 KiB pages as on the L475.
+pub const SETTINGS_AREA: core::ops::Range<u32> = 0..4096;
+
+/// Marks a [`SettingsFlash`] the firmware set up; anything else is power-on garbage.
+const FLASH_MAGIC: u32 = 0x4D4C_5346; // "MLSF"
+
+#[repr(C)]
+struct KeptFlash {
+    magic: u32,
+    flash: SettingsFlash,
+}
+
+struct FlashSlot(core::cell::UnsafeCell<core::mem::MaybeUninit<KeptFlash>>);
+
+// SAFETY: taken once, at boot, before the tasks start (see `settings_flash`).
+unsafe impl Sync for FlashSlot {}
+
+#[link_section = ".uninit.morphlink_settings"]
+static FLASH_SLOT: FlashSlot =
+    FlashSlot(core::cell::UnsafeCell::new(core::mem::MaybeUninit::uninit()));
+
+/// The settings flash kept across resets: erased at the first boot after power-on (no magic),
+/// as it was otherwise. Call once.
+pub fn settings_flash() -> &'static mut SettingsFlash {
+    static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+    assert!(
+        !TAKEN.swap(true, core::sync::atomic::Ordering::Relaxed),
+        "taken once"
+    );
+    let kept = FLASH_SLOT.0.get() as *mut KeptFlash;
+    // SAFETY: taken once (above), so this is the only reference; every bit pattern is a valid
+    // `KeptFlash` (integers and bytes only), so reading what a previous run left is sound.
+    unsafe {
+        let magic = core::ptr::addr_of!((*kept).magic).read_volatile();
+        if magic != FLASH_MAGIC {
+            core::ptr::addr_of_mut!((*kept).flash).write(SettingsFlash::new());
+            core::ptr::addr_of_mut!((*kept).magic).write_volatile(FLASH_MAGIC);
+        }
+        &mut (*kept).flash
+    }
+}

@@ -48,6 +48,8 @@ mod firmware {
         format_error, parse_line, reply, Assembled, Command, LineAssembler, OutLine, Overrun,
         SimCommand, ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
     };
+    use morphlink::settings::codec::LoadError;
+    use morphlink::settings::store::SettingsStore;
     use morphlink::stats::{write_boot_line, LoopTiming};
     use morphlink::vocab::ResetCause;
     use morphlink_boards::selected as board;
@@ -84,6 +86,28 @@ mod firmware {
         CONTROLLER.lock(|c| f(c.borrow_mut().as_mut().expect("set up in main")))
     }
 
+    /// The settings flash: the chip's own; on the emulated board the firmware's RAM flash
+    /// that survives a reset (QEMU's flash cannot be written).
+    #[cfg(not(emulated))]
+    type SettingsFlash = board::SettingsFlash;
+    #[cfg(emulated)]
+    type SettingsFlash = &'static mut crate::emulated::SettingsFlash;
+
+    /// The settings store over the board's settings area (`None` if the area is unusable: the
+    /// defaults then hold and SAVE is unsupported).
+    #[cfg(not(emulated))]
+    fn settings_store(flash: board::SettingsFlash) -> Option<SettingsStore<SettingsFlash>> {
+        SettingsStore::new(flash, morphlink_boards::settings_area()).ok()
+    }
+    #[cfg(emulated)]
+    fn settings_store(_: ()) -> Option<SettingsStore<SettingsFlash>> {
+        let flash = crate::emulated::settings_flash();
+        SettingsStore::new(flash, crate::emulated::SETTINGS_AREA).ok()
+    }
+
+    /// The settings store the serial task carries out SAVE with.
+    type Store = Option<SettingsStore<SettingsFlash>>;
+
     /// The board's parts; the emulated board gets the firmware's simulated link.
     fn board_parts() -> board::Parts {
         #[cfg(emulated)]
@@ -114,6 +138,17 @@ mod firmware {
 
         let mut ctrl = Controller::new(Config::DEFAULT);
         ctrl.enable_timing(LoopTiming::new(board::CPU_HZ, TICK_MS as u32 * 1000, cause));
+        // The stored settings, range-checked, or the defaults and why; before the control task
+        // starts, and heaters stay off whatever it finds.
+        let mut store = settings_store(parts.settings_flash);
+        let loaded = match &mut store {
+            Some(s) => s.load().await,
+            None => Err(LoadError::Flash),
+        };
+        ctrl.load_settings(loaded);
+        if store.is_some() {
+            ctrl.enable_storage();
+        }
         CONTROLLER.lock(|c| *c.borrow_mut() = Some(ctrl));
 
         let mut boot = OutLine::new();
@@ -124,7 +159,7 @@ mod firmware {
         }
 
         spawner.spawn(control(parts.sensors, parts.heaters, parts.watchdog).expect("spawned once"));
-        spawner.spawn(serial(parts.tx, parts.rx, boot).expect("spawned once"));
+        spawner.spawn(serial(parts.tx, parts.rx, boot, store).expect("spawned once"));
     }
 
     #[embassy_executor::task]
@@ -133,8 +168,8 @@ mod firmware {
     }
 
     #[embassy_executor::task]
-    async fn serial(tx: board::SerialTx, rx: board::SerialRx, boot: OutLine) {
-        serial_loop(tx, rx, boot).await
+    async fn serial(tx: board::SerialTx, rx: board::SerialRx, boot: OutLine, store: Store) {
+        serial_loop(tx, rx, boot, store).await
     }
 
     /// Sums [`READS_PER_TICK`] reads of every input, [`SAMPLE_SPACING`] apart.
@@ -328,7 +363,12 @@ mod firmware {
     /// dropped and counted (its command was run); the count goes out as one `error: busy`
     /// line once all queued output is out, and until then later replies are dropped too. Lost
     /// input makes its line an overrun error.
-    async fn serial_loop(mut tx: impl Write, mut rx: impl SerialReceive, boot: OutLine) {
+    async fn serial_loop(
+        mut tx: impl Write,
+        mut rx: impl SerialReceive,
+        boot: OutLine,
+        mut store: Store,
+    ) {
         let mut reply: heapless::String<REPLY_BYTES> = heapless::String::new();
         let mut out = Output {
             q: heapless::Deque::new(),
@@ -359,6 +399,18 @@ mod firmware {
                     });
                     if changed || abort {
                         APPLY_NOW.signal(());
+                    }
+                    // SAVE: only ever asked for while no morph runs (heaters off), so the CPU
+                    // stalling on its flash during an erase or write holds no heater on.
+                    if let Some(blob) = with_controller(|c| c.take_save_request()) {
+                        if let Some(s) = &mut store {
+                            let t0 = Instant::now();
+                            let r = s.save(&blob).await;
+                            defmt::info!("SAVE took {} ms", t0.elapsed().as_millis());
+                            with_controller(|c| {
+                                c.finish_save(r, &mut |l| push_line(&mut reply, l))
+                            });
+                        }
                     }
                     // Once one reply is dropped, the following ones are too until the notice
                     // is out, so the notice counts the replies right before it (an ABORT's

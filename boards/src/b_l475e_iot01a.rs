@@ -25,7 +25,7 @@
 use crate::stm32 as common;
 pub use crate::stm32::{
     cycles, fatal, heater_pins_low, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx,
-    SerialTx,
+    SerialTx, SettingsFlash,
 };
 use crate::ResetFlags;
 use embassy_stm32::adc::{Adc, AdcChannel, SampleTime};
@@ -111,5 +111,5 @@ pub fn init() -> Parts {
     )
     .expect("USART1 accepts 115200 8N1");
 
-    common::parts(sensors, pwm, serial, p.IWDG, reset_flags)
+    common::parts(sensors, pwm, serial, p.IWDG, p.FLASH, reset_flags)
 }

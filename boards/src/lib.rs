@@ -145,7 +145,7 @@ impl LastFatal {
 }
 
 /// A board's peripherals, configured and ready for the tasks: heaters at 0 % duty.
-pub struct Parts<S, H, W, Tx, Rx> {
+pub struct Parts<S, H, W, Tx, Rx, F = ()> {
     /// Thermistor and supply inputs.
     pub sensors: S,
     /// Both heaters, off.
@@ -161,7 +161,31 @@ pub struct Parts<S, H, W, Tx, Rx> {
     /// The fatal error that ended the previous run, if the firmware recorded one (read once:
     /// the record is cleared at boot).
     pub last_fatal: Option<LastFatal>,
+    /// The flash the settings area is in (`()` where the firmware brings its own: the
+    /// emulated board), with the area from [`settings_area`].
+    pub settings_flash: F,
 }
+
+/// The settings area, byte offsets from the start of the chip's flash: the `SETTINGS` region
+/// of the board's `memory.x`, right after `FLASH` (which the code is linked into, so it can
+/// never overlap the settings; `cargo xtask boards` checks the two regions).
+#[cfg(all(target_os = "none", feature = "_stm32"))]
+pub fn settings_area() -> core::ops::Range<u32> {
+    extern "C" {
+        static __morphlink_settings_start: u8;
+        static __morphlink_settings_end: u8;
+    }
+    // Only the addresses of the linker's symbols are taken, never their contents.
+    let (start, end) = (
+        core::ptr::addr_of!(__morphlink_settings_start) as u32,
+        core::ptr::addr_of!(__morphlink_settings_end) as u32,
+    );
+    (start - FLASH_BASE)..(end - FLASH_BASE)
+}
+
+/// Where the STM32s map their flash.
+#[cfg(all(target_os = "none", feature = "_stm32"))]
+const FLASH_BASE: u32 = 0x0800_0000;
 
 #[cfg(target_os = "none")]
 pub mod reset_record;

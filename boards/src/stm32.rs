@@ -81,7 +81,13 @@ impl SerialReceive for SerialRx {
 }
 
 /// A hardware board's parts.
-pub type HardwareParts = Parts<Sensors, Heaters, Iwdg, SerialTx, SerialRx>;
+pub type HardwareParts = Parts<Sensors, Heaters, Iwdg, SerialTx, SerialRx, SettingsFlash>;
+/// The chip's flash, for the settings area ([`crate::settings_area`]): embassy-stm32's driver
+/// (offsets from the flash start; erase unit the largest sector: the F401's 128 KiB, the G4's
+/// and L4's 2 KiB pages) behind the async NOR-flash trait.
+pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<
+    embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
+>;
 /// Both heaters on [`HeaterTimer`].
 pub type Heaters = PwmHeaters<HeaterTimer>;
 
@@ -239,6 +245,7 @@ pub fn parts(
     pwm: SimplePwm<'static, HeaterTimer>,
     serial: BufferedUart<'static>,
     iwdg: Peri<'static, IWDG>,
+    flash: Peri<'static, embassy_stm32::peripherals::FLASH>,
     reset_flags: ResetFlags,
 ) -> HardwareParts {
     let mut cp = cortex_m::Peripherals::take().expect("taken once");
@@ -253,5 +260,8 @@ pub fn parts(
         rx: SerialRx(rx),
         reset_flags,
         last_fatal: crate::reset_record::take(),
+        settings_flash: embassy_embedded_hal::adapter::BlockingAsync::new(
+            embassy_stm32::flash::Flash::new_blocking(flash),
+        ),
     }
 }

@@ -13,8 +13,10 @@ use embedded_storage_async::nor_flash::{
 #[derive(Clone, Debug)]
 pub struct RamFlash<const BYTES: usize, const PAGE: usize, const WORD: usize> {
     data: [u8; BYTES],
-    /// A word written since its page was last erased (index = byte offset / `WORD`).
-    written: [bool; BYTES],
+    /// Non-zero for a word written since its page was last erased (at the word's first byte).
+    /// Plain bytes, not `bool`s, and the budget below a plain integer: any bit pattern is a
+    /// valid `RamFlash`, so one kept in RAM across a reset can never be an invalid value.
+    written: [u8; BYTES],
     /// Pages erased since creation.
     pub erases: u32,
     /// Bytes written since creation.
@@ -22,7 +24,8 @@ pub struct RamFlash<const BYTES: usize, const PAGE: usize, const WORD: usize> {
     /// Power fails once this many more bytes have been written or erased: the operation under
     /// way stops there (a write keeps the words before that point, an erase leaves the rest of
     /// its page as it was) and every later operation fails, as a board that lost power would.
-    pub fail_after_bytes: Option<u32>,
+    /// `u32::MAX` never fails.
+    pub fail_after_bytes: u32,
 }
 
 /// A [`RamFlash`] error.
@@ -65,10 +68,10 @@ impl<const BYTES: usize, const PAGE: usize, const WORD: usize> RamFlash<BYTES, P
         let () = Self::_GEOMETRY;
         RamFlash {
             data: [0xFF; BYTES],
-            written: [false; BYTES],
+            written: [0; BYTES],
             erases: 0,
             bytes_written: 0,
-            fail_after_bytes: None,
+            fail_after_bytes: u32::MAX,
         }
     }
 
@@ -81,7 +84,7 @@ impl<const BYTES: usize, const PAGE: usize, const WORD: usize> RamFlash<BYTES, P
         let mut f = Self::new();
         f.data.copy_from_slice(image);
         for (w, word) in f.data.chunks(WORD).enumerate() {
-            f.written[w * WORD] = word.iter().any(|&b| b != 0xFF);
+            f.written[w * WORD] = word.iter().any(|&b| b != 0xFF) as u8;
         }
         Some(f)
     }
@@ -93,19 +96,17 @@ impl<const BYTES: usize, const PAGE: usize, const WORD: usize> RamFlash<BYTES, P
 
     /// Spends `n` bytes of the power budget; the bytes allowed before power fails.
     fn budget(&mut self, n: u32) -> u32 {
-        match &mut self.fail_after_bytes {
-            None => n,
-            Some(left) => {
-                let ok = n.min(*left);
-                *left -= ok;
-                ok
-            }
+        if self.fail_after_bytes == u32::MAX {
+            return n;
         }
+        let ok = n.min(self.fail_after_bytes);
+        self.fail_after_bytes -= ok;
+        ok
     }
 
     fn powered(&self) -> Result<(), RamFlashError> {
         match self.fail_after_bytes {
-            Some(0) => Err(RamFlashError::PowerLost),
+            0 => Err(RamFlashError::PowerLost),
             _ => Ok(()),
         }
     }
@@ -158,7 +159,7 @@ impl<const BYTES: usize, const PAGE: usize, const WORD: usize> NorFlash
         for page in (start..end).step_by(PAGE) {
             let n = self.budget(PAGE as u32) as usize;
             self.data[page..page + n].fill(0xFF);
-            self.written[page..page + n].fill(false);
+            self.written[page..page + n].fill(0);
             if n < PAGE {
                 return Err(RamFlashError::PowerLost);
             }
@@ -171,7 +172,7 @@ impl<const BYTES: usize, const PAGE: usize, const WORD: usize> NorFlash
         self.powered()?;
         let start = self.check(offset, bytes.len(), WORD)?;
         for w in (0..bytes.len()).step_by(WORD) {
-            if self.written[start + w] {
+            if self.written[start + w] != 0 {
                 return Err(RamFlashError::WrittenTwice);
             }
         }
@@ -181,7 +182,7 @@ impl<const BYTES: usize, const PAGE: usize, const WORD: usize> NorFlash
             for (d, &b) in self.data[at..at + n].iter_mut().zip(word) {
                 *d &= b;
             }
-            self.written[at] = true;
+            self.written[at] = 1;
             self.bytes_written += n as u32;
             if n < WORD {
                 return Err(RamFlashError::PowerLost);

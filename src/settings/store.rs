@@ -262,7 +262,7 @@ mod tests {
                     block_on_ready(st.save(&codec::encode(&s))).unwrap();
                 }
                 block_on_ready(st.save(&codec::encode(&old))).unwrap();
-                st.flash_mut().fail_after_bytes = Some(budget);
+                st.flash_mut().fail_after_bytes = budget;
                 let done = block_on_ready(st.save(&codec::encode(&new))).is_ok();
                 // Power back: the board boots and loads.
                 let mut rebooted =

@@ -5,8 +5,11 @@
 //! Budgets:
 //! - every image fits its board: flash ≤ the `FLASH` length of the board's `memory.x`, and
 //!   static RAM plus [`STACK_RESERVE_BYTES`] ≤ its `RAM` length;
-//! - the default board's image also fits a small part of the same family:
-//!   [`SMALL_PART_FLASH_BYTES`] of flash and [`SMALL_PART_RAM_BYTES`] of RAM.
+//! - the default board's image also fits a small part: [`SMALL_PART_FLASH_BYTES`] of flash for
+//!   code (the part's flash less its settings area) and [`SMALL_PART_RAM_BYTES`] of RAM;
+//! - every hardware board's `memory.x` has a `SETTINGS` region right after `FLASH` (the code
+//!   is linked into `FLASH`, so it can never overlap the settings; its own `ASSERT` says so
+//!   again at link time), of two or more erase units.
 use morphlink_host::workspace::Workspace;
 use object::elf::{SHF_ALLOC, SHF_WRITE, SHT_NOBITS};
 use object::{Object, ObjectSection, ObjectSymbol, SectionFlags};
@@ -14,12 +17,20 @@ use std::path::{Path, PathBuf};
 
 /// The default board (the `default` feature), which must also fit the small part.
 pub const DEFAULT_BOARD: &str = "nucleo-f401re";
-/// Flash of the small part the default image must fit, bytes: 64 KiB, the smallest STM32F4
-/// with this pinout (STM32F401RB/C-class parts start at 128 KiB; 64 KiB also covers
-/// STM32G431K6-class G4s).
-pub const SMALL_PART_FLASH_BYTES: u64 = 64 * 1024;
-/// RAM of that small part, bytes: 16 KiB.
-pub const SMALL_PART_RAM_BYTES: u64 = 16 * 1024;
+/// Flash for code on the smallest part that holds this firmware and its settings, bytes: a
+/// project choice, re-based when the settings came to flash. The settings store needs two
+/// equal erase units at the end of flash. On a 128 KiB STM32G431xB (2 KiB pages) that is
+/// 4 KiB, leaving 124 KiB for code; on the F4s it is two sectors of 128 KiB, so the smallest
+/// F401 with two equal sectors at its end is the 384 KiB STM32F401RD (sectors 5 and 6), with
+/// 128 KiB for code; a 64 KiB part (G431x6) would keep 60 KiB, less than the image already
+/// is (64 720 B before the settings). 124 KiB leaves the image room to grow by about half.
+pub const SMALL_PART_FLASH_BYTES: u64 = 124 * 1024;
+/// The settings area of every hardware board, at least: two erase units of the largest page
+/// any board here has (the G431's and L475's 2 KiB).
+pub const MIN_SETTINGS_BYTES: u64 = 4 * 1024;
+/// RAM of that small part, bytes: the STM32G431xB's SRAM1 and SRAM2 (22 KiB; its 10 KiB CCM
+/// SRAM is not used), as on the NUCLEO-G431RB. The F401RD has 96 KiB.
+pub const SMALL_PART_RAM_BYTES: u64 = 22 * 1024;
 /// RAM kept for the main stack on top of the static data, bytes. The tasks live in statics, so
 /// the stack only holds `main`, interrupt handlers and the deepest call of a task poll
 /// (`Controller::step`, or a reply with a few 192-byte lines). An estimate with a wide margin,
@@ -87,6 +98,29 @@ fn region_field(memory_x: &str, name: &str, field: &str) -> Option<u64> {
         None => digits.parse().ok()?,
     };
     Some(n * scale)
+}
+
+/// Checks a hardware board's `SETTINGS` region: right after `FLASH`, at least
+/// [`MIN_SETTINGS_BYTES`]; returns its origin and length.
+pub fn settings_region(memory_x: &str) -> Result<(u64, u64), String> {
+    let flash_end = region_origin(memory_x, "FLASH")
+        .zip(region_length(memory_x, "FLASH"))
+        .map(|(o, l)| o + l)
+        .ok_or("no FLASH region")?;
+    let (origin, length) = region_origin(memory_x, "SETTINGS")
+        .zip(region_length(memory_x, "SETTINGS"))
+        .ok_or("no SETTINGS region: the settings need their own flash (docs/settings.md)")?;
+    if origin != flash_end {
+        return Err(format!(
+            "SETTINGS starts at {origin:#x}, not right after FLASH at {flash_end:#x}"
+        ));
+    }
+    if length < MIN_SETTINGS_BYTES {
+        return Err(format!(
+            "SETTINGS is {length} B, under {MIN_SETTINGS_BYTES}"
+        ));
+    }
+    Ok((origin, length))
 }
 
 /// Flash and static RAM of an ELF image, bytes: flash holds every allocated section with
@@ -184,6 +218,9 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
                 mem_path.display(),
                 stack_start(&elf)
             ));
+        }
+        if !board.ends_with("-emulated") {
+            settings_region(&mem).map_err(|e| format!("{}: {e}", mem_path.display()))?;
         }
         images.push(Image {
             board,
@@ -286,6 +323,23 @@ mod tests {
             assert!(region_length(&m, "FLASH").unwrap() >= 64 * 1024, "{b}");
             assert!(region_length(&m, "RAM").unwrap() >= 16 * 1024, "{b}");
         }
+    }
+
+    #[test]
+    fn every_hardware_board_has_a_settings_area_right_after_its_code() {
+        let root = Workspace::containing(Path::new(env!("CARGO_MANIFEST_DIR")))
+            .unwrap()
+            .root;
+        for b in boards(&root).unwrap() {
+            if b.ends_with("-emulated") {
+                continue;
+            }
+            let m = std::fs::read_to_string(memory_x(&root, &b)).unwrap();
+            settings_region(&m).unwrap_or_else(|e| panic!("{b}: {e}"));
+        }
+        let overlapping = "FLASH : ORIGIN = 0x08000000, LENGTH = 128K\nSETTINGS : ORIGIN = 0x0801F000, LENGTH = 4K\n";
+        assert!(settings_region(overlapping).is_err());
+        assert!(settings_region("FLASH : ORIGIN = 0x08000000, LENGTH = 128K\n").is_err());
     }
 
     #[test]

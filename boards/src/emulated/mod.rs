@@ -183,5 +183,6 @@ pub fn init(link: &'static dyn SimulatedLink) -> Parts {
         rx,
         reset_flags,
         last_fatal,
+        settings_flash: (),
     }
 }
