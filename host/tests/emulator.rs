@@ -662,3 +662,46 @@ fn a_help_flood_does_not_starve_the_control_task() {
         "period_max_us={period_max_us}"
     );
 }
+
+#[test]
+fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
+    let Some((qemu, image)) = setup() else {
+        return;
+    };
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
+    let mut emu = Emulator::boot(&qemu, &image).unwrap_or_else(|e| panic!("{e}"));
+    // QEMU starts with zeroed RAM: no settings kept yet.
+    let first = emu.wait_for("event: config ", REPLY).unwrap();
+    check!(
+        emu,
+        first.last().unwrap() == "event: config defaults reason=absent",
+        "{first:?}"
+    );
+    emu.wait_ready(REPLY).unwrap();
+    let set = emu.command("CONFIG SET lock_timeout_s 321", REPLY).unwrap();
+    check!(emu, set.last().unwrap() == "ok lock_timeout_s=321.0 saved=no", "{set:?}");
+    let t0 = std::time::Instant::now();
+    let saved = emu.command("SAVE", REPLY).unwrap();
+    let save_wall = t0.elapsed();
+    check!(emu, saved.last().unwrap().starts_with("ok saved bytes=34 "), "{saved:?}");
+    println!("emulated SAVE round trip: {save_wall:?} wall time");
+    emu.command("CONFIG SET bend_timeout_s 222", REPLY).unwrap();
+
+    emu.write_raw(b"SIM PANIC\n").unwrap();
+    next_boot_line(&mut emu);
+    let again = emu.wait_for("event: config ", REPLY).unwrap();
+    check!(
+        emu,
+        again.last().unwrap() == "event: config loaded settings=7",
+        "{again:?}"
+    );
+    emu.wait_ready(REPLY).unwrap();
+    assert_idle_and_off(&mut emu, "after the reset with saved settings");
+    let config = emu.command("CONFIG", REPLY).unwrap();
+    check!(
+        emu,
+        config.iter().any(|l| l.starts_with("data: lock_timeout_s=321.0 s"))
+            && config.iter().any(|l| l.starts_with("data: bend_timeout_s=120.0 s")),
+        "{config:?}"
+    );
+}
