@@ -679,11 +679,19 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
     );
     emu.wait_ready(REPLY).unwrap();
     let set = emu.command("CONFIG SET lock_timeout_s 321", REPLY).unwrap();
-    check!(emu, set.last().unwrap() == "ok lock_timeout_s=321.0 saved=no", "{set:?}");
+    check!(
+        emu,
+        set.last().unwrap() == "ok lock_timeout_s=321.0 saved=no",
+        "{set:?}"
+    );
     let t0 = std::time::Instant::now();
     let saved = emu.command("SAVE", REPLY).unwrap();
     let save_wall = t0.elapsed();
-    check!(emu, saved.last().unwrap().starts_with("ok saved bytes=34 "), "{saved:?}");
+    check!(
+        emu,
+        saved.last().unwrap().starts_with("ok saved bytes=34 "),
+        "{saved:?}"
+    );
     println!("emulated SAVE round trip: {save_wall:?} wall time");
     emu.command("CONFIG SET bend_timeout_s 222", REPLY).unwrap();
 
@@ -700,8 +708,12 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
     let config = emu.command("CONFIG", REPLY).unwrap();
     check!(
         emu,
-        config.iter().any(|l| l.starts_with("data: lock_timeout_s=321.0 s"))
-            && config.iter().any(|l| l.starts_with("data: bend_timeout_s=120.0 s")),
+        config
+            .iter()
+            .any(|l| l.starts_with("data: lock_timeout_s=321.0 s"))
+            && config
+                .iter()
+                .any(|l| l.starts_with("data: bend_timeout_s=120.0 s")),
         "{config:?}"
     );
 }
