@@ -512,4 +512,21 @@ mod tests {
             }
         }
     }
+
+    #[test]
+    fn the_settings_doc_names_every_setting_and_its_range() {
+        let doc = include_str!("../../docs/settings.md");
+        for s in all_specs() {
+            let row = doc
+                .lines()
+                .find(|l| l.starts_with(&std::format!("| `{}` |", s.name)))
+                .unwrap_or_else(|| panic!("docs/settings.md has no row for {}", s.name));
+            if s.choices.is_empty() {
+                let d = s.decimals as usize;
+                let range = std::format!("{:.d$}–{:.d$}", s.min, s.max);
+                assert!(row.contains(&range), "{}: {range} not in {row}", s.name);
+                assert!(row.contains(&std::format!("| {:.d$} |", s.default)), "{row}");
+            }
+        }
+    }
 }
