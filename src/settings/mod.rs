@@ -525,7 +525,10 @@ mod tests {
                 let d = s.decimals as usize;
                 let range = std::format!("{:.d$}–{:.d$}", s.min, s.max);
                 assert!(row.contains(&range), "{}: {range} not in {row}", s.name);
-                assert!(row.contains(&std::format!("| {:.d$} |", s.default)), "{row}");
+                assert!(
+                    row.contains(&std::format!("| {:.d$} |", s.default)),
+                    "{row}"
+                );
             }
         }
     }
