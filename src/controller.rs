@@ -447,6 +447,7 @@ impl Controller {
 
     fn write_status(&self, l: &mut OutLine) {
         let m = self.sup.live();
+        let targets = self.seq.targets_c();
         let status = reply::StatusReport {
             phase: self.phase(),
             target_mm: self.seq.target_mm(),
@@ -457,6 +458,9 @@ impl Controller {
             p_tca_w: self.powers.tca_w,
             supply_v: self.supply_v,
             fault: self.fault().map(|f| f.code),
+            pla_target_c: targets.pla_c,
+            tca_target_c: targets.tca_c,
+            mode: self.seq.mode_ran(),
         };
         reply::status(l, &status);
     }
