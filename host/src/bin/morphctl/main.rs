@@ -1,12 +1,13 @@
 //! `morphctl`: drive a morphlink board over its serial port, or `morph-sim` as a child
 //! process, with protocol v1: morph to a radius and follow the phases, STATUS, ABORT, log
-//! telemetry to CSV and plot a run (SVG, or PNG without text).
+//! telemetry to CSV and plot a run (SVG or PNG, with text).
 mod link;
 mod telemetry;
 
 use clap::{Parser, Subcommand};
 use link::{default_sim_program, field, Link, LinkError, Target, REPLY_TIMEOUT_S};
 use morphlink::protocol::client::{classify, LineKind};
+use morphlink_host::plot;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -67,7 +68,7 @@ enum Cmd {
         /// Write the telemetry to this CSV file.
         #[arg(long)]
         log: Option<PathBuf>,
-        /// Plot the run to this file (.svg, or .png without text).
+        /// Plot the run to this file (.svg or .png; checked before the morph starts).
         #[arg(long)]
         plot: Option<PathBuf>,
         /// STATUS poll interval, ms of link time.
@@ -94,7 +95,7 @@ enum Cmd {
     Plot {
         /// The CSV file.
         csv: PathBuf,
-        /// The plot (.svg, or .png without text).
+        /// The plot (.svg or .png).
         out: PathBuf,
     },
 }
@@ -110,9 +111,22 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<ExitCode, String> {
+    // A plot that could not be written is refused before anything is sent.
+    if let Cmd::Morph {
+        plot: Some(path), ..
+    } = &cli.cmd
+    {
+        plot::Format::of(path)?;
+    }
     if let Cmd::Plot { csv, out } = &cli.cmd {
+        plot::Format::of(out)?;
         let samples = telemetry::read_csv(csv)?;
-        telemetry::plot(&samples, &csv.display().to_string(), out)?;
+        let name = csv.display().to_string();
+        let title = match samples.iter().rev().find(|s| s.mode != "-") {
+            Some(s) => format!("{name}: {} ran", s.mode),
+            None => name,
+        };
+        telemetry::plot(&samples, &title, out)?;
         println!("wrote {}", out.display());
         return Ok(ExitCode::SUCCESS);
     }
@@ -180,7 +194,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 }
             }
             if let Some(path) = plot {
-                let title = format!("MORPH {} {} on {}", opts.radius_mm, opts.mode, link.name);
+                let title = telemetry::title(opts.radius_mm, &opts.mode, &samples, &link.name);
                 if samples.is_empty() {
                     println!("plot: skipped, no samples were logged");
                 } else {
