@@ -57,3 +57,289 @@ fn a_plot_morphctl_cannot_write_is_refused_before_the_device_is_started() {
     assert!(!dir.join("run.jpg").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+const MORPH_SIM: &str = env!("CARGO_BIN_EXE_morph-sim");
+
+/// morph-sim that counts its starts in `starts` and records every line to it in
+/// `to_device.log` and from it in `from_device.log`.
+fn counted_sim(dir: &Path) -> PathBuf {
+    script(
+        dir,
+        "device.sh",
+        &format!(
+            "echo start >> '{}'; tee '{}' | '{MORPH_SIM}' \"$@\" | tee '{}'",
+            dir.join("starts").display(),
+            dir.join("to_device.log").display(),
+            dir.join("from_device.log").display()
+        ),
+    )
+}
+
+fn read(path: &Path) -> String {
+    std::fs::read_to_string(path).unwrap_or_default()
+}
+
+/// True if a STATUS line shows both heaters off in idle or fault.
+fn heaters_off(status: &str) -> bool {
+    status.contains(" p_pla_w=0.000 p_tca_w=0.000 ")
+        && (status.starts_with("ok phase=idle ") || status.starts_with("ok phase=fault "))
+}
+
+#[test]
+fn a_script_injects_a_fault_then_morphs_on_one_simulator_and_logs_every_line() {
+    let dir = scratch("run");
+    let device = counted_sim(&dir);
+    let file = dir.join("fault-then-morph.txt");
+    std::fs::write(
+        &file,
+        "# a dead TCA heater is caught, then a healthy morph on the same link\n\
+         SIM FAULT heater-open tca\n\
+         MORPH 38\n\
+         wait alarm 120   # the supervisor's heating check\n\
+         SIM CLEAR\n\
+         RESET\n\
+         MORPH 40\n\
+         wait done\n\
+         sleep 1\n\
+         SIM STATE\n",
+    )
+    .unwrap();
+    let log = dir.join("session.log");
+    let out = morphctl(&[
+        "--sim",
+        "--sim-speed",
+        "50",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "run",
+        file.to_str().unwrap(),
+        "--log",
+        log.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        read(&dir.join("starts")).lines().count(),
+        1,
+        "one simulator"
+    );
+    let text = read(&log);
+    assert_eq!(text, stdout, "the log file is the session as printed");
+    // In order: each line sent (>) and received (<), with its time.
+    let mut at = 0;
+    for want in [
+        "> SIM FAULT heater-open tca",
+        "< ok fault=heater-open target=tca",
+        "> MORPH 38",
+        "< alarm: heater-not-heating tca",
+        "> RESET",
+        "< ok cleared=heater-not-heating",
+        "> MORPH 40",
+        "< event: done ",
+        "> SIM STATE",
+        "< ok time_s=",
+        "# script done",
+    ] {
+        let found = text[at..]
+            .find(want)
+            .unwrap_or_else(|| panic!("`{want}` missing after byte {at}:\n{text}"));
+        at += found + want.len();
+    }
+    assert!(
+        text.lines()
+            .all(|l| l.starts_with('[') && l[1..].contains(" s] ")),
+        "{text}"
+    );
+    let last = text.lines().last().unwrap();
+    assert!(heaters_off(&last[last.find("< ").unwrap() + 2..]), "{last}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_bad_script_is_refused_before_the_device_is_started() {
+    let dir = scratch("bad-script");
+    let device = counted_sim(&dir);
+    let file = dir.join("typo.txt");
+    std::fs::write(&file, "MORPH 38\nwait dome\n").unwrap();
+    let out = morphctl(&[
+        "--sim",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "run",
+        file.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        err.contains("typo.txt: line 2: `wait` needs `done` or `alarm`"),
+        "{err}"
+    );
+    assert!(!dir.join("starts").exists(), "the device was started");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_script_that_fails_mid_morph_ends_in_abort_and_the_device_reports_the_heaters_off() {
+    let dir = scratch("run-fails");
+    let device = counted_sim(&dir);
+    let file = dir.join("short-wait.txt");
+    // The morph takes about 25 s of link time; the wait allows 2.
+    std::fs::write(&file, "MORPH 38\nwait done 2\nSTATUS\n").unwrap();
+    let out = morphctl(&[
+        "--sim",
+        "--sim-speed",
+        "2",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "run",
+        file.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{stdout}");
+    assert!(
+        stdout.contains("# line 2: no done within 2 s; stopping the heaters"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("heaters off: ok phase=idle"), "{stdout}");
+    assert!(
+        !stdout.contains("> STATUS\n"),
+        "the script went on after the failure"
+    );
+    // Seen from the device's side: ABORT, then a STATUS with both heaters off.
+    let to = read(&dir.join("to_device.log"));
+    let after_abort = to
+        .split("ABORT\n")
+        .nth(1)
+        .expect("no ABORT reached the device");
+    assert!(after_abort.starts_with("STATUS"), "{to}");
+    let from = read(&dir.join("from_device.log"));
+    let last_status = from
+        .lines()
+        .filter(|l| l.starts_with("ok phase="))
+        .last()
+        .unwrap();
+    assert!(heaters_off(last_status), "{last_status}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sigint_during_a_script_sleep_ends_in_abort_and_heaters_off() {
+    let dir = scratch("run-sigint");
+    let device = counted_sim(&dir);
+    let file = dir.join("sleepy.txt");
+    std::fs::write(&file, "MORPH 38\nsleep 600\n").unwrap();
+    let child = Command::new(MORPHCTL)
+        .args([
+            "--sim",
+            "--sim-speed",
+            "1",
+            "--sim-program",
+            device.to_str().unwrap(),
+            "run",
+            file.to_str().unwrap(),
+        ])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the morph is under way (the device has said `ok` to MORPH and a phase).
+    let t0 = std::time::Instant::now();
+    while !read(&dir.join("from_device.log")).contains("event: phase soften") {
+        assert!(t0.elapsed().as_secs() < 20, "the morph never started");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(128 + libc::SIGINT), "{stdout}");
+    assert!(
+        stdout.contains("interrupted by SIGINT (Ctrl-C); stopping the heaters"),
+        "{stdout}"
+    );
+    let from = read(&dir.join("from_device.log"));
+    let last_status = from
+        .lines()
+        .filter(|l| l.starts_with("ok phase="))
+        .last()
+        .unwrap();
+    assert!(heaters_off(last_status), "{last_status}");
+    assert!(read(&dir.join("to_device.log")).contains("ABORT"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A TCP serial port in front of a fresh morph-sim per connection, as the emulated image
+/// serves its USART1: the address and the thread serving it.
+fn tcp_sim(speed: &str) -> (String, std::thread::JoinHandle<()>) {
+    use std::io::{Read, Write};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    let speed = speed.to_string();
+    let handle = std::thread::spawn(move || {
+        let (mut sock, _) = listener.accept().unwrap();
+        let mut sim = Command::new(MORPH_SIM)
+            .args(["--speed", &speed])
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut to_sim = sim.stdin.take().unwrap();
+        let mut from_sim = sim.stdout.take().unwrap();
+        let mut back = sock.try_clone().unwrap();
+        let pump = std::thread::spawn(move || {
+            let mut buf = [0u8; 512];
+            while let Ok(n) = from_sim.read(&mut buf) {
+                if n == 0 || back.write_all(&buf[..n]).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut buf = [0u8; 512];
+        while let Ok(n) = sock.read(&mut buf) {
+            if n == 0 || to_sim.write_all(&buf[..n]).is_err() {
+                break;
+            }
+        }
+        drop(to_sim);
+        let _ = sim.kill();
+        let _ = sim.wait();
+        let _ = pump.join();
+    });
+    (addr, handle)
+}
+
+#[test]
+fn tcp_reaches_a_serial_port_served_over_tcp_and_finds_its_sim_commands() {
+    let dir = scratch("tcp");
+    let (addr, server) = tcp_sim("20");
+    let plot = dir.join("tcp.svg");
+    let out = morphctl(&[
+        "--tcp",
+        &addr,
+        "--tcp-speed",
+        "20",
+        "morph",
+        "40",
+        "--plot",
+        plot.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("event: done"), "{stdout}");
+    // SIM STATE answered over TCP: the plot has the simulated radius.
+    let svg = read(&plot);
+    assert!(svg.contains(&format!("on tcp:{addr}")) && svg.contains("radius (mm)"));
+    server.join().unwrap();
+    // Nothing listening: named as such.
+    let out = morphctl(&["--tcp", &addr, "status"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(err.contains(&format!("cannot connect to {addr}")), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

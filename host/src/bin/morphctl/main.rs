@@ -2,6 +2,7 @@
 //! process, with protocol v1: morph to a radius and follow the phases, STATUS, ABORT, log
 //! telemetry to CSV and plot a run (SVG or PNG, with text).
 mod link;
+mod script;
 mod telemetry;
 
 use clap::{Parser, Subcommand};
@@ -38,8 +39,16 @@ const ABORT_TRIES: u32 = 3;
 )]
 struct Cli {
     /// Serial port of the board (e.g. /dev/ttyACM0, COM3).
-    #[arg(long, conflicts_with = "sim")]
+    #[arg(long, conflicts_with_all = ["sim", "tcp"])]
     port: Option<String>,
+    /// A serial port served over TCP, HOST:PORT: the emulated image (`cargo xtask emulate
+    /// --port PORT`) or a serial-to-TCP bridge.
+    #[arg(long, conflicts_with = "sim")]
+    tcp: Option<String>,
+    /// How many times faster than real time the device on --tcp runs: 20 for the emulated
+    /// image, 1 for a board behind a bridge.
+    #[arg(long, default_value_t = 1.0)]
+    tcp_speed: f64,
     /// Baud rate of the serial port.
     #[arg(long, default_value_t = DEFAULT_BAUD)]
     baud: u32,
@@ -91,6 +100,15 @@ enum Cmd {
         /// The line, e.g. `TABLE` or `SIM SUPPLY 11`.
         line: Vec<String>,
     },
+    /// Play a script on one link: protocol lines, `wait done|alarm [<s>]`, `sleep <s>`, `#`
+    /// comments; every line sent and received is logged with its time.
+    Run {
+        /// The script file.
+        file: PathBuf,
+        /// Also write the session log to this file.
+        #[arg(long)]
+        log: Option<PathBuf>,
+    },
     /// Plot a telemetry CSV written by `morph --log` (needs no device).
     Plot {
         /// The CSV file.
@@ -130,17 +148,31 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
         println!("wrote {}", out.display());
         return Ok(ExitCode::SUCCESS);
     }
+    // A script is read whole before the link opens: a typo changes nothing.
+    let script = match &cli.cmd {
+        Cmd::Run { file, .. } => Some(script::read(file)?),
+        _ => None,
+    };
+    for speed in [cli.sim_speed, cli.tcp_speed] {
+        if !(speed.is_finite() && speed > 0.0) {
+            return Err(format!(
+                "--sim-speed and --tcp-speed must be above 0, not {speed}"
+            ));
+        }
+    }
     let target = if cli.sim {
         Target::Sim {
             program: cli.sim_program.clone().unwrap_or_else(default_sim_program),
             speed: cli.sim_speed,
         }
+    } else if let Some(addr) = &cli.tcp {
+        Target::Tcp { addr: addr.clone() }
     } else {
         Target::Serial {
             path: cli
                 .port
                 .clone()
-                .ok_or("say where the link is: --port <serial port> or --sim")?,
+                .ok_or("say where the link is: --port <serial port>, --tcp <HOST:PORT> or --sim")?,
             baud: cli.baud,
         }
     };
@@ -148,6 +180,17 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
     let mut link = Link::open(&target)?;
     link.watch(signals);
     let version = link.handshake()?;
+    // Link seconds per host second.
+    let speed = match target {
+        Target::Sim { speed, .. } => speed,
+        Target::Tcp { .. } => {
+            // The emulated image answers SIM commands (its time, its true radius); a bridge
+            // to a board does not.
+            link.probe_simulated()?;
+            cli.tcp_speed
+        }
+        Target::Serial { .. } => 1.0,
+    };
     let print_event = &mut |l: &str| println!("{l}");
     match cli.cmd {
         Cmd::Status => simple(&mut link, "STATUS"),
@@ -173,7 +216,6 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
             poll_ms,
             timeout_s,
         } => {
-            let speed = if link.simulated { cli.sim_speed } else { 1.0 };
             let opts = MorphOpts {
                 radius_mm,
                 mode,
@@ -205,6 +247,17 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 }
             }
             Ok(code)
+        }
+        Cmd::Run { log, .. } => {
+            let steps = script.expect("read above");
+            let mut log = script::Log::new(log.as_deref())?;
+            log.note(&format!(
+                "{}: firmware {version}; {} steps",
+                link.name,
+                steps.len()
+            ));
+            let end = script::play(&mut link, &steps, speed, &mut log);
+            Ok(end_script(&mut link, end, &mut log))
         }
         Cmd::Plot { .. } => unreachable!("handled above"),
     }
@@ -334,6 +387,58 @@ fn finish(link: &mut Link, end: MorphEnd) -> ExitCode {
         LinkError::Interrupted(sig) => ExitCode::from((128 + sig) as u8),
         _ => ExitCode::FAILURE,
     }
+}
+
+/// Ends a script: whatever happened, the heaters end off. A script that ran to its end is
+/// checked with STATUS (a morph it left running is aborted); one that stopped on an error or
+/// a signal gets ABORT and a heaters-off STATUS.
+fn end_script(link: &mut Link, end: Result<(), script::Stop>, log: &mut script::Log) -> ExitCode {
+    let code = match &end {
+        Ok(()) => {
+            log.note("script done");
+            log.sent("STATUS");
+            let status = link.command_where("STATUS", REPLY_TIMEOUT_S, &mut |l| log.got(l), &|l| {
+                field(l, "phase").is_some() || classify(l) == LineKind::Error
+            });
+            match status {
+                Ok((_, st)) if heaters_off(&st) => {
+                    log.got(&st);
+                    return ExitCode::SUCCESS;
+                }
+                Ok((_, st)) => {
+                    log.got(&st);
+                    log.note("the script left a heater on; stopping the heaters");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    log.note(&format!("{e}; stopping the heaters"));
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Err(script::Stop::Failed(why)) => {
+            log.note(&format!("{why}; stopping the heaters"));
+            ExitCode::FAILURE
+        }
+        Err(script::Stop::Link(e)) => {
+            log.note(&format!("{e}; stopping the heaters"));
+            match e {
+                LinkError::Interrupted(sig) => ExitCode::from((128 + sig) as u8),
+                _ => ExitCode::FAILURE,
+            }
+        }
+    };
+    match stop_heaters(link) {
+        Ok(done) => log.note(&done),
+        Err(e) => {
+            log.note(&format!(
+                "could not confirm the heaters off after {ABORT_TRIES} ABORTs ({e}); {} is lost: the heaters may still be on, cut the heater supply",
+                link.name
+            ));
+            return ExitCode::FAILURE;
+        }
+    }
+    code
 }
 
 /// Sends ABORT until STATUS shows both heaters off (at most [`ABORT_TRIES`] times); signals
