@@ -79,6 +79,21 @@ fn read(path: &Path) -> String {
     std::fs::read_to_string(path).unwrap_or_default()
 }
 
+/// The device's last STATUS reply once it shows the heaters off (the recording `tee` may
+/// write its file a moment after morphctl read the line), within 5 s.
+fn last_status_heaters_off(dir: &Path) -> String {
+    let t0 = std::time::Instant::now();
+    loop {
+        let from = read(&dir.join("from_device.log"));
+        let last = from.lines().filter(|l| l.starts_with("ok phase=")).last();
+        match last {
+            Some(l) if heaters_off(l) => return l.to_string(),
+            _ if t0.elapsed().as_secs() >= 5 => panic!("no heaters-off STATUS last:\n{from}"),
+            _ => std::thread::sleep(std::time::Duration::from_millis(50)),
+        }
+    }
+}
+
 /// True if a STATUS line shows both heaters off in idle or fault.
 fn heaters_off(status: &str) -> bool {
     status.contains(" p_pla_w=0.000 p_tca_w=0.000 ")
@@ -216,13 +231,7 @@ fn a_script_that_fails_mid_morph_ends_in_abort_and_the_device_reports_the_heater
         .nth(1)
         .expect("no ABORT reached the device");
     assert!(after_abort.starts_with("STATUS"), "{to}");
-    let from = read(&dir.join("from_device.log"));
-    let last_status = from
-        .lines()
-        .filter(|l| l.starts_with("ok phase="))
-        .last()
-        .unwrap();
-    assert!(heaters_off(last_status), "{last_status}");
+    last_status_heaters_off(&dir);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -259,13 +268,7 @@ fn sigint_during_a_script_sleep_ends_in_abort_and_heaters_off() {
         stdout.contains("interrupted by SIGINT (Ctrl-C); stopping the heaters"),
         "{stdout}"
     );
-    let from = read(&dir.join("from_device.log"));
-    let last_status = from
-        .lines()
-        .filter(|l| l.starts_with("ok phase="))
-        .last()
-        .unwrap();
-    assert!(heaters_off(last_status), "{last_status}");
+    last_status_heaters_off(&dir);
     assert!(read(&dir.join("to_device.log")).contains("ABORT"));
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -341,5 +344,21 @@ fn tcp_reaches_a_serial_port_served_over_tcp_and_finds_its_sim_commands() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1));
     assert!(err.contains(&format!("cannot connect to {addr}")), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_live_view_without_a_terminal_is_refused_before_the_device_is_started() {
+    let dir = scratch("live");
+    let device = counted_sim(&dir);
+    for args in [&["morph", "38", "--live"][..], &["watch"][..]] {
+        let mut all = vec!["--sim", "--sim-program", device.to_str().unwrap()];
+        all.extend_from_slice(args);
+        let out = morphctl(&all);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains("the live view needs a terminal"), "{err}");
+    }
+    assert!(!dir.join("starts").exists(), "the device was started");
     let _ = std::fs::remove_dir_all(&dir);
 }

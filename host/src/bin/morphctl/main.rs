@@ -2,6 +2,7 @@
 //! process, with protocol v1: morph to a radius and follow the phases, STATUS, ABORT, log
 //! telemetry to CSV and plot a run (SVG or PNG, with text).
 mod link;
+mod live;
 mod script;
 mod telemetry;
 
@@ -86,6 +87,15 @@ enum Cmd {
         /// Abort the morph if it is not done after this many seconds of link time.
         #[arg(long, default_value_t = DEFAULT_MORPH_TIMEOUT_S)]
         timeout_s: f64,
+        /// Follow the morph in a live terminal view (key `a` aborts, `q` quits).
+        #[arg(long)]
+        live: bool,
+    },
+    /// Watch the device in a live terminal view without starting anything (`a` sends ABORT).
+    Watch {
+        /// STATUS poll interval, ms of link time.
+        #[arg(long, default_value_t = DEFAULT_POLL_MS)]
+        poll_ms: u64,
     },
     /// Print STATUS.
     Status,
@@ -135,6 +145,13 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
     } = &cli.cmd
     {
         plot::Format::of(path)?;
+    }
+    // The live view needs a terminal to draw on, known before anything is sent.
+    if matches!(cli.cmd, Cmd::Morph { live: true, .. } | Cmd::Watch { .. }) {
+        use std::io::IsTerminal;
+        if !std::io::stdout().is_terminal() || !std::io::stdin().is_terminal() {
+            return Err("the live view needs a terminal (stdin and stdout); without --live, morph prints its progress as lines".into());
+        }
     }
     if let Cmd::Plot { csv, out } = &cli.cmd {
         plot::Format::of(out)?;
@@ -215,6 +232,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
             plot,
             poll_ms,
             timeout_s,
+            live,
         } => {
             let opts = MorphOpts {
                 radius_mm,
@@ -227,8 +245,12 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 None => None,
             };
             let mut samples = Vec::new();
-            let end = morph(&mut link, &opts, &mut samples, &mut csv);
-            let code = finish(&mut link, end);
+            let code = if live {
+                morph_live(&mut link, &opts, &mut samples, &mut csv)
+            } else {
+                let end = morph(&mut link, &opts, &mut samples, &mut csv);
+                finish(&mut link, end)
+            };
             if let (Some(path), Some(csv)) = (&log, &csv) {
                 println!("telemetry: {} ({} samples)", path.display(), csv.rows);
                 if let Some(e) = &csv.failed {
@@ -247,6 +269,22 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 }
             }
             Ok(code)
+        }
+        Cmd::Watch { poll_ms } => {
+            let poll = Duration::from_secs_f64(poll_ms as f64 / 1000.0 / speed);
+            let mut st = live::LiveState::new(format!("watch {}", link.name), false, f64::INFINITY);
+            let end = {
+                let mut view = LiveTerminal::open()?;
+                live::run(
+                    &mut view.0,
+                    &mut link,
+                    &mut st,
+                    poll,
+                    Vec::new(),
+                    &mut |_| {},
+                )
+            };
+            Ok(end_live(&mut link, end))
         }
         Cmd::Run { log, .. } => {
             let steps = script.expect("read above");
@@ -439,6 +477,89 @@ fn end_script(link: &mut Link, end: Result<(), script::Stop>, log: &mut script::
         }
     }
     code
+}
+
+/// The terminal in the live view's mode (raw, alternate screen) until dropped.
+struct LiveTerminal(ratatui::DefaultTerminal);
+
+impl LiveTerminal {
+    fn open() -> Result<LiveTerminal, String> {
+        ratatui::try_init()
+            .map(LiveTerminal)
+            .map_err(|e| format!("cannot start the live view: {e}"))
+    }
+}
+
+impl Drop for LiveTerminal {
+    fn drop(&mut self) {
+        ratatui::restore();
+    }
+}
+
+/// A morph followed in the live view: MORPH, the view until the user quits, then as `morph`
+/// ends (a user's abort, a lost link or a timeout stop the heaters).
+fn morph_live(
+    link: &mut Link,
+    o: &MorphOpts,
+    samples: &mut Vec<Sample>,
+    csv: &mut Option<CsvLog>,
+) -> ExitCode {
+    let mut events: Vec<String> = Vec::new();
+    let line = format!("MORPH {} {}", o.radius_mm, o.mode);
+    let reply = match link.command(&line, REPLY_TIMEOUT_S, &mut |l| events.push(l.to_string())) {
+        Ok((_, reply)) => reply,
+        Err(LinkError::Closed(e)) => return finish(link, MorphEnd::Failed(e)),
+        Err(e) => return finish(link, MorphEnd::Broken(e)),
+    };
+    if reply != morphlink::protocol::OK {
+        return finish(link, MorphEnd::Failed(format!("MORPH refused: {reply}")));
+    }
+    let title = format!("{line} on {}", link.name);
+    let mut st = live::LiveState::new(title, true, o.timeout_s);
+    let end = match LiveTerminal::open() {
+        Ok(mut view) => live::run(&mut view.0, link, &mut st, o.poll, events, &mut |s| {
+            if let Some(csv) = csv.as_mut() {
+                csv.row(s);
+            }
+            samples.push(s.clone());
+        }),
+        Err(e) => live::LiveEnd::Broken(LinkError::Closed(e)),
+    };
+    end_live(link, end)
+}
+
+/// The exit of a live view, after the terminal is restored: the outcome seen, or ABORT and
+/// a heaters-off STATUS.
+fn end_live(link: &mut Link, end: live::LiveEnd) -> ExitCode {
+    match end {
+        live::LiveEnd::Quit(Some(live::Outcome::Done(r))) => {
+            println!("done: the controller estimates {r:.2} mm");
+            ExitCode::SUCCESS
+        }
+        live::LiveEnd::Quit(Some(live::Outcome::Alarm(a))) => {
+            println!("{a}");
+            ExitCode::FAILURE
+        }
+        live::LiveEnd::Quit(None) => ExitCode::SUCCESS,
+        live::LiveEnd::Abort => {
+            eprintln!("morphctl: abort asked from the live view; stopping the heaters");
+            match stop_heaters(link) {
+                Ok(done) => {
+                    eprintln!("morphctl: {done}");
+                    ExitCode::FAILURE
+                }
+                Err(e) => {
+                    eprintln!("morphctl: could not confirm the heaters off after {ABORT_TRIES} ABORTs ({e}); {} is lost: the heaters may still be on, cut the heater supply", link.name);
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        live::LiveEnd::TimedOut => finish(
+            link,
+            MorphEnd::Broken(LinkError::Timeout("no done within --timeout-s".into())),
+        ),
+        live::LiveEnd::Broken(e) => finish(link, MorphEnd::Broken(e)),
+    }
 }
 
 /// Sends ABORT until STATUS shows both heaters off (at most [`ABORT_TRIES`] times); signals
