@@ -7,12 +7,13 @@
 
 use crate::heater::HeaterConfig;
 use crate::protocol::{self, reply, Command, Mode, OutLine, SimCommand};
+use crate::pulse::{Pulse, PulseError};
 use crate::sequencer::{SeqEvent, Sequencer};
 use crate::stats::LoopTiming;
 use crate::supervisor::{Fault, FaultCode, Faults, Frame, Subject, Supervisor};
 use crate::table;
 use crate::thermistor::ThermistorConfig;
-use crate::vocab::{Phase, Powers};
+use crate::vocab::{Heater, Phase, Powers};
 use heapless::Deque;
 
 /// Control rate, Hz. The fastest thermal part (the TCA, about 1 s) is sampled ten times per
@@ -146,6 +147,8 @@ pub struct Controller {
     /// The faults alarmed since the last RESET (code and subject): each alarms once, however
     /// long it stays present.
     alarmed: heapless::Vec<(FaultCode, Subject), ALARMED_MAX>,
+    /// A running `HEAT` pulse (only while idle: a morph or a fault ends it).
+    pulse: Option<Pulse>,
 }
 
 /// How many distinct faults are remembered as alarmed until RESET; beyond it the oldest is
@@ -169,6 +172,7 @@ impl Controller {
             events: Deque::new(),
             timing: None,
             alarmed: heapless::Vec::new(),
+            pulse: None,
         }
     }
 
@@ -238,6 +242,7 @@ impl Controller {
     }
 
     fn trip(&mut self, fault: Fault) {
+        self.pulse = None;
         self.seq.latch(fault);
         self.powers = Powers::default();
         self.outputs = Outputs::default();
@@ -290,6 +295,14 @@ impl Controller {
         for e in seq_events {
             self.push(Event::Seq(e));
         }
+        // A HEAT pulse drives its heater while no morph runs, until its own clock ends it.
+        let result = result.map(|p| match self.pulse.and_then(|h| h.powers(now_ms)) {
+            Some(pulse) if !self.seq.busy() => pulse,
+            _ => {
+                self.pulse = None;
+                p
+            }
+        });
         match result {
             Ok(p) => {
                 self.powers = p;
@@ -345,6 +358,7 @@ impl Controller {
                 if self.fault().is_none() {
                     self.seq.abort();
                 }
+                self.pulse = None;
                 self.powers = Powers::default();
                 self.outputs = Outputs::default();
                 out(protocol::OK);
@@ -383,7 +397,51 @@ impl Controller {
                 None => out(&protocol::format_error(&reply::ERR_STATS_UNSUPPORTED)),
             },
             Command::Sim(_) => out(&protocol::format_error(&reply::ERR_SIM_UNSUPPORTED)),
+            Command::Heat {
+                heater,
+                power_w,
+                duration_s,
+            } => self.heat(now_ms, heater, power_w, duration_s, out),
         }
+    }
+
+    /// `HEAT`: refused during a morph, with a fault latched or before the first reading; a
+    /// pulse replaces a running one.
+    fn heat(
+        &mut self,
+        now_ms: u64,
+        heater: Heater,
+        power_w: f32,
+        duration_s: f32,
+        out: &mut impl FnMut(&str),
+    ) {
+        let mut l = OutLine::new();
+        if let Some(f) = self.fault() {
+            reply::fault_latched(&mut l, f.code);
+            return out(&l);
+        }
+        if self.seq.busy() {
+            reply::busy_morphing(&mut l, self.seq.phase());
+            return out(&l);
+        }
+        if self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan() {
+            reply::busy_no_reading(&mut l);
+            return out(&l);
+        }
+        match Pulse::new(now_ms, heater, power_w, duration_s) {
+            Ok(p) => {
+                self.pulse = Some(p);
+                reply::heat_started(&mut l, heater, power_w, duration_s);
+            }
+            Err(PulseError::Power(cap_w)) => reply::heat_power_out_of_range(&mut l, heater, cap_w),
+            Err(PulseError::Duration) => reply::heat_duration_out_of_range(&mut l),
+        }
+        out(&l);
+    }
+
+    /// The running `HEAT` pulse's heater, if one runs.
+    pub fn heating(&self) -> Option<Heater> {
+        self.pulse.map(|p| p.heater)
     }
 
     fn morph(&mut self, now_ms: u64, radius_mm: f32, mode: Mode, out: &mut impl FnMut(&str)) {
@@ -394,6 +452,10 @@ impl Controller {
         }
         if self.seq.busy() {
             reply::busy_morphing(&mut l, self.seq.phase());
+            return out(&l);
+        }
+        if let Some(h) = self.heating() {
+            reply::busy_heating(&mut l, h);
             return out(&l);
         }
         if self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan() {

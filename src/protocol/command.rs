@@ -1,6 +1,8 @@
 //! Command parsing: one received line → a [`Command`] or a [`ProtoError`].
 
-use super::{Command, ErrorCode, Medium, Mode, ProtoError, Sensor, SimCommand, SimFault, MODES};
+use super::{
+    Command, ErrorCode, Heater, Medium, Mode, ProtoError, Sensor, SimCommand, SimFault, MODES,
+};
 
 /// Every [`Sensor`], for matching wire words.
 const SENSORS: [Sensor; 3] = [Sensor::Pla, Sensor::Tca, Sensor::Amb];
@@ -73,6 +75,8 @@ pub fn parse_line(line: &str) -> Result<Option<Command>, ProtoError> {
         parse_morph(args).map(Some)
     } else if first.eq_ignore_ascii_case("SIM") {
         parse_sim(args).map(|sim| Some(Command::Sim(sim)))
+    } else if first.eq_ignore_ascii_case("HEAT") {
+        parse_heat(args).map(Some)
     } else {
         Err(UNKNOWN)
     }
@@ -197,3 +201,24 @@ fn number(word: Option<&str>, text: &'static str) -> Result<f32, ProtoError> {
         .filter(|v| v.is_finite())
         .ok_or(bad(text))
 }
+
+/// `HEAT <pla|tca> <power_w> <s>` after the command word (the bounds are checked by the
+/// controller, [`crate::pulse`]).
+fn parse_heat<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<Command, ProtoError> {
+    const USAGE: &str = "HEAT needs a heater, a power in W and seconds, e.g. HEAT pla 0.8 10.";
+    let heater = args
+        .next()
+        .and_then(|w| lookup(&HEATERS, w, Heater::as_str))
+        .ok_or(bad(USAGE))?;
+    let power_w = number(args.next(), USAGE)?;
+    let duration_s = number(args.next(), USAGE)?;
+    no_more(args, USAGE)?;
+    Ok(Command::Heat {
+        heater,
+        power_w,
+        duration_s,
+    })
+}
+
+/// Every [`Heater`], for matching wire words.
+const HEATERS: [Heater; 2] = [Heater::Pla, Heater::Tca];

@@ -135,6 +135,16 @@ pub enum Command {
     Stats,
     /// `SIM ...` (simulated builds only).
     Sim(SimCommand),
+    /// `HEAT <pla|tca> <power_w> <s>`: one heater at a low fixed power for a few seconds,
+    /// supervised (bring-up; bounds in [`crate::pulse`]).
+    Heat {
+        /// The heater.
+        heater: Heater,
+        /// Power, W.
+        power_w: f32,
+        /// Duration, s.
+        duration_s: f32,
+    },
 }
 
 /// Error codes of `error: <code> <text>` replies (kebab-case on the wire).

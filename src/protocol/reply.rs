@@ -12,12 +12,12 @@ use crate::fixed::Fixed;
 use crate::supervisor::{
     Fault, FaultCode, Subject, SAFETY_README_SECTION, SUPPLY_MAX_V, SUPPLY_MIN_V,
 };
-use crate::vocab::Phase;
 use crate::vocab::ResetCause;
+use crate::vocab::{Heater, Phase};
 use core::fmt::{self, Write};
 
 /// HELP text, one `data:` line each.
-pub const HELP: [&str; 11] = [
+pub const HELP: [&str; 12] = [
     "MORPH <radius_mm> [auto|paper|gated|boost|closed]  morph to a radius (see RANGE)",
     "STATUS                          phase, temperatures, powers, supply, fault, targets, mode",
     "ABORT                           both heaters off at once, phase idle",
@@ -29,6 +29,7 @@ pub const HELP: [&str; 11] = [
     "STATS                           control-loop timing (us) and reset cause; hardware only",
     "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|WAIT|CLEAR|PANIC|STALL  simulated builds only",
     "SIM WAIT <s>                    run <s> of simulated time, then ok; morph-sim only",
+    "HEAT <pla|tca> <power_w> <s>    one heater at a low power for a while (bring-up)",
 ];
 
 /// `STATS` on a build that does not time its control loop.
@@ -508,6 +509,55 @@ impl fmt::Display for FaultText<'_> {
             FaultCode::PhaseTimeout => write!(l, "phase-timeout phase {s} did not finish in time"),
         }
     }
+}
+
+/// HEAT accepted: `ok heat=<heater> power_w=<W> s=<s>`.
+pub fn heat_started(l: &mut OutLine, heater: Heater, power_w: f32, duration_s: f32) {
+    ok_with(
+        l,
+        format_args!(
+            "heat={} power_w={} s={}",
+            heater.as_str(),
+            Fixed(power_w, 3),
+            Fixed(duration_s, 1)
+        ),
+    );
+}
+
+/// HEAT power outside (0, cap]: `error: out-of-range HEAT <heater> takes more than 0 and at
+/// most <cap> W`.
+pub fn heat_power_out_of_range(l: &mut OutLine, heater: Heater, cap_w: f32) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!(
+            "HEAT {} takes more than 0 and at most {} W (a low bring-up power)",
+            heater.as_str(),
+            Fixed(cap_w, 3)
+        ),
+    );
+}
+
+/// HEAT duration outside (0, max]: `error: out-of-range HEAT lasts more than 0 and at most
+/// <max> s`.
+pub fn heat_duration_out_of_range(l: &mut OutLine) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!(
+            "HEAT lasts more than 0 and at most {} s",
+            Fixed(crate::pulse::HEAT_MAX_S, 0)
+        ),
+    );
+}
+
+/// MORPH refused while a HEAT pulse runs: `error: busy a HEAT pulse of <heater> runs; ...`.
+pub fn busy_heating(l: &mut OutLine, heater: Heater) {
+    error(
+        l,
+        ErrorCode::Busy,
+        format_args!("a HEAT pulse of {} runs; send ABORT first", heater.as_str()),
+    );
 }
 
 #[cfg(test)]
