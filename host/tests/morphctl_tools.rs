@@ -362,3 +362,111 @@ fn the_live_view_without_a_terminal_is_refused_before_the_device_is_started() {
     assert!(!dir.join("starts").exists(), "the device was started");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+const MORPH_PLANT: &str = env!("CARGO_BIN_EXE_morph-plant");
+
+/// Runs `morphctl bringup` on the simulator started by `device_body` (a `sh` script body that
+/// gets morph-sim's arguments in `"$@"`); returns the exit code and stdout.
+fn bringup(name: &str, device_body: &str) -> (Option<i32>, String) {
+    let dir = scratch(name);
+    let device = script(&dir, "device.sh", device_body);
+    let out = morphctl(&[
+        "--sim",
+        "--sim-speed",
+        "40",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "bringup",
+    ]);
+    let _ = std::fs::remove_dir_all(&dir);
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr),
+    )
+}
+
+/// The last line: the heaters confirmed off.
+fn ends_heaters_off(out: &str) {
+    let last = out
+        .lines()
+        .rev()
+        .find(|l| l.starts_with("sent ABORT"))
+        .unwrap_or_else(|| panic!("no ABORT at the end:\n{out}"));
+    assert!(
+        heaters_off(&last[last.find("ok phase=").unwrap()..]),
+        "{last}"
+    );
+}
+
+#[test]
+fn bringup_passes_a_healthy_link_lumped_and_hifi_and_ends_with_the_heaters_off() {
+    for plant in ["lumped", "hifi"] {
+        let (code, out) = bringup(
+            &format!("bringup-{plant}"),
+            &format!("exec '{MORPH_SIM}' \"$@\" --plant {plant}"),
+        );
+        assert_eq!(code, Some(0), "{plant}:\n{out}");
+        for want in [
+            "ok   thermistors at rest:",
+            "ok   heater supply: 12.00 V",
+            "ok   PLA heater warms its own thermistor",
+            "ok   TCA heater warms its own thermistor",
+            "ok   ambient thermistor stays put",
+        ] {
+            assert!(out.contains(want), "{plant}: `{want}` missing:\n{out}");
+        }
+        ends_heaters_off(&out);
+    }
+}
+
+#[test]
+fn bringup_names_swapped_thermistor_wires() {
+    // The plant's pla and tca bead temperatures swapped on their way to the board's ADC: the
+    // two thermistor wires on each other's inputs.
+    let swap = r"sed -u -E 's/t_pla_c=([^ ]*) t_tca_c=([^ ]*)/t_pla_c=\2 t_tca_c=\1/'";
+    let (code, out) = bringup(
+        "bringup-swapped",
+        &format!(
+            "exec '{MORPH_SIM}' \"$@\" --plant-cmd \"'{MORPH_PLANT}' --plant lumped | {swap}\""
+        ),
+    );
+    assert_eq!(code, Some(1), "{out}");
+    assert!(
+        out.contains("FAIL PLA and TCA swapped: the PLA heater warmed the tca thermistor"),
+        "{out}"
+    );
+    assert!(out.contains("ok   thermistors at rest:"), "{out}");
+    ends_heaters_off(&out);
+}
+
+#[test]
+fn bringup_names_a_dead_heater_and_refuses_a_faulted_device() {
+    let (code, out) = bringup(
+        "bringup-dead",
+        &format!("{{ echo 'SIM FAULT heater-open tca'; cat; }} | '{MORPH_SIM}' \"$@\" | sed -u '/^ok fault=heater-open/d'"),
+    );
+    assert_eq!(code, Some(1), "{out}");
+    assert!(out.contains("FAIL TCA heater warms no thermistor"), "{out}");
+    assert!(
+        out.contains("ok   PLA heater warms its own thermistor"),
+        "{out}"
+    );
+    ends_heaters_off(&out);
+    // A supply out of range trips the supervisor at rest: bring-up refuses the faulted device
+    // and pulses no heater.
+    let (code, out) = bringup(
+        "bringup-supply",
+        &format!(
+            "{{ echo 'SIM SUPPLY 16'; cat; }} | '{MORPH_SIM}' \"$@\" | sed -u '/^ok supply_v=/d'"
+        ),
+    );
+    assert_eq!(code, Some(1), "{out}");
+    // The trip comes within a few ticks: before the first STATUS or during the rest readings.
+    assert!(
+        out.contains("bring-up stopped: the device is in phase fault, not idle: send RESET")
+            || out.contains("bring-up stopped: the device left idle during the rest readings: phase fault, fault supply-out-of-range"),
+        "{out}"
+    );
+    assert!(!out.contains("HEAT"), "a heater was pulsed:\n{out}");
+    ends_heaters_off(&out);
+}

@@ -1,6 +1,7 @@
 //! `morphctl`: drive a morphlink board over its serial port, or `morph-sim` as a child
 //! process, with protocol v1: morph to a radius and follow the phases, STATUS, ABORT, log
 //! telemetry to CSV and plot a run (SVG or PNG, with text).
+mod bringup;
 mod link;
 mod live;
 mod script;
@@ -110,6 +111,9 @@ enum Cmd {
         /// The line, e.g. `TABLE` or `SIM SUPPLY 11`.
         line: Vec<String>,
     },
+    /// Check a new board before its first morph: thermistors agree at rest, the supply is in
+    /// range, each heater's low-power pulse warms its own thermistor; heaters off at the end.
+    Bringup,
     /// Play a script on one link: protocol lines, `wait done|alarm [<s>]`, `sleep <s>`, `#`
     /// comments; every line sent and received is logged with its time.
     Run {
@@ -285,6 +289,44 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 )
             };
             Ok(end_live(&mut link, end))
+        }
+        Cmd::Bringup => {
+            println!(
+                "{}: firmware {version}; bring-up checks (README \"Bring-up\")",
+                link.name
+            );
+            let result = bringup::run(&mut link, speed, &mut |l| println!("  {l}"));
+            let mut code = ExitCode::SUCCESS;
+            match &result {
+                Ok(checks) => {
+                    for c in checks {
+                        println!("{} {}", if c.ok { "ok  " } else { "FAIL" }, c.text);
+                    }
+                    if checks.iter().any(|c| !c.ok) {
+                        code = ExitCode::FAILURE;
+                    }
+                }
+                Err(bringup::Stop::Refused(why)) => {
+                    eprintln!("morphctl: bring-up stopped: {why}");
+                    code = ExitCode::FAILURE;
+                }
+                Err(bringup::Stop::Link(e)) => {
+                    eprintln!("morphctl: bring-up stopped: {e}");
+                    code = match e {
+                        LinkError::Interrupted(sig) => ExitCode::from((128 + sig) as u8),
+                        _ => ExitCode::FAILURE,
+                    };
+                }
+            }
+            // Heaters off at the end whatever happened.
+            match stop_heaters(&mut link) {
+                Ok(done) => println!("{done}"),
+                Err(e) => {
+                    eprintln!("morphctl: could not confirm the heaters off after {ABORT_TRIES} ABORTs ({e}); {} is lost: the heaters may still be on, cut the heater supply", link.name);
+                    code = ExitCode::FAILURE;
+                }
+            }
+            Ok(code)
         }
         Cmd::Run { log, .. } => {
             let steps = script.expect("read above");
