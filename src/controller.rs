@@ -7,7 +7,7 @@
 
 use crate::heater::HeaterConfig;
 use crate::protocol::{self, reply, Command, Mode, OutLine, SimCommand};
-use crate::pulse::{Pulse, PulseError};
+use crate::pulse::Pulse;
 use crate::sequencer::{SeqEvent, Sequencer};
 use crate::stats::LoopTiming;
 use crate::supervisor::{Fault, FaultCode, Faults, Frame, Subject, Supervisor};
@@ -416,27 +416,31 @@ impl Controller {
         out: &mut impl FnMut(&str),
     ) {
         let mut l = OutLine::new();
-        if let Some(f) = self.fault() {
-            reply::fault_latched(&mut l, f.code);
-            return out(&l);
-        }
-        if self.seq.busy() {
-            reply::busy_morphing(&mut l, self.seq.phase());
-            return out(&l);
-        }
-        if self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan() {
-            reply::busy_no_reading(&mut l);
+        if self.refused(&mut l) {
             return out(&l);
         }
         match Pulse::new(now_ms, heater, power_w, duration_s) {
             Ok(p) => {
                 self.pulse = Some(p);
-                reply::heat_started(&mut l, heater, power_w, duration_s);
+                out(protocol::OK);
             }
-            Err(PulseError::Power(cap_w)) => reply::heat_power_out_of_range(&mut l, heater, cap_w),
-            Err(PulseError::Duration) => reply::heat_duration_out_of_range(&mut l),
+            Err(_) => out(&protocol::format_error(&reply::ERR_HEAT_RANGE)),
         }
-        out(&l);
+    }
+
+    /// Whether heating must be refused now (a fault latched, a morph running, no reading yet):
+    /// if so, writes the refusal into `l`. MORPH and HEAT share it.
+    fn refused(&self, l: &mut OutLine) -> bool {
+        if let Some(f) = self.fault() {
+            reply::fault_latched(l, f.code);
+        } else if self.seq.busy() {
+            reply::busy_morphing(l, self.seq.phase());
+        } else if self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan() {
+            reply::busy_no_reading(l);
+        } else {
+            return false;
+        }
+        true
     }
 
     /// The running `HEAT` pulse's heater, if one runs.
@@ -446,20 +450,10 @@ impl Controller {
 
     fn morph(&mut self, now_ms: u64, radius_mm: f32, mode: Mode, out: &mut impl FnMut(&str)) {
         let mut l = OutLine::new();
-        if let Some(f) = self.fault() {
-            reply::fault_latched(&mut l, f.code);
-            return out(&l);
+        if self.pulse.is_some() {
+            return out(&protocol::format_error(&reply::ERR_BUSY_HEATING));
         }
-        if self.seq.busy() {
-            reply::busy_morphing(&mut l, self.seq.phase());
-            return out(&l);
-        }
-        if let Some(h) = self.heating() {
-            reply::busy_heating(&mut l, h);
-            return out(&l);
-        }
-        if self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan() {
-            reply::busy_no_reading(&mut l);
+        if self.refused(&mut l) {
             return out(&l);
         }
         match table::power_for_radius_w(radius_mm) {

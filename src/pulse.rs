@@ -66,7 +66,8 @@ impl Pulse {
         Ok(Pulse {
             heater,
             power_w,
-            until_ms: now_ms + (duration_s * 1000.0) as u64,
+            // At most 60 000 ms: a u32 holds it (and needs no 64-bit float conversion).
+            until_ms: now_ms + (duration_s * 1000.0) as u32 as u64,
         })
     }
 

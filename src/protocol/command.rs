@@ -203,22 +203,28 @@ fn number(word: Option<&str>, text: &'static str) -> Result<f32, ProtoError> {
 }
 
 /// `HEAT <pla|tca> <power_w> <s>` after the command word (the bounds are checked by the
-/// controller, [`crate::pulse`]).
-fn parse_heat<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<Command, ProtoError> {
+/// controller, [`crate::pulse`]). The words are gathered in one loop, so the word splitter is
+/// inlined once, not once per argument (flash on small parts).
+fn parse_heat<'a>(args: impl Iterator<Item = &'a str>) -> Result<Command, ProtoError> {
     const USAGE: &str = "HEAT needs a heater, a power in W and seconds, e.g. HEAT pla 0.8 10.";
-    let heater = args
-        .next()
-        .and_then(|w| lookup(&HEATERS, w, Heater::as_str))
-        .ok_or(bad(USAGE))?;
-    let power_w = number(args.next(), USAGE)?;
-    let duration_s = number(args.next(), USAGE)?;
-    no_more(args, USAGE)?;
+    // Heater, power, seconds, and a slot that must stay empty.
+    let mut w: [Option<&str>; 4] = [None; 4];
+    for (slot, word) in w.iter_mut().zip(args) {
+        *slot = Some(word);
+    }
+    if w[3].is_some() {
+        return Err(bad(USAGE));
+    }
+    // The heaters' words are the sensors' (each heater has its thermistor): the sensor
+    // lookup SIM FAULT uses serves, with amb refused.
+    let heater = match w[0].and_then(|w| lookup(&SENSORS, w, Sensor::as_str)) {
+        Some(Sensor::Pla) => Heater::Pla,
+        Some(Sensor::Tca) => Heater::Tca,
+        _ => return Err(bad(USAGE)),
+    };
     Ok(Command::Heat {
         heater,
-        power_w,
-        duration_s,
+        power_w: number(w[1], USAGE)?,
+        duration_s: number(w[2], USAGE)?,
     })
 }
-
-/// Every [`Heater`], for matching wire words.
-const HEATERS: [Heater; 2] = [Heater::Pla, Heater::Tca];

@@ -12,8 +12,8 @@ use crate::fixed::Fixed;
 use crate::supervisor::{
     Fault, FaultCode, Subject, SAFETY_README_SECTION, SUPPLY_MAX_V, SUPPLY_MIN_V,
 };
+use crate::vocab::Phase;
 use crate::vocab::ResetCause;
-use crate::vocab::{Heater, Phase};
 use core::fmt::{self, Write};
 
 /// HELP text, one `data:` line each.
@@ -182,8 +182,12 @@ pub struct StatusReport {
 /// pla_target_c= tca_target_c= mode=` (the last three appended in that order, so a parser of the
 /// older line still finds its fields).
 pub fn status(l: &mut OutLine, s: &StatusReport) {
-    let _ = write!(l, "{OK} phase={} target_mm=", s.phase.as_str());
-    write_or_dash(l, s.target_mm);
+    let _ = write!(
+        l,
+        "{OK} phase={} target_mm={}",
+        s.phase.as_str(),
+        Dash(s.target_mm)
+    );
     let _ = write!(
         l,
         " t_pla_c={} t_tca_c={} t_amb_c={} p_pla_w={} p_tca_w={} supply_v={} fault={}",
@@ -195,19 +199,25 @@ pub fn status(l: &mut OutLine, s: &StatusReport) {
         Fixed(s.supply_v, 2),
         s.fault.map(|f| f.as_str()).unwrap_or("none"),
     );
-    let _ = write!(l, " pla_target_c=");
-    write_or_dash(l, s.pla_target_c);
-    let _ = write!(l, " tca_target_c=");
-    write_or_dash(l, s.tca_target_c);
-    let _ = write!(l, " mode={}", s.mode.map_or("-", Mode::as_str));
+    let _ = write!(
+        l,
+        " pla_target_c={} tca_target_c={} mode={}",
+        Dash(s.pla_target_c),
+        Dash(s.tca_target_c),
+        s.mode.map_or("-", Mode::as_str)
+    );
 }
 
 /// A value with 2 decimals, or `-` for NaN (no value).
-fn write_or_dash(l: &mut OutLine, v: f32) {
-    if v.is_nan() {
-        let _ = write!(l, "-");
-    } else {
-        let _ = write!(l, "{}", Fixed(v, 2));
+struct Dash(f32);
+
+impl fmt::Display for Dash {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0.is_nan() {
+            f.write_str("-")
+        } else {
+            Fixed(self.0, 2).fmt(f)
+        }
     }
 }
 
@@ -511,54 +521,17 @@ impl fmt::Display for FaultText<'_> {
     }
 }
 
-/// HEAT accepted: `ok heat=<heater> power_w=<W> s=<s>`.
-pub fn heat_started(l: &mut OutLine, heater: Heater, power_w: f32, duration_s: f32) {
-    ok_with(
-        l,
-        format_args!(
-            "heat={} power_w={} s={}",
-            heater.as_str(),
-            Fixed(power_w, 3),
-            Fixed(duration_s, 1)
-        ),
-    );
-}
+/// HEAT power or duration outside its bounds (`crate::pulse`): one text for both (flash).
+pub const ERR_HEAT_RANGE: ProtoError = ProtoError {
+    code: ErrorCode::OutOfRange,
+    text: "HEAT power must be above 0 and at most 20 % of the heater's cap (pla 1 W, tca 0.4 W), for more than 0 and at most 60 s.",
+};
 
-/// HEAT power outside (0, cap]: `error: out-of-range HEAT <heater> takes more than 0 and at
-/// most <cap> W`.
-pub fn heat_power_out_of_range(l: &mut OutLine, heater: Heater, cap_w: f32) {
-    error(
-        l,
-        ErrorCode::OutOfRange,
-        format_args!(
-            "HEAT {} takes more than 0 and at most {} W (a low bring-up power)",
-            heater.as_str(),
-            Fixed(cap_w, 3)
-        ),
-    );
-}
-
-/// HEAT duration outside (0, max]: `error: out-of-range HEAT lasts more than 0 and at most
-/// <max> s`.
-pub fn heat_duration_out_of_range(l: &mut OutLine) {
-    error(
-        l,
-        ErrorCode::OutOfRange,
-        format_args!(
-            "HEAT lasts more than 0 and at most {} s",
-            Fixed(crate::pulse::HEAT_MAX_S, 0)
-        ),
-    );
-}
-
-/// MORPH refused while a HEAT pulse runs: `error: busy a HEAT pulse of <heater> runs; ...`.
-pub fn busy_heating(l: &mut OutLine, heater: Heater) {
-    error(
-        l,
-        ErrorCode::Busy,
-        format_args!("a HEAT pulse of {} runs; send ABORT first", heater.as_str()),
-    );
-}
+/// MORPH refused while a HEAT pulse runs.
+pub const ERR_BUSY_HEATING: ProtoError = ProtoError {
+    code: ErrorCode::Busy,
+    text: "a HEAT pulse runs; send ABORT first",
+};
 
 #[cfg(test)]
 mod tests {
