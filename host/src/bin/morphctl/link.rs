@@ -104,6 +104,10 @@ pub enum Target {
     },
 }
 
+/// Time morphctl waits for a boot line after connecting over TCP, s: the emulated image sends
+/// it about 80 ms after QEMU starts (docs/emulation.md); a bridge to a running board sends
+/// nothing, and costs this once.
+pub const TCP_BOOT_WAIT_S: f64 = 2.0;
 /// Time to connect to a TCP serial port, s: a loopback or LAN peer answers within
 /// milliseconds; beyond this the address is wrong or nothing listens.
 pub const TCP_CONNECT_TIMEOUT_S: f64 = 3.0;

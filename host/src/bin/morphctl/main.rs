@@ -200,6 +200,11 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
     let signals = link::watch_signals()?;
     let mut link = Link::open(&target)?;
     link.watch(signals);
+    if let Target::Tcp { .. } = target {
+        // The emulated image boots when the connection opens and drops what arrives before
+        // its UART runs: wait for its boot line (a bridge to a running board sends none).
+        let _ = link.recv(Duration::from_secs_f64(link::TCP_BOOT_WAIT_S))?;
+    }
     let version = link.handshake()?;
     // Link seconds per host second.
     let speed = match target {
