@@ -7,6 +7,7 @@
 
 use crate::heater::HeaterConfig;
 use crate::protocol::{self, reply, Command, Mode, OutLine, SimCommand};
+use crate::pulse::Pulse;
 use crate::sequencer::{SeqEvent, Sequencer};
 use crate::settings::codec::{self, Blob, LoadError};
 use crate::settings::store::{SaveReport, StoreError};
@@ -15,7 +16,7 @@ use crate::stats::LoopTiming;
 use crate::supervisor::{Fault, FaultCode, Faults, Frame, Subject, Supervisor};
 use crate::table;
 use crate::thermistor::ThermistorConfig;
-use crate::vocab::{Phase, Powers};
+use crate::vocab::{Heater, Phase, Powers};
 use heapless::Deque;
 
 /// Control rate, Hz. The fastest thermal part (the TCA, about 1 s) is sampled ten times per
@@ -167,6 +168,8 @@ pub struct Controller {
     storage: bool,
     /// A SAVE the shell is to carry out ([`Controller::take_save_request`]).
     save_request: Option<Blob>,
+    /// A running `HEAT` pulse (only while idle: a morph or a fault ends it).
+    pulse: Option<Pulse>,
 }
 
 /// How many distinct faults are remembered as alarmed until RESET; beyond it the oldest is
@@ -193,6 +196,7 @@ impl Controller {
             settings: Settings::DEFAULT,
             storage: false,
             save_request: None,
+            pulse: None,
         }
     }
 
@@ -235,9 +239,9 @@ impl Controller {
         self.phase() == Phase::Idle
     }
 
-    /// True while a morph is under way (not idle, not faulted).
+    /// True while a morph or a `HEAT` pulse is under way (not idle, not faulted).
     pub fn busy(&self) -> bool {
-        self.seq.busy()
+        self.seq.busy() || self.pulse.is_some()
     }
 
     fn push(&mut self, e: Event) {
@@ -262,6 +266,7 @@ impl Controller {
     }
 
     fn trip(&mut self, fault: Fault) {
+        self.pulse = None;
         self.seq.latch(fault);
         self.powers = Powers::default();
         self.outputs = Outputs::default();
@@ -314,6 +319,14 @@ impl Controller {
         for e in seq_events {
             self.push(Event::Seq(e));
         }
+        // A HEAT pulse drives its heater while no morph runs, until its own clock ends it.
+        let result = result.map(|p| match self.pulse.and_then(|h| h.powers(now_ms)) {
+            Some(pulse) if !self.seq.busy() => pulse,
+            _ => {
+                self.pulse = None;
+                p
+            }
+        });
         match result {
             Ok(p) => {
                 self.powers = p;
@@ -369,6 +382,7 @@ impl Controller {
                 if self.fault().is_none() {
                     self.seq.abort();
                 }
+                self.pulse = None;
                 self.powers = Powers::default();
                 self.outputs = Outputs::default();
                 out(protocol::OK);
@@ -409,21 +423,63 @@ impl Controller {
             Command::Sim(_) => out(&protocol::format_error(&reply::ERR_SIM_UNSUPPORTED)),
             Command::Config(c) => self.config(c, out),
             Command::Save => self.save(out),
+            Command::Heat {
+                heater,
+                power_w,
+                duration_s,
+            } => self.heat(now_ms, heater, power_w, duration_s, out),
         }
+    }
+
+    /// `HEAT`: refused during a morph, with a fault latched or before the first reading; a
+    /// pulse replaces a running one.
+    fn heat(
+        &mut self,
+        now_ms: u64,
+        heater: Heater,
+        power_w: f32,
+        duration_s: f32,
+        out: &mut impl FnMut(&str),
+    ) {
+        let mut l = OutLine::new();
+        if self.refused(&mut l) {
+            return out(&l);
+        }
+        match Pulse::new(now_ms, heater, power_w, duration_s) {
+            Ok(p) => {
+                self.pulse = Some(p);
+                out(protocol::OK);
+            }
+            Err(_) => out(&protocol::format_error(&reply::ERR_HEAT_RANGE)),
+        }
+    }
+
+    /// Whether heating must be refused now (a fault latched, a morph running, no reading yet):
+    /// if so, writes the refusal into `l`. MORPH and HEAT share it.
+    fn refused(&self, l: &mut OutLine) -> bool {
+        if let Some(f) = self.fault() {
+            reply::fault_latched(l, f.code);
+        } else if self.seq.busy() {
+            reply::busy_morphing(l, self.seq.phase());
+        } else if self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan() {
+            reply::busy_no_reading(l);
+        } else {
+            return false;
+        }
+        true
+    }
+
+    /// The running `HEAT` pulse's heater, if one runs.
+    pub fn heating(&self) -> Option<Heater> {
+        self.pulse.map(|p| p.heater)
     }
 
     fn morph(&mut self, now_ms: u64, radius_mm: f32, mode: Mode, out: &mut impl FnMut(&str)) {
         let mut l = OutLine::new();
-        if let Some(f) = self.fault() {
-            reply::fault_latched(&mut l, f.code);
-            return out(&l);
+        if self.pulse.is_some() {
+            return out(&protocol::format_error(&reply::ERR_BUSY_HEATING));
         }
-        if self.seq.busy() {
-            reply::busy_morphing(&mut l, self.seq.phase());
-            return out(&l);
-        }
-        if self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan() {
-            reply::busy_no_reading(&mut l);
+        if self.refused(&mut l) {
             return out(&l);
         }
         let mode = self.settings.morph.resolve(mode);
@@ -478,6 +534,7 @@ impl Controller {
 
     fn write_status(&self, l: &mut OutLine) {
         let m = self.sup.live();
+        let targets = self.seq.targets_c();
         let status = reply::StatusReport {
             phase: self.phase(),
             target_mm: self.seq.target_mm(),
@@ -488,6 +545,9 @@ impl Controller {
             p_tca_w: self.powers.tca_w,
             supply_v: self.supply_v,
             fault: self.fault().map(|f| f.code),
+            pla_target_c: targets.pla_c,
+            tca_target_c: targets.tca_c,
+            mode: self.seq.mode_ran(),
         };
         reply::status(l, &status);
     }

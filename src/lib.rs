@@ -18,6 +18,7 @@ pub mod heater;
 pub mod link;
 pub mod mathf;
 pub mod protocol;
+pub mod pulse;
 pub mod sequencer;
 pub mod settings;
 pub mod stats;

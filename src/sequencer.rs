@@ -5,7 +5,7 @@
 //! every tick, before it).
 
 use crate::protocol::Mode;
-use crate::strategy::{AnyStrategy, Start, Strategy, Thresholds, Tick, RELEASE_S};
+use crate::strategy::{AnyStrategy, Start, Strategy, TargetTemps, Thresholds, Tick, RELEASE_S};
 use crate::supervisor::{Fault, FaultCode, Subject};
 use crate::vocab::{Measurements, Phase, Powers};
 
@@ -239,6 +239,20 @@ impl Sequencer {
     /// Leaves Fault after a successful RESET: Idle.
     pub fn clear_fault(&mut self) {
         self.fault = None;
+    }
+
+    /// The temperatures the running morph's strategy aims at in the current phase, °C (NaN
+    /// for a heater driven by power, and for both when no morph runs).
+    pub fn targets_c(&self) -> TargetTemps {
+        match (&self.strategy, self.busy()) {
+            (Some(s), true) => s.get().targets_c(self.at.phase),
+            _ => TargetTemps::NONE,
+        }
+    }
+
+    /// The strategy the running or last morph ran (`auto` resolved), None before the first.
+    pub fn mode_ran(&self) -> Option<Mode> {
+        self.strategy.as_ref().map(AnyStrategy::mode)
     }
 
     fn timeout_s(&self) -> f32 {

@@ -204,3 +204,57 @@ fn every_reply_fits_the_shell_reply_buffer() {
         );
     }
 }
+
+#[test]
+fn status_reports_the_target_temperatures_of_the_phase_and_the_mode_that_ran() {
+    let mut b = Bench::new();
+    let st = |b: &mut Bench| b.send("STATUS")[0].clone();
+    let s = st(&mut b);
+    assert!(
+        s.ends_with(" pla_target_c=- tca_target_c=- mode=-"),
+        "before any morph: {s}"
+    );
+    // auto runs the model-driven strategy: both heaters have a target in soften and bend.
+    assert_eq!(b.send("MORPH 38"), ["ok"]);
+    b.run_for(1.0);
+    let s = st(&mut b);
+    let num = |s: &str, k: &str| Bench::field(s, k).and_then(|v| v.parse::<f32>().ok());
+    assert_eq!(num(&s, "pla_target_c"), Some(75.0), "{s}");
+    let tca = num(&s, "tca_target_c").unwrap_or_else(|| panic!("no TCA target: {s}"));
+    assert!(tca > 40.0 && tca < 110.0, "{s}");
+    assert_eq!(
+        Bench::field(&s, "mode").as_deref(),
+        Some(morphlink::strategy::AUTO_STRATEGY.as_str())
+    );
+    // In lock the PLA cools (no target) while the TCA holds its target.
+    assert!(b.run_until(300.0, |b| b.phase() == morphlink::vocab::Phase::Lock));
+    let s = st(&mut b);
+    assert_eq!(
+        Bench::field(&s, "pla_target_c").as_deref(),
+        Some("-"),
+        "{s}"
+    );
+    assert_eq!(num(&s, "tca_target_c"), Some(tca), "{s}");
+    // Done: no targets, the mode of the last morph stays.
+    assert!(b.run_until(900.0, |b| b.phase() == morphlink::vocab::Phase::Idle));
+    let s = st(&mut b);
+    let auto = morphlink::strategy::AUTO_STRATEGY.as_str();
+    assert!(
+        s.ends_with(&format!(" pla_target_c=- tca_target_c=- mode={auto}")),
+        "after the morph: {s}"
+    );
+    // paper drives powers from the table: no temperature targets.
+    assert_eq!(b.send("MORPH 40 paper"), ["ok"]);
+    b.run_for(1.0);
+    let s = st(&mut b);
+    assert!(
+        s.ends_with(" pla_target_c=- tca_target_c=- mode=paper"),
+        "paper: {s}"
+    );
+    b.send("ABORT");
+    let s = st(&mut b);
+    assert!(
+        s.ends_with(" pla_target_c=- tca_target_c=- mode=paper"),
+        "{s}"
+    );
+}

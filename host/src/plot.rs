@@ -1,11 +1,12 @@
 //! The charts' shared plotting: one place for what morphctl's run plots, `morph-model charts`
 //! and `cargo xtask strategies` have in common.
 //!
-//! - [`write`] draws a [`Figure`] into `.svg` (labels, grid) or `.png` (curves and marks only:
-//!   no font ships with the tools) chosen by the file's extension; [`write_svg`] takes a closure
-//!   for SVG-only charts. Both fill the page white, draw, and present.
-//! - [`Frame`] is a panel's caption, margin and label areas; [`mesh`] its axis descriptions
-//!   (or no labels at all without text); [`sci`] and [`whole`] label log axes.
+//! - [`write`] draws a [`Figure`] into `.svg` or `.png` chosen by the file's extension (both
+//!   with text: the PNG's is drawn with [`FONT_TTF`], DejaVu Sans embedded in the tools);
+//!   [`write_svg`] takes a closure for SVG-only charts. Both fill the page white, draw, and
+//!   present. [`Format::of`] checks a path before anything runs.
+//! - [`Frame`] is a panel's caption, margin and label areas; [`mesh`] its axis descriptions;
+//!   [`sci`] and [`whole`] label log axes.
 //! - [`line`] draws a line series with its legend entry, [`marks`] thin vertical marks (phase
 //!   changes), [`labelled_point`] a dot with a text beside it, [`legend`] the series box.
 //! - [`PALETTE`] and the `TAB_*` colours, [`FONT`]; [`PlotError`] converts from every backend's
@@ -61,9 +62,9 @@ pub type PlotResult = Result<(), PlotError>;
 /// A chart file's format, from its extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
-    /// SVG: text is written as SVG text, so captions, axis labels and legends are drawn.
+    /// SVG: text is written as SVG text.
     Svg,
-    /// PNG through the bitmap backend: curves and marks only (no font is bundled).
+    /// PNG through the bitmap backend: text drawn with the embedded [`FONT_TTF`].
     Png,
 }
 
@@ -78,15 +79,16 @@ impl Format {
             Some("svg") => Ok(Format::Svg),
             Some("png") => Ok(Format::Png),
             _ => Err(PlotError(format!(
-                "{}: the plot must end in .svg or .png",
+                "{}: the plot must end in .svg or .png (other formats are not written)",
                 path.display()
             ))),
         }
     }
 
-    /// Whether text (captions, labels, legends) can be drawn in this format.
+    /// Whether text (captions, labels, legends) can be drawn in this format: in both, since
+    /// the PNG's font is embedded.
     pub fn has_text(self) -> bool {
-        self == Format::Svg
+        true
     }
 }
 
@@ -123,6 +125,7 @@ fn page<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     draw: impl FnOnce(&DrawingArea<DB, Shift>) -> PlotResult,
 ) -> PlotResult {
+    register_font()?;
     root.fill(&WHITE)?;
     draw(&root)?;
     root.present()?;
@@ -131,6 +134,28 @@ fn page<DB: DrawingBackend>(
 
 /// The font family of every caption, label and legend.
 pub const FONT: &str = "sans-serif";
+
+/// The font every chart's text is drawn and measured with: DejaVu Sans 2.37 (Bitstream Vera
+/// licence, `host/fonts/LICENSE-DejaVu.txt`), embedded so a chart looks the same on every
+/// machine and needs no system font.
+pub const FONT_TTF: &[u8] = include_bytes!("../fonts/DejaVuSans.ttf");
+
+/// Registers [`FONT_TTF`] as [`FONT`] with plotters, once per process.
+fn register_font() -> PlotResult {
+    static REGISTERED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let ok = *REGISTERED.get_or_init(|| {
+        [FontStyle::Normal, FontStyle::Bold]
+            .into_iter()
+            .all(|style| plotters::style::register_font(FONT, style, FONT_TTF).is_ok())
+    });
+    if ok {
+        Ok(())
+    } else {
+        Err(PlotError(
+            "the embedded chart font could not be read".into(),
+        ))
+    }
+}
 
 /// Matplotlib's "tab10" blue.
 pub const TAB_BLUE: RGBColor = RGBColor(31, 119, 180);
@@ -422,6 +447,34 @@ mod tests {
             .unwrap()
             .contains("log axes"));
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn png_text_is_drawn_with_the_embedded_font() {
+        let (w, h) = (200u32, 40u32);
+        let ink = |text: &str| -> usize {
+            let mut buf = vec![255u8; (w * h * 3) as usize];
+            {
+                let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+                register_font().unwrap();
+                root.draw(&Text::new(
+                    text.to_string(),
+                    (5, 5),
+                    (FONT, 20).into_font().color(&BLACK),
+                ))
+                .unwrap();
+                root.present().unwrap();
+            }
+            buf.iter().filter(|&&b| b < 128).count()
+        };
+        assert_eq!(ink(""), 0);
+        let one = ink("l");
+        let word = ink("MORPH 38 closed");
+        assert!(one > 0, "no pixel drawn for a glyph");
+        assert!(
+            word > 10 * one,
+            "{word} dark bytes for a word, {one} for one glyph"
+        );
     }
 
     #[test]

@@ -602,7 +602,7 @@ fn a_status_flood_loses_no_abort_and_merges_no_lines() {
     assert_idle_and_off(&mut emu, "after the flood");
 }
 
-/// 300 HELP lines in a row (each 11 data lines and an ok, about 1 KiB) do not starve the
+/// 300 HELP lines in a row (each 12 data lines and an ok, about 1 KiB) do not starve the
 /// control task: no watchdog reset, the tick period stays bounded, and the replies that did
 /// not fit are counted in `error: busy` notices.
 #[test]

@@ -188,7 +188,13 @@ fn an_interrupted_run_keeps_its_csv_rows_and_plots_them() {
             .any(|r| r.contains(",soften,") && r.contains(",5.000,")),
         "{csv}"
     );
-    assert!(rows.iter().all(|r| r.split(',').count() == 9), "{csv}");
+    // Every row has the header's columns (time ... radius, target radius, targets, mode).
+    assert!(rows.iter().all(|r| r.split(',').count() == 13), "{csv}");
+    let auto = morphlink::strategy::AUTO_STRATEGY.as_str();
+    assert!(
+        rows.iter().all(|r| r.ends_with(&format!(",{auto}"))),
+        "auto ran {auto}: {csv}"
+    );
     assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
     std::fs::remove_dir_all(&dir).unwrap();
     std::fs::remove_dir_all(&dir0).unwrap();

@@ -96,6 +96,55 @@ pub fn data_text(line: &str) -> Option<&str> {
     line.strip_prefix(DATA_TAG).map(str::trim_start)
 }
 
+/// The value of `key=` in a reply line (`ok phase=bend ...`), None if the line has no such field.
+pub fn field<'a>(line: &'a str, key: &str) -> Option<&'a str> {
+    line.split(' ')
+        .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))
+}
+
+/// A STATUS reply, parsed. Numbers are None when the field is missing, `-` or not a number;
+/// the fields STATUS gained later (the target temperatures, the mode) are None on a device
+/// that does not send them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Status<'a> {
+    /// Phase word (`idle`, `soften`, `bend`, `lock`, `release`, `fault`).
+    pub phase: &'a str,
+    /// Target radius, mm.
+    pub target_mm: Option<f32>,
+    /// PLA, TCA and ambient thermistors, °C.
+    pub temps_c: [Option<f32>; 3],
+    /// PLA and TCA heater powers, W.
+    pub powers_w: [Option<f32>; 2],
+    /// Measured supply, V.
+    pub supply_v: Option<f32>,
+    /// Fault word (`none` or a fault code).
+    pub fault: &'a str,
+    /// The PLA and TCA heaters' target temperatures, °C (None: no target, or an older device).
+    pub targets_c: [Option<f32>; 2],
+    /// The strategy the running or last morph ran (None: none yet, or an older device).
+    pub mode: Option<&'a str>,
+}
+
+impl<'a> Status<'a> {
+    /// Parses a STATUS reply; None unless it is an `ok` line with a `phase=` field.
+    pub fn parse(line: &'a str) -> Option<Status<'a>> {
+        if classify(line) != LineKind::Ok {
+            return None;
+        }
+        let num = |key: &str| field(line, key).and_then(|v| v.parse::<f32>().ok());
+        Some(Status {
+            phase: field(line, "phase")?,
+            target_mm: num("target_mm"),
+            temps_c: [num("t_pla_c"), num("t_tca_c"), num("t_amb_c")],
+            powers_w: [num("p_pla_w"), num("p_tca_w")],
+            supply_v: num("supply_v"),
+            fault: field(line, "fault").unwrap_or("none"),
+            targets_c: [num("pla_target_c"), num("tca_target_c")],
+            mode: field(line, "mode").filter(|m| *m != "-"),
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -171,5 +220,32 @@ mod tests {
         for k in [LineKind::Blank, LineKind::Other] {
             assert!(!k.is_final() && !k.is_unsolicited());
         }
+    }
+
+    #[test]
+    fn status_lines_parse_with_and_without_the_target_fields() {
+        let new = "ok phase=bend target_mm=38.00 t_pla_c=74.17 t_tca_c=56.88 t_amb_c=21.94 \
+                   p_pla_w=1.250 p_tca_w=0.700 supply_v=12.00 fault=none \
+                   pla_target_c=75.00 tca_target_c=- mode=closed";
+        let s = Status::parse(new).unwrap();
+        assert_eq!(s.phase, "bend");
+        assert_eq!(s.target_mm, Some(38.0));
+        assert_eq!(s.temps_c, [Some(74.17), Some(56.88), Some(21.94)]);
+        assert_eq!(s.powers_w, [Some(1.25), Some(0.7)]);
+        assert_eq!(s.supply_v, Some(12.0));
+        assert_eq!(s.fault, "none");
+        assert_eq!(s.targets_c, [Some(75.0), None]);
+        assert_eq!(s.mode, Some("closed"));
+        // A device from before the targets: the same fields, the new ones None.
+        let old = "ok phase=idle target_mm=- t_pla_c=22.00 t_tca_c=22.00 t_amb_c=22.00 \
+                   p_pla_w=0.000 p_tca_w=0.000 supply_v=12.00 fault=none";
+        let s = Status::parse(old).unwrap();
+        assert_eq!(
+            (s.phase, s.target_mm, s.targets_c, s.mode),
+            ("idle", None, [None, None], None)
+        );
+        assert_eq!(Status::parse("ok"), None);
+        assert_eq!(Status::parse("error: busy phase=bend"), None);
+        assert_eq!(field("ok t_pla_c=1 t_pla=2", "t_pla"), Some("2"));
     }
 }

@@ -1,8 +1,8 @@
 //! Command parsing: one received line → a [`Command`] or a [`ProtoError`].
 
 use super::{
-    Command, ConfigCommand, ErrorCode, Medium, Mode, ProtoError, Sensor, SimCommand, SimFault,
-    Word, MODES,
+    Command, ConfigCommand, ErrorCode, Heater, Medium, Mode, ProtoError, Sensor, SimCommand,
+    SimFault, Word, MODES,
 };
 
 /// Every [`Sensor`], for matching wire words.
@@ -79,6 +79,8 @@ pub fn parse_line(line: &str) -> Result<Option<Command>, ProtoError> {
         parse_sim(args).map(|sim| Some(Command::Sim(sim)))
     } else if first.eq_ignore_ascii_case("CONFIG") {
         parse_config(args).map(|c| Some(Command::Config(c)))
+    } else if first.eq_ignore_ascii_case("HEAT") {
+        parse_heat(args).map(Some)
     } else {
         Err(UNKNOWN)
     }
@@ -227,4 +229,31 @@ fn parse_config<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<ConfigCom
     ))?;
     let value = Word::new(value).ok_or(bad("CONFIG SET: the value is too long."))?;
     Ok(ConfigCommand::Set { name, value })
+}
+
+/// `HEAT <pla|tca> <power_w> <s>` after the command word (the bounds are checked by the
+/// controller, [`crate::pulse`]). The words are gathered in one loop, so the word splitter is
+/// inlined once, not once per argument (flash on small parts).
+fn parse_heat<'a>(args: impl Iterator<Item = &'a str>) -> Result<Command, ProtoError> {
+    const USAGE: &str = "HEAT needs a heater, a power in W and seconds, e.g. HEAT pla 0.8 10.";
+    // Heater, power, seconds, and a slot that must stay empty.
+    let mut w: [Option<&str>; 4] = [None; 4];
+    for (slot, word) in w.iter_mut().zip(args) {
+        *slot = Some(word);
+    }
+    if w[3].is_some() {
+        return Err(bad(USAGE));
+    }
+    // The heaters' words are the sensors' (each heater has its thermistor): the sensor
+    // lookup SIM FAULT uses serves, with amb refused.
+    let heater = match w[0].and_then(|w| lookup(&SENSORS, w, Sensor::as_str)) {
+        Some(Sensor::Pla) => Heater::Pla,
+        Some(Sensor::Tca) => Heater::Tca,
+        _ => return Err(bad(USAGE)),
+    };
+    Ok(Command::Heat {
+        heater,
+        power_w: number(w[1], USAGE)?,
+        duration_s: number(w[2], USAGE)?,
+    })
 }

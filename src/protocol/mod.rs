@@ -139,6 +139,16 @@ pub enum Command {
     Config(ConfigCommand),
     /// `SAVE`: write the settings to flash.
     Save,
+    /// `HEAT <pla|tca> <power_w> <s>`: one heater at a low fixed power for a few seconds,
+    /// supervised (bring-up; bounds in [`crate::pulse`]).
+    Heat {
+        /// The heater.
+        heater: Heater,
+        /// Power, W.
+        power_w: f32,
+        /// Duration, s.
+        duration_s: f32,
+    },
 }
 
 /// What `CONFIG` does.

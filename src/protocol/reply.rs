@@ -5,7 +5,7 @@
 //! an [`ErrorCode`] and their detail. Nothing here reaches [`OutLine`]'s capacity.
 
 use super::{
-    ErrorCode, Medium, OutLine, ProtoError, Sensor, SimFault, ALARM_TAG, DATA_TAG, ERROR_TAG,
+    ErrorCode, Medium, Mode, OutLine, ProtoError, Sensor, SimFault, ALARM_TAG, DATA_TAG, ERROR_TAG,
     EVENT_TAG, OK, PROTOCOL_VERSION,
 };
 use crate::fixed::Fixed;
@@ -17,9 +17,9 @@ use crate::vocab::ResetCause;
 use core::fmt::{self, Write};
 
 /// HELP text, one `data:` line each.
-pub const HELP: [&str; 13] = [
+pub const HELP: [&str; 14] = [
     "MORPH <radius_mm> [auto|paper|gated|boost|closed]  morph to a radius (see RANGE)",
-    "STATUS                          phase, temperatures, powers, supply, fault",
+    "STATUS                          phase, temperatures, powers, supply, fault, targets, mode",
     "ABORT                           both heaters off at once, phase idle",
     "RESET                           clear a latched fault once its cause is gone",
     "RANGE                           reachable radii in mm",
@@ -31,6 +31,7 @@ pub const HELP: [&str; 13] = [
     "SIM WAIT <s>                    run <s> of simulated time, then ok; morph-sim only",
     "CONFIG [SET <name> <value>|RESET]  list, change or reset the settings",
     "SAVE                            write the settings to flash (idle only)",
+    "HEAT <pla|tca> <power_w> <s>    one heater at a low power for a while (bring-up)",
 ];
 
 /// `STATS` on a build that does not time its control loop.
@@ -171,16 +172,24 @@ pub struct StatusReport {
     pub supply_v: f32,
     /// The latched fault, if any.
     pub fault: Option<FaultCode>,
+    /// The PLA heater's target temperature, °C (NaN when it has none: written `-`).
+    pub pla_target_c: f32,
+    /// The TCA heater's target temperature, °C (NaN when it has none: written `-`).
+    pub tca_target_c: f32,
+    /// The strategy the running or last morph ran, `auto` resolved (None before the first).
+    pub mode: Option<Mode>,
 }
 
-/// `STATUS`: `ok phase= target_mm= t_pla_c= t_tca_c= t_amb_c= p_pla_w= p_tca_w= supply_v= fault=`.
+/// `STATUS`: `ok phase= target_mm= t_pla_c= t_tca_c= t_amb_c= p_pla_w= p_tca_w= supply_v= fault=
+/// pla_target_c= tca_target_c= mode=` (the last three appended in that order, so a parser of the
+/// older line still finds its fields).
 pub fn status(l: &mut OutLine, s: &StatusReport) {
-    let _ = write!(l, "{OK} phase={} target_mm=", s.phase.as_str());
-    if s.target_mm.is_nan() {
-        let _ = write!(l, "-");
-    } else {
-        let _ = write!(l, "{}", Fixed(s.target_mm, 2));
-    }
+    let _ = write!(
+        l,
+        "{OK} phase={} target_mm={}",
+        s.phase.as_str(),
+        Dash(s.target_mm)
+    );
     let _ = write!(
         l,
         " t_pla_c={} t_tca_c={} t_amb_c={} p_pla_w={} p_tca_w={} supply_v={} fault={}",
@@ -192,6 +201,26 @@ pub fn status(l: &mut OutLine, s: &StatusReport) {
         Fixed(s.supply_v, 2),
         s.fault.map(|f| f.as_str()).unwrap_or("none"),
     );
+    let _ = write!(
+        l,
+        " pla_target_c={} tca_target_c={} mode={}",
+        Dash(s.pla_target_c),
+        Dash(s.tca_target_c),
+        s.mode.map_or("-", Mode::as_str)
+    );
+}
+
+/// A value with 2 decimals, or `-` for NaN (no value).
+struct Dash(f32);
+
+impl fmt::Display for Dash {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0.is_nan() {
+            f.write_str("-")
+        } else {
+            Fixed(self.0, 2).fmt(f)
+        }
+    }
 }
 
 /// MORPH refused: `error: fault-latched <code> is latched; ...`.
@@ -494,6 +523,18 @@ impl fmt::Display for FaultText<'_> {
     }
 }
 
+/// HEAT power or duration outside its bounds (`crate::pulse`): one text for both (flash).
+pub const ERR_HEAT_RANGE: ProtoError = ProtoError {
+    code: ErrorCode::OutOfRange,
+    text: "HEAT power must be above 0 and at most 20 % of the heater's cap (pla 1 W, tca 0.4 W), for more than 0 and at most 60 s.",
+};
+
+/// MORPH refused while a HEAT pulse runs.
+pub const ERR_BUSY_HEATING: ProtoError = ProtoError {
+    code: ErrorCode::Busy,
+    text: "a HEAT pulse runs; send ABORT first",
+};
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -529,6 +570,70 @@ mod tests {
             format_error(&ERR_OVERRUN).split(' ').nth(1),
             Some("overrun")
         );
+    }
+
+    #[test]
+    fn status_ends_with_the_targets_and_mode_and_fits_the_line_at_its_widest() {
+        let report = |phase, fault, targets: (f32, f32)| StatusReport {
+            phase,
+            target_mm: 38.0,
+            t_pla_c: 74.171,
+            t_tca_c: 56.88,
+            t_amb_c: 21.94,
+            p_pla_w: 1.25,
+            p_tca_w: 0.7,
+            supply_v: 12.0,
+            fault,
+            pla_target_c: targets.0,
+            tca_target_c: targets.1,
+            mode: Some(Mode::Closed),
+        };
+        let l = line(|l| status(l, &report(Phase::Bend, None, (75.0, 62.5))));
+        assert_eq!(
+            l.as_str(),
+            "ok phase=bend target_mm=38.00 t_pla_c=74.17 t_tca_c=56.88 t_amb_c=21.94 \
+             p_pla_w=1.250 p_tca_w=0.700 supply_v=12.00 fault=none \
+             pla_target_c=75.00 tca_target_c=62.50 mode=closed"
+        );
+        let idle = StatusReport {
+            target_mm: f32::NAN,
+            mode: None,
+            ..report(Phase::Idle, None, (f32::NAN, f32::NAN))
+        };
+        let l = line(|l| status(l, &idle));
+        assert!(
+            l.ends_with("fault=none pla_target_c=- tca_target_c=- mode=-"),
+            "{l}"
+        );
+        // The widest values a link gives: every temperature at five digits with a sign, the
+        // heaters at their caps, the longest fault word; the line must end whole.
+        for (phase, fault, targets) in [
+            (Phase::Release, None, (75.0, 110.0)),
+            (
+                Phase::Fault,
+                Some(FaultCode::SupplyOutOfRange),
+                (f32::NAN, f32::NAN),
+            ),
+            (
+                Phase::Fault,
+                Some(FaultCode::HeaterNotHeating),
+                (f32::NAN, f32::NAN),
+            ),
+        ] {
+            let wide = StatusReport {
+                target_mm: 99.99,
+                t_pla_c: -99.99,
+                t_tca_c: -99.99,
+                t_amb_c: -99.99,
+                p_pla_w: 5.0,
+                p_tca_w: 5.0,
+                supply_v: 99.99,
+                ..report(phase, fault, targets)
+            };
+            let l = line(|l| status(l, &wide));
+            assert!(l.ends_with(" mode=closed"), "truncated: {l}");
+            assert!(l.len() < l.capacity(), "{} bytes: {l}", l.len());
+        }
     }
 
     #[test]

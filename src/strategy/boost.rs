@@ -4,7 +4,7 @@
 
 use super::model::observer::HeatedNode;
 use super::model::{target, ModelDrive};
-use super::{Start, Strategy, Tick, RELEASE_S};
+use super::{Start, Strategy, TargetTemps, Tick, RELEASE_S};
 use crate::vocab::{Measurements, Phase, Powers};
 
 /// The `boost` strategy.
@@ -48,5 +48,9 @@ impl Strategy for Boost {
 
     fn powers(&mut self, phase: Phase, t: &Tick) -> Powers {
         self.drive.powers(phase, t, 0.0, 0.0)
+    }
+
+    fn targets_c(&self, phase: Phase) -> TargetTemps {
+        self.drive.targets_c(phase)
     }
 }

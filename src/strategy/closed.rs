@@ -4,7 +4,7 @@
 
 use super::model::observer::{HeatedNode, LEARN_MAX_RATE_K_PER_S, SENSOR_TAU_S};
 use super::model::{target, ModelDrive};
-use super::{Start, Strategy, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
+use super::{Start, Strategy, TargetTemps, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
 use crate::vocab::{Measurements, Phase, Powers};
 
 /// `closed` ends lock when the observer's PLA estimate and the PLA thermistor corrected for its
@@ -100,5 +100,9 @@ impl Strategy for Closed {
             o.disturbance_k(HeatedNode::Tca),
         );
         self.drive.powers(phase, t, d_pla, d_tca)
+    }
+
+    fn targets_c(&self, phase: Phase) -> TargetTemps {
+        self.drive.targets_c(phase)
     }
 }

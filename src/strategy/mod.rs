@@ -102,6 +102,28 @@ pub trait Strategy {
     fn radius_estimate_mm(&self, m: &Measurements) -> f32;
     /// Heater powers for `phase` (the phase after this tick's change, if any), W.
     fn powers(&mut self, phase: Phase, t: &Tick) -> Powers;
+    /// The temperatures this strategy drives the heaters towards in `phase`, °C; NaN for a
+    /// heater it drives by power, not to a temperature (STATUS reports them, `-` for NaN).
+    fn targets_c(&self, _phase: Phase) -> TargetTemps {
+        TargetTemps::NONE
+    }
+}
+
+/// The temperatures a strategy aims the heaters at, °C (NaN: no temperature target).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TargetTemps {
+    /// PLA heater's target, °C.
+    pub pla_c: f32,
+    /// TCA heater's target, °C.
+    pub tca_c: f32,
+}
+
+impl TargetTemps {
+    /// No temperature target for either heater.
+    pub const NONE: TargetTemps = TargetTemps {
+        pla_c: f32::NAN,
+        tca_c: f32::NAN,
+    };
 }
 
 /// How a morph starts: the target and what the table and the sensors say.
@@ -146,6 +168,16 @@ impl AnyStrategy {
             Mode::Boost => AnyStrategy::Boost(boost::Boost::new(s)),
             Mode::Closed => AnyStrategy::Closed(closed::Closed::new(s)),
             Mode::Gated | Mode::Auto => AnyStrategy::Gated(gated::Gated::new(s)),
+        }
+    }
+
+    /// The strategy this is, as its mode (never `Auto`).
+    pub fn mode(&self) -> Mode {
+        match self {
+            AnyStrategy::Paper(_) => Mode::Paper,
+            AnyStrategy::Gated(_) => Mode::Gated,
+            AnyStrategy::Boost(_) => Mode::Boost,
+            AnyStrategy::Closed(_) => Mode::Closed,
         }
     }
 

@@ -5,7 +5,7 @@
 pub mod observer;
 pub mod target;
 
-use super::{Start, Tick, SOFT_THRESHOLD_C};
+use super::{Start, TargetTemps, Tick, SOFT_THRESHOLD_C};
 use crate::heater::HeaterConfig;
 use crate::link::R_TT_K_PER_W;
 use crate::supervisor::{HEATING_WINDOW_S, PLA_LIMITS, TCA_LIMITS};
@@ -69,6 +69,15 @@ fn deliverable_w(heater: &HeaterConfig, w: f32, supply_v: f32) -> f32 {
     }
 }
 
+/// Which heaters the model drives in `phase`: (PLA, TCA). The PLA is heated through soften and
+/// bend; the TCA from soften on until lock ends, so it holds the shape while the PLA cools.
+fn driven(phase: Phase) -> (bool, bool) {
+    (
+        matches!(phase, Phase::Soften | Phase::Bend),
+        matches!(phase, Phase::Soften | Phase::Bend | Phase::Lock),
+    )
+}
+
 /// The model, the TCA target and the drive state `boost` and `closed` share.
 #[derive(Clone, Copy, Debug)]
 pub struct ModelDrive {
@@ -101,6 +110,16 @@ impl ModelDrive {
     #[cfg(test)]
     pub(crate) fn tca_target_c(&self) -> f32 {
         self.tca_target_c
+    }
+
+    /// The temperatures [`ModelDrive::powers`] drives to in `phase`: the PLA at
+    /// [`PLA_SOFT_TARGET_C`] in soften and bend, the TCA at its target in soften, bend and lock.
+    pub(crate) fn targets_c(&self, phase: Phase) -> TargetTemps {
+        let (pla_on, tca_on) = driven(phase);
+        TargetTemps {
+            pla_c: if pla_on { PLA_SOFT_TARGET_C } else { f32::NAN },
+            tca_c: if tca_on { self.tca_target_c } else { f32::NAN },
+        }
     }
 
     /// A new phase: the settle hold starts afresh.
@@ -152,8 +171,7 @@ impl ModelDrive {
     pub(crate) fn powers(&mut self, phase: Phase, t: &Tick, d_pla: f32, d_tca: f32) -> Powers {
         let o = &self.observer;
         let m = t.m;
-        let pla_on = matches!(phase, Phase::Soften | Phase::Bend);
-        let tca_on = matches!(phase, Phase::Soften | Phase::Bend | Phase::Lock);
+        let (pla_on, tca_on) = driven(phase);
         let pla_w = if pla_on {
             o.power_to_reach_w(
                 HeatedNode::Pla,

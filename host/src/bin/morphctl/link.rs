@@ -1,5 +1,6 @@
-//! The line link to a board (serial port) or to `morph-sim` (a child process over pipes), and
-//! a protocol session on it: the VERSION handshake, commands with their final reply, and the
+//! The line link to a board (serial port), to `morph-sim` (a child process over pipes) or to a
+//! TCP serial port (the emulated image's USART1, a serial-to-TCP bridge), and a protocol
+//! session on it: the VERSION handshake, commands with their final reply, and the
 //! unsolicited `event:`/`alarm:` lines.
 
 use morphlink::protocol::client::{classify, data_text, LineKind};
@@ -98,7 +99,20 @@ pub enum Target {
         /// morph-sim's `--flash-file`: where the simulated settings flash is kept.
         flash_file: Option<PathBuf>,
     },
+    /// A serial port served over TCP at `HOST:PORT` (`cargo xtask emulate --port`, ser2net).
+    Tcp {
+        /// `HOST:PORT`.
+        addr: String,
+    },
 }
+
+/// Time morphctl waits for a boot line after connecting over TCP, s: the emulated image sends
+/// it about 80 ms after QEMU starts (docs/emulation.md); a bridge to a running board sends
+/// nothing, and costs this once.
+pub const TCP_BOOT_WAIT_S: f64 = 2.0;
+/// Time to connect to a TCP serial port, s: a loopback or LAN peer answers within
+/// milliseconds; beyond this the address is wrong or nothing listens.
+pub const TCP_CONNECT_TIMEOUT_S: f64 = 3.0;
 
 /// A line received from the device.
 #[derive(Clone, Debug, PartialEq)]
@@ -196,10 +210,13 @@ fn spawn_reader(mut source: impl Read + Send + 'static, what: String) -> Receive
                         }
                     }
                 }
+                // A serial port's read timeout is TimedOut, a socket's WouldBlock.
                 Err(e)
                     if matches!(
                         e.kind(),
-                        std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted
+                        std::io::ErrorKind::TimedOut
+                            | std::io::ErrorKind::Interrupted
+                            | std::io::ErrorKind::WouldBlock
                     ) => {}
                 Err(e) => {
                     let _ = tx.send(Incoming::Closed(format!("{what}: {e}")));
@@ -291,6 +308,7 @@ impl Link {
                     path.clone(),
                 ))
             }
+            Target::Tcp { addr } => open_tcp(addr),
             Target::Sim {
                 program,
                 speed,
@@ -429,6 +447,14 @@ impl Link {
         }
     }
 
+    /// Asks whether the device answers `SIM STATE` (morph-sim, the emulated image) and marks
+    /// the link simulated if it does; a board answers `error: unsupported`.
+    pub fn probe_simulated(&mut self) -> Result<bool, LinkError> {
+        let (_, reply) = self.command("SIM STATE", REPLY_TIMEOUT_S, &mut |_| {})?;
+        self.simulated = classify(&reply) == LineKind::Ok && field(&reply, "time_s").is_some();
+        Ok(self.simulated)
+    }
+
     /// Checks the device speaks [`PROTOCOL`]: `VERSION` must reply `ok version=.. protocol=<PROTOCOL>`.
     /// Returns the firmware version.
     pub fn handshake(&mut self) -> Result<String, String> {
@@ -449,6 +475,44 @@ impl Link {
             _ => Err(not_morphlink(&self.name, &reply)),
         }
     }
+}
+
+/// Connects to a TCP serial port (`HOST:PORT`), Nagle off so each line goes out at once.
+fn open_tcp(addr: &str) -> Result<Link, String> {
+    use std::net::{TcpStream, ToSocketAddrs};
+    let addrs: Vec<_> = addr
+        .to_socket_addrs()
+        .map_err(|e| format!("--tcp {addr}: not a HOST:PORT address ({e})"))?
+        .collect();
+    let timeout = Duration::from_secs_f64(TCP_CONNECT_TIMEOUT_S);
+    let mut last = None;
+    for a in &addrs {
+        match TcpStream::connect_timeout(a, timeout) {
+            Ok(stream) => {
+                let name = format!("tcp:{addr}");
+                let io = |e: std::io::Error| format!("{name}: {e}");
+                stream.set_nodelay(true).map_err(io)?;
+                stream
+                    .set_read_timeout(Some(Duration::from_millis(SERIAL_READ_TIMEOUT_MS)))
+                    .map_err(io)?;
+                let reader = stream.try_clone().map_err(io)?;
+                return Ok(Link::new(
+                    Box::new(stream),
+                    spawn_reader(reader, name.clone()),
+                    None,
+                    false,
+                    name,
+                ));
+            }
+            Err(e) => last = Some(e),
+        }
+    }
+    Err(match last {
+        Some(e) => format!(
+            "cannot connect to {addr}: {e} (is `cargo xtask emulate --port <PORT>` or the bridge running?)"
+        ),
+        None => format!("--tcp {addr}: the name resolves to no address"),
+    })
 }
 
 fn not_morphlink(name: &str, line: &str) -> String {
@@ -480,6 +544,34 @@ pub fn link_from_text(text: &str) -> Link {
         Box::new(std::io::sink()),
         spawn_reader(
             std::io::Cursor::new(text.as_bytes().to_vec()),
+            "test".into(),
+        ),
+        None,
+        false,
+        "test device".into(),
+    )
+}
+
+/// A device for tests that sends `text` and then stays connected and silent (a reader that
+/// times out, as an idle serial port does).
+#[cfg(test)]
+pub fn link_held_open(text: &str) -> Link {
+    struct Held(std::io::Cursor<Vec<u8>>);
+    impl Read for Held {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            match self.0.read(buf)? {
+                0 => {
+                    std::thread::sleep(Duration::from_millis(10));
+                    Err(std::io::ErrorKind::TimedOut.into())
+                }
+                n => Ok(n),
+            }
+        }
+    }
+    Link::new(
+        Box::new(std::io::sink()),
+        spawn_reader(
+            Held(std::io::Cursor::new(text.as_bytes().to_vec())),
             "test".into(),
         ),
         None,

@@ -1,13 +1,17 @@
 //! `morphctl`: drive a morphlink board over its serial port, or `morph-sim` as a child
 //! process, with protocol v1: morph to a radius and follow the phases, STATUS, ABORT, log
-//! telemetry to CSV and plot a run (SVG, or PNG without text).
+//! telemetry to CSV and plot a run (SVG or PNG, with text).
+mod bringup;
 mod config;
 mod link;
+mod live;
+mod script;
 mod telemetry;
 
 use clap::{Parser, Subcommand};
 use link::{default_sim_program, field, Link, LinkError, Target, REPLY_TIMEOUT_S};
 use morphlink::protocol::client::{classify, LineKind};
+use morphlink_host::plot;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -38,8 +42,16 @@ const ABORT_TRIES: u32 = 3;
 )]
 struct Cli {
     /// Serial port of the board (e.g. /dev/ttyACM0, COM3).
-    #[arg(long, conflicts_with = "sim")]
+    #[arg(long, conflicts_with_all = ["sim", "tcp"])]
     port: Option<String>,
+    /// A serial port served over TCP, HOST:PORT: the emulated image (`cargo xtask emulate
+    /// --port PORT`) or a serial-to-TCP bridge.
+    #[arg(long, conflicts_with = "sim")]
+    tcp: Option<String>,
+    /// How many times faster than real time the device on --tcp runs: 20 for the emulated
+    /// image, 1 for a board behind a bridge.
+    #[arg(long, default_value_t = 1.0)]
+    tcp_speed: f64,
     /// Baud rate of the serial port.
     #[arg(long, default_value_t = DEFAULT_BAUD)]
     baud: u32,
@@ -72,7 +84,7 @@ enum Cmd {
         /// Write the telemetry to this CSV file.
         #[arg(long)]
         log: Option<PathBuf>,
-        /// Plot the run to this file (.svg, or .png without text).
+        /// Plot the run to this file (.svg or .png; checked before the morph starts).
         #[arg(long)]
         plot: Option<PathBuf>,
         /// STATUS poll interval, ms of link time.
@@ -81,6 +93,15 @@ enum Cmd {
         /// Abort the morph if it is not done after this many seconds of link time.
         #[arg(long, default_value_t = DEFAULT_MORPH_TIMEOUT_S)]
         timeout_s: f64,
+        /// Follow the morph in a live terminal view (key `a` aborts, `q` quits).
+        #[arg(long)]
+        live: bool,
+    },
+    /// Watch the device in a live terminal view without starting anything (`a` sends ABORT).
+    Watch {
+        /// STATUS poll interval, ms of link time.
+        #[arg(long, default_value_t = DEFAULT_POLL_MS)]
+        poll_ms: u64,
     },
     /// Print STATUS.
     Status,
@@ -95,11 +116,23 @@ enum Cmd {
         /// The line, e.g. `TABLE` or `SIM SUPPLY 11`.
         line: Vec<String>,
     },
+    /// Check a new board before its first morph: thermistors agree at rest, the supply is in
+    /// range, each heater's low-power pulse warms its own thermistor; heaters off at the end.
+    Bringup,
+    /// Play a script on one link: protocol lines, `wait done|alarm [<s>]`, `sleep <s>`, `#`
+    /// comments; every line sent and received is logged with its time.
+    Run {
+        /// The script file.
+        file: PathBuf,
+        /// Also write the session log to this file.
+        #[arg(long)]
+        log: Option<PathBuf>,
+    },
     /// Plot a telemetry CSV written by `morph --log` (needs no device).
     Plot {
         /// The CSV file.
         csv: PathBuf,
-        /// The plot (.svg, or .png without text).
+        /// The plot (.svg or .png).
         out: PathBuf,
     },
     /// The device's settings: list, set one, reset all to defaults, save to flash.
@@ -120,11 +153,43 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<ExitCode, String> {
+    // A plot that could not be written is refused before anything is sent.
+    if let Cmd::Morph {
+        plot: Some(path), ..
+    } = &cli.cmd
+    {
+        plot::Format::of(path)?;
+    }
+    // The live view needs a terminal to draw on, known before anything is sent.
+    if matches!(cli.cmd, Cmd::Morph { live: true, .. } | Cmd::Watch { .. }) {
+        use std::io::IsTerminal;
+        if !std::io::stdout().is_terminal() || !std::io::stdin().is_terminal() {
+            return Err("the live view needs a terminal (stdin and stdout); without --live, morph prints its progress as lines".into());
+        }
+    }
     if let Cmd::Plot { csv, out } = &cli.cmd {
+        plot::Format::of(out)?;
         let samples = telemetry::read_csv(csv)?;
-        telemetry::plot(&samples, &csv.display().to_string(), out)?;
+        let name = csv.display().to_string();
+        let title = match samples.iter().rev().find(|s| s.mode != "-") {
+            Some(s) => format!("{name}: {} ran", s.mode),
+            None => name,
+        };
+        telemetry::plot(&samples, &title, out)?;
         println!("wrote {}", out.display());
         return Ok(ExitCode::SUCCESS);
+    }
+    // A script is read whole before the link opens: a typo changes nothing.
+    let script = match &cli.cmd {
+        Cmd::Run { file, .. } => Some(script::read(file)?),
+        _ => None,
+    };
+    for speed in [cli.sim_speed, cli.tcp_speed] {
+        if !(speed.is_finite() && speed > 0.0) {
+            return Err(format!(
+                "--sim-speed and --tcp-speed must be above 0, not {speed}"
+            ));
+        }
     }
     let target = if cli.sim {
         Target::Sim {
@@ -132,19 +197,37 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
             speed: cli.sim_speed,
             flash_file: cli.sim_flash_file.clone(),
         }
+    } else if let Some(addr) = &cli.tcp {
+        Target::Tcp { addr: addr.clone() }
     } else {
         Target::Serial {
             path: cli
                 .port
                 .clone()
-                .ok_or("say where the link is: --port <serial port> or --sim")?,
+                .ok_or("say where the link is: --port <serial port>, --tcp <HOST:PORT> or --sim")?,
             baud: cli.baud,
         }
     };
     let signals = link::watch_signals()?;
     let mut link = Link::open(&target)?;
     link.watch(signals);
+    if let Target::Tcp { .. } = target {
+        // The emulated image boots when the connection opens and drops what arrives before
+        // its UART runs: wait for its boot line (a bridge to a running board sends none).
+        let _ = link.recv(Duration::from_secs_f64(link::TCP_BOOT_WAIT_S))?;
+    }
     let version = link.handshake()?;
+    // Link seconds per host second.
+    let speed = match target {
+        Target::Sim { speed, .. } => speed,
+        Target::Tcp { .. } => {
+            // The emulated image answers SIM commands (its time, its true radius); a bridge
+            // to a board does not.
+            link.probe_simulated()?;
+            cli.tcp_speed
+        }
+        Target::Serial { .. } => 1.0,
+    };
     let print_event = &mut |l: &str| println!("{l}");
     match cli.cmd {
         Cmd::Status => simple(&mut link, "STATUS"),
@@ -169,8 +252,8 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
             plot,
             poll_ms,
             timeout_s,
+            live,
         } => {
-            let speed = if link.simulated { cli.sim_speed } else { 1.0 };
             let opts = MorphOpts {
                 radius_mm,
                 mode,
@@ -182,8 +265,12 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 None => None,
             };
             let mut samples = Vec::new();
-            let end = morph(&mut link, &opts, &mut samples, &mut csv);
-            let code = finish(&mut link, end);
+            let code = if live {
+                morph_live(&mut link, &opts, &mut samples, &mut csv)
+            } else {
+                let end = morph(&mut link, &opts, &mut samples, &mut csv);
+                finish(&mut link, end)
+            };
             if let (Some(path), Some(csv)) = (&log, &csv) {
                 println!("telemetry: {} ({} samples)", path.display(), csv.rows);
                 if let Some(e) = &csv.failed {
@@ -191,7 +278,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 }
             }
             if let Some(path) = plot {
-                let title = format!("MORPH {} {} on {}", opts.radius_mm, opts.mode, link.name);
+                let title = telemetry::title(opts.radius_mm, &opts.mode, &samples, &link.name);
                 if samples.is_empty() {
                     println!("plot: skipped, no samples were logged");
                 } else {
@@ -204,6 +291,71 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
             Ok(code)
         }
         Cmd::Config { cmd } => config::run(&mut link, cmd.unwrap_or(config::ConfigCmd::List)),
+        Cmd::Watch { poll_ms } => {
+            let poll = Duration::from_secs_f64(poll_ms as f64 / 1000.0 / speed);
+            let mut st = live::LiveState::new(format!("watch {}", link.name), false, f64::INFINITY);
+            let end = {
+                let mut view = LiveTerminal::open()?;
+                live::run(
+                    &mut view.0,
+                    &mut link,
+                    &mut st,
+                    poll,
+                    Vec::new(),
+                    &mut |_| {},
+                )
+            };
+            Ok(end_live(&mut link, end))
+        }
+        Cmd::Bringup => {
+            println!(
+                "{}: firmware {version}; bring-up checks (README \"Bring-up\")",
+                link.name
+            );
+            let result = bringup::run(&mut link, speed, &mut |l| println!("  {l}"));
+            let mut code = ExitCode::SUCCESS;
+            match &result {
+                Ok(checks) => {
+                    for c in checks {
+                        println!("{} {}", if c.ok { "ok  " } else { "FAIL" }, c.text);
+                    }
+                    if checks.iter().any(|c| !c.ok) {
+                        code = ExitCode::FAILURE;
+                    }
+                }
+                Err(bringup::Stop::Refused(why)) => {
+                    eprintln!("morphctl: bring-up stopped: {why}");
+                    code = ExitCode::FAILURE;
+                }
+                Err(bringup::Stop::Link(e)) => {
+                    eprintln!("morphctl: bring-up stopped: {e}");
+                    code = match e {
+                        LinkError::Interrupted(sig) => ExitCode::from((128 + sig) as u8),
+                        _ => ExitCode::FAILURE,
+                    };
+                }
+            }
+            // Heaters off at the end whatever happened.
+            match stop_heaters(&mut link) {
+                Ok(done) => println!("{done}"),
+                Err(e) => {
+                    eprintln!("morphctl: could not confirm the heaters off after {ABORT_TRIES} ABORTs ({e}); {} is lost: the heaters may still be on, cut the heater supply", link.name);
+                    code = ExitCode::FAILURE;
+                }
+            }
+            Ok(code)
+        }
+        Cmd::Run { log, .. } => {
+            let steps = script.expect("read above");
+            let mut log = script::Log::new(log.as_deref())?;
+            log.note(&format!(
+                "{}: firmware {version}; {} steps",
+                link.name,
+                steps.len()
+            ));
+            let end = script::play(&mut link, &steps, speed, &mut log);
+            Ok(end_script(&mut link, end, &mut log))
+        }
         Cmd::Plot { .. } => unreachable!("handled above"),
     }
 }
@@ -331,6 +483,141 @@ fn finish(link: &mut Link, end: MorphEnd) -> ExitCode {
         // The shell's convention for a run ended by a signal.
         LinkError::Interrupted(sig) => ExitCode::from((128 + sig) as u8),
         _ => ExitCode::FAILURE,
+    }
+}
+
+/// Ends a script: whatever happened, the heaters end off. A script that ran to its end is
+/// checked with STATUS (a morph it left running is aborted); one that stopped on an error or
+/// a signal gets ABORT and a heaters-off STATUS.
+fn end_script(link: &mut Link, end: Result<(), script::Stop>, log: &mut script::Log) -> ExitCode {
+    let code = match &end {
+        Ok(()) => {
+            log.note("script done");
+            log.sent("STATUS");
+            let status = link.command_where("STATUS", REPLY_TIMEOUT_S, &mut |l| log.got(l), &|l| {
+                field(l, "phase").is_some() || classify(l) == LineKind::Error
+            });
+            match status {
+                Ok((_, st)) if heaters_off(&st) => {
+                    log.got(&st);
+                    return ExitCode::SUCCESS;
+                }
+                Ok((_, st)) => {
+                    log.got(&st);
+                    log.note("the script left a heater on; stopping the heaters");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    log.note(&format!("{e}; stopping the heaters"));
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Err(script::Stop::Failed(why)) => {
+            log.note(&format!("{why}; stopping the heaters"));
+            ExitCode::FAILURE
+        }
+        Err(script::Stop::Link(e)) => {
+            log.note(&format!("{e}; stopping the heaters"));
+            match e {
+                LinkError::Interrupted(sig) => ExitCode::from((128 + sig) as u8),
+                _ => ExitCode::FAILURE,
+            }
+        }
+    };
+    match stop_heaters(link) {
+        Ok(done) => log.note(&done),
+        Err(e) => {
+            log.note(&format!(
+                "could not confirm the heaters off after {ABORT_TRIES} ABORTs ({e}); {} is lost: the heaters may still be on, cut the heater supply",
+                link.name
+            ));
+            return ExitCode::FAILURE;
+        }
+    }
+    code
+}
+
+/// The terminal in the live view's mode (raw, alternate screen) until dropped.
+struct LiveTerminal(ratatui::DefaultTerminal);
+
+impl LiveTerminal {
+    fn open() -> Result<LiveTerminal, String> {
+        ratatui::try_init()
+            .map(LiveTerminal)
+            .map_err(|e| format!("cannot start the live view: {e}"))
+    }
+}
+
+impl Drop for LiveTerminal {
+    fn drop(&mut self) {
+        ratatui::restore();
+    }
+}
+
+/// A morph followed in the live view: MORPH, the view until the user quits, then as `morph`
+/// ends (a user's abort, a lost link or a timeout stop the heaters).
+fn morph_live(
+    link: &mut Link,
+    o: &MorphOpts,
+    samples: &mut Vec<Sample>,
+    csv: &mut Option<CsvLog>,
+) -> ExitCode {
+    let mut events: Vec<String> = Vec::new();
+    let line = format!("MORPH {} {}", o.radius_mm, o.mode);
+    let reply = match link.command(&line, REPLY_TIMEOUT_S, &mut |l| events.push(l.to_string())) {
+        Ok((_, reply)) => reply,
+        Err(LinkError::Closed(e)) => return finish(link, MorphEnd::Failed(e)),
+        Err(e) => return finish(link, MorphEnd::Broken(e)),
+    };
+    if reply != morphlink::protocol::OK {
+        return finish(link, MorphEnd::Failed(format!("MORPH refused: {reply}")));
+    }
+    let title = format!("{line} on {}", link.name);
+    let mut st = live::LiveState::new(title, true, o.timeout_s);
+    let end = match LiveTerminal::open() {
+        Ok(mut view) => live::run(&mut view.0, link, &mut st, o.poll, events, &mut |s| {
+            if let Some(csv) = csv.as_mut() {
+                csv.row(s);
+            }
+            samples.push(s.clone());
+        }),
+        Err(e) => live::LiveEnd::Broken(LinkError::Closed(e)),
+    };
+    end_live(link, end)
+}
+
+/// The exit of a live view, after the terminal is restored: the outcome seen, or ABORT and
+/// a heaters-off STATUS.
+fn end_live(link: &mut Link, end: live::LiveEnd) -> ExitCode {
+    match end {
+        live::LiveEnd::Quit(Some(live::Outcome::Done(r))) => {
+            println!("done: the controller estimates {r:.2} mm");
+            ExitCode::SUCCESS
+        }
+        live::LiveEnd::Quit(Some(live::Outcome::Alarm(a))) => {
+            println!("{a}");
+            ExitCode::FAILURE
+        }
+        live::LiveEnd::Quit(None) => ExitCode::SUCCESS,
+        live::LiveEnd::Abort => {
+            eprintln!("morphctl: abort asked from the live view; stopping the heaters");
+            match stop_heaters(link) {
+                Ok(done) => {
+                    eprintln!("morphctl: {done}");
+                    ExitCode::FAILURE
+                }
+                Err(e) => {
+                    eprintln!("morphctl: could not confirm the heaters off after {ABORT_TRIES} ABORTs ({e}); {} is lost: the heaters may still be on, cut the heater supply", link.name);
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        live::LiveEnd::TimedOut => finish(
+            link,
+            MorphEnd::Broken(LinkError::Timeout("no done within --timeout-s".into())),
+        ),
+        live::LiveEnd::Broken(e) => finish(link, MorphEnd::Broken(e)),
     }
 }
 

@@ -1,0 +1,711 @@
+//! The live view (`morph --live`, `watch`): a terminal UI (ratatui on crossterm) with the
+//! temperatures against their targets, the heater powers, the radius (target, the controller's
+//! estimate at done, the simulator's truth), the phase and the time left, and the events.
+//! Key `a` aborts, `q` quits (with ABORT if a morph this morphctl started still runs).
+//!
+//! The state ([`LiveState`]) is updated from the lines and samples alone and drawn by [`draw`]
+//! onto any ratatui backend, so both are tested without a terminal; [`run`] is the thin shell
+//! that polls the link and the keyboard.
+
+use crate::link::{field, Link, LinkError, REPLY_TIMEOUT_S};
+use crate::telemetry::Sample;
+use morphlink::heater::HeaterConfig;
+use morphlink::protocol::client::{classify, LineKind};
+use morphlink::protocol::{Mode, MODES};
+use morphlink::strategy::{AnyStrategy, Start};
+use morphlink::vocab::{Measurements, Phase};
+use ratatui::crossterm::event::{self, Event, KeyCode, KeyEventKind, KeyModifiers};
+use ratatui::layout::{Constraint, Layout};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::symbols::Marker;
+use ratatui::text::{Line, Span};
+use ratatui::widgets::{Axis, Block, Chart, Dataset, Gauge, GraphType, LegendPosition, Paragraph};
+use ratatui::Frame;
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+/// Event lines the view keeps (the newest shown at the bottom).
+const EVENTS_KEPT: usize = 6;
+/// Temperature points the chart keeps per series: at 2 Hz, the last 20 min of a run.
+const HISTORY_KEPT: usize = 2400;
+/// How long a wait for a key lasts before the link is read again, ms: keys feel immediate and
+/// the link's lines are taken well within their reply timeout.
+const KEY_POLL_MS: u64 = 20;
+
+/// What the user asked for with a key.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Action {
+    /// Nothing (another key).
+    None,
+    /// Send ABORT and confirm the heaters off.
+    Abort,
+    /// Leave the view (with ABORT first if a morph this morphctl started still runs).
+    Quit,
+}
+
+/// The action of a key press: `a` aborts; `q`, Esc and Ctrl-C quit (raw mode turns Ctrl-C into
+/// a key, so it must still stop a morph).
+pub fn key_action(code: KeyCode, modifiers: KeyModifiers) -> Action {
+    match code {
+        KeyCode::Char('c') if modifiers.contains(KeyModifiers::CONTROL) => Action::Quit,
+        KeyCode::Char('a') | KeyCode::Char('A') => Action::Abort,
+        KeyCode::Char('q') | KeyCode::Char('Q') | KeyCode::Esc => Action::Quit,
+        _ => Action::None,
+    }
+}
+
+/// How a morph in view ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Outcome {
+    /// `event: done`, with the controller's radius estimate, mm.
+    Done(f64),
+    /// An alarm line: the controller has turned the heaters off.
+    Alarm(String),
+}
+
+/// Everything the view shows, updated from STATUS samples and the device's lines.
+#[derive(Clone, Debug)]
+pub struct LiveState {
+    /// Title: what was sent and to which device.
+    pub title: String,
+    /// True if this morphctl started the morph (then `q` aborts it).
+    pub started: bool,
+    /// The latest sample.
+    pub last: Option<Sample>,
+    /// Link time the current phase began, s (same clock as the samples).
+    pub phase_since_s: f64,
+    /// PLA and TCA temperatures against time, °C.
+    pub history: [VecDeque<(f64, f64)>; 2],
+    /// The latest events and alarms.
+    pub events: VecDeque<String>,
+    /// How the morph ended, once it has.
+    pub outcome: Option<Outcome>,
+    /// morphctl's own limit on the morph, s of link time.
+    pub timeout_s: f64,
+    /// A note from morphctl (aborting, the heaters confirmed off).
+    pub note: Option<String>,
+}
+
+impl LiveState {
+    /// An empty view titled `title`.
+    pub fn new(title: String, started: bool, timeout_s: f64) -> LiveState {
+        LiveState {
+            title,
+            started,
+            last: None,
+            phase_since_s: 0.0,
+            history: [VecDeque::new(), VecDeque::new()],
+            events: VecDeque::new(),
+            outcome: None,
+            timeout_s,
+            note: None,
+        }
+    }
+
+    /// Takes in one STATUS sample (with the simulator's radius if known).
+    pub fn sample(&mut self, s: Sample) {
+        if self.last.as_ref().is_none_or(|l| l.phase != s.phase) {
+            self.phase_since_s = s.t_s;
+        }
+        for (i, h) in self.history.iter_mut().enumerate() {
+            if s.temps_c[i].is_finite() {
+                if h.len() == HISTORY_KEPT {
+                    h.pop_front();
+                }
+                h.push_back((s.t_s, s.temps_c[i]));
+            }
+        }
+        self.last = Some(s);
+    }
+
+    /// Takes in one unsolicited line (event, done, alarm, boot).
+    pub fn line(&mut self, l: &str) {
+        match classify(l) {
+            LineKind::Done => {
+                let r = field(l, "radius_mm").and_then(|v| v.parse().ok());
+                self.outcome = Some(Outcome::Done(r.unwrap_or(f64::NAN)));
+            }
+            LineKind::Alarm => self.outcome = Some(Outcome::Alarm(l.to_string())),
+            _ => {}
+        }
+        if self.events.len() == EVENTS_KEPT {
+            self.events.pop_front();
+        }
+        self.events.push_back(l.to_string());
+    }
+
+    /// True while the morph this view follows runs (a morph started and not ended, or, for
+    /// `watch`, the device in a morphing phase).
+    pub fn morphing(&self) -> bool {
+        let phase = self.last.as_ref().map(|s| s.phase.as_str());
+        self.outcome.is_none() && !matches!(phase, Some("idle") | Some("fault"))
+    }
+
+    /// Seconds left before the current phase's timeout trips, if known.
+    pub fn phase_time_left_s(&self) -> Option<f64> {
+        let s = self.last.as_ref()?;
+        let limit = phase_timeout_s(&s.mode, &s.phase)?;
+        Some(limit - (s.t_s - self.phase_since_s))
+    }
+}
+
+/// The firmware's timeout of `phase` in a morph of strategy `mode`, s (a strategy's own, else
+/// the sequencer's); None for an unknown mode or a phase without one.
+pub fn phase_timeout_s(mode: &str, phase: &str) -> Option<f64> {
+    let mode = *MODES.iter().find(|m| m.as_str() == mode)?;
+    let phase = [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release]
+        .into_iter()
+        .find(|p| p.as_str() == phase)?;
+    let m = Measurements {
+        t_pla_c: 22.0,
+        t_tca_c: 22.0,
+        t_amb_c: 22.0,
+    };
+    let start = Start {
+        now_ms: 0,
+        radius_mm: 40.0,
+        tca_power_w: 0.5,
+        m: &m,
+    };
+    let own = AnyStrategy::new(mode, &start).get().timeout_s(phase);
+    use morphlink::sequencer::{
+        BEND_TIMEOUT_S, LOCK_TIMEOUT_S, RELEASE_TIMEOUT_S, SOFTEN_TIMEOUT_S,
+    };
+    let default = match phase {
+        Phase::Soften => SOFTEN_TIMEOUT_S,
+        Phase::Bend => BEND_TIMEOUT_S,
+        Phase::Lock => LOCK_TIMEOUT_S,
+        _ => RELEASE_TIMEOUT_S,
+    };
+    let _: Mode = mode;
+    Some(own.unwrap_or(default) as f64)
+}
+
+/// `12.34` or `-` for NaN, with `unit`.
+fn val(v: f64, decimals: usize, unit: &str) -> String {
+    if v.is_finite() {
+        format!("{v:.decimals$} {unit}")
+    } else {
+        "-".into()
+    }
+}
+
+/// Draws the view into `frame`.
+pub fn draw(frame: &mut Frame, st: &LiveState) {
+    let [head, temps, powers, radius, chart, events, keys] = Layout::vertical([
+        Constraint::Length(3),
+        Constraint::Length(5),
+        Constraint::Length(4),
+        Constraint::Length(3),
+        Constraint::Min(8),
+        Constraint::Length(EVENTS_KEPT as u16 + 2),
+        Constraint::Length(1),
+    ])
+    .areas(frame.area());
+    let bold = Style::default().add_modifier(Modifier::BOLD);
+    let s = st.last.as_ref();
+    let num = |f: &dyn Fn(&Sample) -> f64| s.map_or(f64::NAN, f);
+
+    // Phase and time.
+    let phase = s.map_or("-", |s| s.phase.as_str());
+    let mode = s.map_or("-", |s| s.mode.as_str());
+    let t = num(&|s| s.t_s);
+    let mut status = vec![
+        Span::styled(format!("phase {phase}"), bold),
+        Span::raw(format!(
+            "  ·  mode {mode}  ·  {} since MORPH",
+            val(t, 1, "s")
+        )),
+    ];
+    if st.morphing() {
+        if let Some(left) = st.phase_time_left_s() {
+            status.push(Span::raw(format!("  ·  phase timeout in {left:.0} s")));
+        }
+        status.push(Span::raw(format!(
+            "  ·  morphctl gives up in {:.0} s",
+            st.timeout_s - t
+        )));
+    }
+    let head_text = match &st.outcome {
+        Some(Outcome::Done(r)) => Line::styled(
+            format!("done: the controller estimates {}", val(*r, 2, "mm")),
+            bold.fg(Color::Green),
+        ),
+        Some(Outcome::Alarm(a)) => Line::styled(a.clone(), bold.fg(Color::Red)),
+        None => Line::from(status),
+    };
+    frame.render_widget(
+        Paragraph::new(head_text).block(Block::bordered().title(st.title.as_str())),
+        head,
+    );
+
+    // Temperatures against targets.
+    let row = |name: &str, i: usize| -> Line {
+        let temp = num(&|s| s.temps_c[i]);
+        let target = if i < 2 {
+            num(&|s| s.targets_c[i])
+        } else {
+            f64::NAN
+        };
+        let mut spans = vec![
+            Span::styled(format!("{name:<8}"), bold),
+            Span::raw(format!("{:>10}", val(temp, 1, "°C"))),
+        ];
+        if i < 2 {
+            spans.push(Span::raw(format!("   target {:>10}", val(target, 1, "°C"))));
+            if temp.is_finite() && target.is_finite() {
+                spans.push(Span::raw(format!("   {:+.1} K", temp - target)));
+            }
+        }
+        Line::from(spans)
+    };
+    frame.render_widget(
+        Paragraph::new(vec![row("PLA", 0), row("TCA", 1), row("ambient", 2)])
+            .block(Block::bordered().title("temperatures")),
+        temps,
+    );
+
+    // Powers as gauges of the heater caps.
+    let [pla_area, tca_area] = Layout::vertical([Constraint::Length(1), Constraint::Length(1)])
+        .areas(
+            Block::bordered()
+                .title(format!(
+                    "powers (supply {})",
+                    val(num(&|s| s.supply_v), 2, "V")
+                ))
+                .inner(powers),
+        );
+    frame.render_widget(
+        Block::bordered().title(format!(
+            "powers (supply {})",
+            val(num(&|s| s.supply_v), 2, "V")
+        )),
+        powers,
+    );
+    for (i, (area, cap, name, colour)) in [
+        (
+            pla_area,
+            HeaterConfig::PLA.max_power_w,
+            "PLA heater",
+            Color::Red,
+        ),
+        (
+            tca_area,
+            HeaterConfig::TCA.max_power_w,
+            "TCA heater",
+            Color::Blue,
+        ),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let p = num(&|s| s.powers_w[i]);
+        let ratio = if p.is_finite() {
+            (p / cap as f64).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        frame.render_widget(
+            Gauge::default()
+                .gauge_style(Style::default().fg(colour))
+                .ratio(ratio)
+                .label(format!("{name} {} of {cap:.1} W", val(p, 2, "W"))),
+            area,
+        );
+    }
+
+    // The radius.
+    let estimate = match st.outcome {
+        Some(Outcome::Done(r)) => val(r, 2, "mm"),
+        _ => "at done".into(),
+    };
+    frame.render_widget(
+        Paragraph::new(Line::from(vec![
+            Span::raw(format!("target {}", val(num(&|s| s.target_mm), 2, "mm"))),
+            Span::raw(format!("   ·   controller's estimate {estimate}")),
+            Span::raw(format!(
+                "   ·   true (simulator) {}",
+                val(num(&|s| s.radius_mm), 2, "mm")
+            )),
+        ]))
+        .block(Block::bordered().title("radius")),
+        radius,
+    );
+
+    // Temperatures against time, with the targets.
+    let series: Vec<Vec<(f64, f64)>> = st
+        .history
+        .iter()
+        .map(|h| h.iter().copied().collect())
+        .collect();
+    let t_lo = series
+        .iter()
+        .flatten()
+        .map(|p| p.0)
+        .fold(f64::INFINITY, f64::min);
+    let t_hi = series
+        .iter()
+        .flatten()
+        .map(|p| p.0)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let (t_lo, t_hi) = if t_lo.is_finite() {
+        (t_lo, t_hi.max(t_lo + 1.0))
+    } else {
+        (0.0, 1.0)
+    };
+    let targets: Vec<Vec<(f64, f64)>> = (0..2)
+        .map(|i| {
+            let v = num(&|s| s.targets_c[i]);
+            if v.is_finite() {
+                vec![(t_lo, v), (t_hi, v)]
+            } else {
+                Vec::new()
+            }
+        })
+        .collect();
+    let ys = series
+        .iter()
+        .chain(&targets)
+        .flatten()
+        .map(|p| p.1)
+        .chain([20.0]);
+    let (y_lo, y_hi) = ys.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    let (y_lo, y_hi) = ((y_lo - 2.0).floor(), (y_hi + 2.0).ceil());
+    let mut sets = vec![
+        Dataset::default()
+            .name("PLA")
+            .marker(Marker::Braille)
+            .graph_type(GraphType::Line)
+            .style(Style::default().fg(Color::Red))
+            .data(&series[0]),
+        Dataset::default()
+            .name("TCA")
+            .marker(Marker::Braille)
+            .graph_type(GraphType::Line)
+            .style(Style::default().fg(Color::Blue))
+            .data(&series[1]),
+    ];
+    for (i, (name, colour)) in [
+        ("PLA target", Color::LightRed),
+        ("TCA target", Color::LightBlue),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        if !targets[i].is_empty() {
+            sets.push(
+                Dataset::default()
+                    .name(name)
+                    .marker(Marker::Dot)
+                    .graph_type(GraphType::Line)
+                    .style(Style::default().fg(colour))
+                    .data(&targets[i]),
+            );
+        }
+    }
+    frame.render_widget(
+        Chart::new(sets)
+            .legend_position(Some(LegendPosition::TopLeft))
+            .hidden_legend_constraints((Constraint::Ratio(1, 2), Constraint::Ratio(2, 3)))
+            .block(Block::bordered().title("temperature (°C) against time since MORPH (s)"))
+            .x_axis(
+                Axis::default()
+                    .bounds([t_lo, t_hi])
+                    .labels([format!("{t_lo:.0}"), format!("{t_hi:.0}")]),
+            )
+            .y_axis(
+                Axis::default()
+                    .bounds([y_lo, y_hi])
+                    .labels([format!("{y_lo:.0}"), format!("{y_hi:.0}")]),
+            ),
+        chart,
+    );
+
+    // Events.
+    let lines: Vec<Line> = st
+        .events
+        .iter()
+        .map(|e| match classify(e) {
+            LineKind::Alarm => Line::styled(e.clone(), Style::default().fg(Color::Red)),
+            LineKind::Done => Line::styled(e.clone(), Style::default().fg(Color::Green)),
+            _ => Line::raw(e.clone()),
+        })
+        .collect();
+    frame.render_widget(
+        Paragraph::new(lines).block(Block::bordered().title("events")),
+        events,
+    );
+
+    let help = if st.started && st.morphing() {
+        "a: abort   q: quit (aborts the morph)"
+    } else {
+        "a: abort   q: quit"
+    };
+    let footer = match &st.note {
+        Some(n) => format!("{help}   ·   {n}"),
+        None => help.to_string(),
+    };
+    frame.render_widget(Paragraph::new(footer), keys);
+}
+
+/// How the view ended.
+#[derive(Debug)]
+pub enum LiveEnd {
+    /// The user quit with nothing left to stop; the outcome seen, if any.
+    Quit(Option<Outcome>),
+    /// The user asked for ABORT (`a`, or `q` during a morph this morphctl started).
+    Abort,
+    /// The link failed (a signal, a lost reply, a closed link, garbage).
+    Broken(LinkError),
+    /// morphctl's own limit on the morph ran out.
+    TimedOut,
+}
+
+/// The view's loop on `terminal`: STATUS (and SIM STATE on a simulator) every `poll`, the
+/// device's lines and the keys in between. Each sample also goes to `record`.
+pub fn run(
+    terminal: &mut ratatui::DefaultTerminal,
+    link: &mut Link,
+    st: &mut LiveState,
+    poll: Duration,
+    pending: Vec<String>,
+    record: &mut dyn FnMut(&Sample),
+) -> LiveEnd {
+    let start = Instant::now();
+    let mut lines = pending;
+    let mut sim_start: Option<f64> = None;
+    let mut next_poll = Instant::now();
+    loop {
+        for l in lines.drain(..) {
+            st.line(&l);
+        }
+        if Instant::now() >= next_poll {
+            next_poll = Instant::now() + poll;
+            let mut on_event = |l: &str| lines.push(l.to_string());
+            let sim = match sim_time_and_radius(link, &mut on_event) {
+                Ok(x) => x,
+                Err(e) => return LiveEnd::Broken(e),
+            };
+            let status = match link.command("STATUS", REPLY_TIMEOUT_S, &mut on_event) {
+                Ok((_, s)) => s,
+                Err(e) => return LiveEnd::Broken(e),
+            };
+            let t_s = match sim {
+                Some((t, _)) => t - *sim_start.get_or_insert(t),
+                None => start.elapsed().as_secs_f64(),
+            };
+            let s = Sample::from_status(t_s, &status, sim.map_or(f64::NAN, |x| x.1));
+            record(&s);
+            st.sample(s);
+            if st.started && st.morphing() && t_s > st.timeout_s {
+                return LiveEnd::TimedOut;
+            }
+        }
+        if let Err(e) = terminal.draw(|f| draw(f, st)) {
+            return LiveEnd::Broken(LinkError::Closed(format!("cannot draw the live view: {e}")));
+        }
+        match event::poll(Duration::from_millis(KEY_POLL_MS)) {
+            Ok(true) => {
+                if let Ok(Event::Key(k)) = event::read() {
+                    if k.kind == KeyEventKind::Press {
+                        match key_action(k.code, k.modifiers) {
+                            Action::Abort => return LiveEnd::Abort,
+                            Action::Quit if st.started && st.morphing() => return LiveEnd::Abort,
+                            Action::Quit => return LiveEnd::Quit(st.outcome.clone()),
+                            Action::None => {}
+                        }
+                    }
+                }
+            }
+            Ok(false) => {}
+            Err(e) => {
+                return LiveEnd::Broken(LinkError::Closed(format!("cannot read the keyboard: {e}")))
+            }
+        }
+        match link.recv(Duration::from_millis(1)) {
+            Ok(Some(l)) => lines.push(l),
+            Ok(None) => {}
+            Err(e) => return LiveEnd::Broken(e),
+        }
+    }
+}
+
+/// Link time and true radius from `SIM STATE` on a simulator; None on a board.
+fn sim_time_and_radius(
+    link: &mut Link,
+    on_event: &mut dyn FnMut(&str),
+) -> Result<Option<(f64, f64)>, LinkError> {
+    if !link.simulated {
+        return Ok(None);
+    }
+    let (_, st) = link.command("SIM STATE", REPLY_TIMEOUT_S, on_event)?;
+    let num = |key: &str| field(&st, key)?.parse::<f64>().ok();
+    Ok(num("time_s").zip(num("radius_mm")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ratatui::backend::TestBackend;
+    use ratatui::Terminal;
+
+    fn status(phase: &str, pla: f64, p_pla: f64, targets: &str) -> String {
+        format!("ok phase={phase} target_mm=38.00 t_pla_c={pla} t_tca_c=50.00 t_amb_c=22.00 p_pla_w={p_pla} p_tca_w=1.000 supply_v=12.00 fault=none {targets}")
+    }
+
+    fn screen(st: &LiveState) -> String {
+        let mut t = Terminal::new(TestBackend::new(110, 40)).unwrap();
+        t.draw(|f| draw(f, st)).unwrap();
+        let buf = t.backend().buffer();
+        let w = buf.area.width as usize;
+        let cells: Vec<&str> = buf.content().iter().map(|c| c.symbol()).collect();
+        cells
+            .chunks(w)
+            .map(|r| r.concat())
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
+    #[test]
+    fn keys_abort_and_quit_and_ctrl_c_quits() {
+        assert_eq!(
+            key_action(KeyCode::Char('a'), KeyModifiers::NONE),
+            Action::Abort
+        );
+        assert_eq!(
+            key_action(KeyCode::Char('q'), KeyModifiers::NONE),
+            Action::Quit
+        );
+        assert_eq!(key_action(KeyCode::Esc, KeyModifiers::NONE), Action::Quit);
+        assert_eq!(
+            key_action(KeyCode::Char('c'), KeyModifiers::CONTROL),
+            Action::Quit
+        );
+        assert_eq!(
+            key_action(KeyCode::Char('c'), KeyModifiers::NONE),
+            Action::None
+        );
+        assert_eq!(key_action(KeyCode::Enter, KeyModifiers::NONE), Action::None);
+    }
+
+    #[test]
+    fn the_state_follows_samples_and_lines() {
+        let t = "pla_target_c=75.00 tca_target_c=57.50 mode=closed";
+        let mut st = LiveState::new("MORPH 38 auto on test".into(), true, 900.0);
+        assert!(st.morphing(), "a started morph runs until told otherwise");
+        st.sample(Sample::from_status(
+            0.0,
+            &status("soften", 22.0, 5.0, t),
+            53.0,
+        ));
+        st.sample(Sample::from_status(
+            3.0,
+            &status("soften", 60.0, 5.0, t),
+            52.0,
+        ));
+        st.line("event: phase bend t=3.4 power_w=0.698");
+        st.sample(Sample::from_status(
+            4.0,
+            &status("bend", 70.0, 3.0, t),
+            45.0,
+        ));
+        assert_eq!(st.phase_since_s, 4.0);
+        assert_eq!(st.history[0].len(), 3);
+        // closed's bend times out after the sequencer's 120 s.
+        assert_eq!(st.phase_time_left_s(), Some(120.0));
+        st.sample(Sample::from_status(
+            14.0,
+            &status("bend", 74.0, 2.0, t),
+            38.2,
+        ));
+        assert_eq!(st.phase_time_left_s(), Some(110.0));
+        assert!(st.morphing() && st.outcome.is_none());
+        st.line("event: done t=23.0 radius_mm=38.01");
+        assert_eq!(st.outcome, Some(Outcome::Done(38.01)));
+        assert!(!st.morphing());
+        for i in 0..10 {
+            st.line(&format!("event: phase x t={i}"));
+        }
+        assert_eq!(st.events.len(), EVENTS_KEPT);
+        assert_eq!(st.events.back().unwrap(), "event: phase x t=9");
+        let mut st = LiveState::new("t".into(), true, 900.0);
+        st.line("alarm: over-temperature pla ...");
+        assert!(matches!(st.outcome, Some(Outcome::Alarm(_))) && !st.morphing());
+        // watch: nothing started, the device's phase says whether a morph runs.
+        let mut st = LiveState::new("watch".into(), false, 900.0);
+        st.sample(Sample::from_status(
+            0.0,
+            &status("idle", 22.0, 0.0, ""),
+            f64::NAN,
+        ));
+        assert!(!st.morphing());
+    }
+
+    #[test]
+    fn paper_has_its_own_phase_timeouts() {
+        assert_eq!(phase_timeout_s("closed", "lock"), Some(600.0));
+        let paper = phase_timeout_s("paper", "soften").unwrap();
+        assert!(paper < 60.0, "{paper}");
+        assert_eq!(phase_timeout_s("-", "bend"), None);
+        assert_eq!(phase_timeout_s("closed", "idle"), None);
+    }
+
+    #[test]
+    fn the_view_draws_temperatures_targets_powers_radius_phase_and_keys() {
+        let t = "pla_target_c=75.00 tca_target_c=57.50 mode=closed";
+        let mut st = LiveState::new("MORPH 38 auto on morph-sim".into(), true, 900.0);
+        st.sample(Sample::from_status(
+            0.0,
+            &status("soften", 22.0, 5.0, t),
+            53.0,
+        ));
+        st.line("event: phase bend t=3.4 power_w=0.698");
+        st.sample(Sample::from_status(
+            4.0,
+            &status("bend", 70.12, 2.5, t),
+            44.5,
+        ));
+        let s = screen(&st);
+        for want in [
+            "MORPH 38 auto on morph-sim",
+            "phase bend",
+            "mode closed",
+            "4.0 s since MORPH",
+            "phase timeout in 120 s",
+            "70.1 °C",
+            "target    75.0 °C",
+            "-4.9 K",
+            "target    57.5 °C",
+            "PLA heater 2.50 W of 5.0 W",
+            "TCA heater 1.00 W of 2.0 W",
+            "supply 12.00 V",
+            "target 38.00 mm",
+            "controller's estimate at done",
+            "true (simulator) 44.50 mm",
+            "event: phase bend t=3.4",
+            "PLA target",
+            "a: abort   q: quit (aborts the morph)",
+        ] {
+            assert!(s.contains(want), "`{want}` not on screen:\n{s}");
+        }
+        st.line("event: done t=23.0 radius_mm=38.01");
+        st.note = Some("heaters off".into());
+        let s = screen(&st);
+        assert!(s.contains("done: the controller estimates 38.01 mm"), "{s}");
+        assert!(s.contains("a: abort   q: quit   ·   heaters off"), "{s}");
+        // A board: no truth, no targets from an older firmware.
+        let mut st = LiveState::new("board".into(), false, 900.0);
+        st.sample(Sample::from_status(
+            0.0,
+            &status("idle", 22.0, 0.0, ""),
+            f64::NAN,
+        ));
+        let s = screen(&st);
+        assert!(
+            s.contains("true (simulator) -") && s.contains("target          -"),
+            "{s}"
+        );
+    }
+}

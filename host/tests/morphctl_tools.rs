@@ -1,0 +1,472 @@
+//! morphctl's lab tools end to end: plots refused before anything starts, scripts (`run`)
+//! on one simulator, the live view's exit path, bring-up on the simulator.
+#![cfg(unix)]
+
+use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const MORPHCTL: &str = env!("CARGO_BIN_EXE_morphctl");
+
+/// A fresh directory for one test.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("morphctl-tools-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Writes an executable `sh` script.
+fn script(dir: &Path, name: &str, body: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, format!("#!/bin/sh\n{body}\n")).unwrap();
+    std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o755)).unwrap();
+    p
+}
+
+/// Runs morphctl to its end.
+fn morphctl(args: &[&str]) -> Output {
+    Command::new(MORPHCTL).args(args).output().unwrap()
+}
+
+#[test]
+fn a_plot_morphctl_cannot_write_is_refused_before_the_device_is_started() {
+    let dir = scratch("jpg");
+    let started = dir.join("started");
+    let device = script(
+        &dir,
+        "device.sh",
+        &format!("touch '{}'; cat >/dev/null", started.display()),
+    );
+    let out = morphctl(&[
+        "--sim",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "morph",
+        "38",
+        "--plot",
+        dir.join("run.jpg").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("run.jpg: the plot must end in .svg or .png"),
+        "{err}"
+    );
+    assert!(!started.exists(), "the device was started");
+    assert!(!dir.join("run.jpg").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+const MORPH_SIM: &str = env!("CARGO_BIN_EXE_morph-sim");
+
+/// morph-sim that counts its starts in `starts` and records every line to it in
+/// `to_device.log` and from it in `from_device.log`.
+fn counted_sim(dir: &Path) -> PathBuf {
+    script(
+        dir,
+        "device.sh",
+        &format!(
+            "echo start >> '{}'; tee '{}' | '{MORPH_SIM}' \"$@\" | tee '{}'",
+            dir.join("starts").display(),
+            dir.join("to_device.log").display(),
+            dir.join("from_device.log").display()
+        ),
+    )
+}
+
+fn read(path: &Path) -> String {
+    std::fs::read_to_string(path).unwrap_or_default()
+}
+
+/// The device's last STATUS reply once it shows the heaters off (the recording `tee` may
+/// write its file a moment after morphctl read the line), within 5 s.
+fn last_status_heaters_off(dir: &Path) -> String {
+    let t0 = std::time::Instant::now();
+    loop {
+        let from = read(&dir.join("from_device.log"));
+        let last = from.lines().filter(|l| l.starts_with("ok phase=")).last();
+        match last {
+            Some(l) if heaters_off(l) => return l.to_string(),
+            _ if t0.elapsed().as_secs() >= 5 => panic!("no heaters-off STATUS last:\n{from}"),
+            _ => std::thread::sleep(std::time::Duration::from_millis(50)),
+        }
+    }
+}
+
+/// True if a STATUS line shows both heaters off in idle or fault.
+fn heaters_off(status: &str) -> bool {
+    status.contains(" p_pla_w=0.000 p_tca_w=0.000 ")
+        && (status.starts_with("ok phase=idle ") || status.starts_with("ok phase=fault "))
+}
+
+#[test]
+fn a_script_injects_a_fault_then_morphs_on_one_simulator_and_logs_every_line() {
+    let dir = scratch("run");
+    let device = counted_sim(&dir);
+    let file = dir.join("fault-then-morph.txt");
+    std::fs::write(
+        &file,
+        "# a dead TCA heater is caught, then a healthy morph on the same link\n\
+         SIM FAULT heater-open tca\n\
+         MORPH 38\n\
+         wait alarm 120   # the supervisor's heating check\n\
+         SIM CLEAR\n\
+         RESET\n\
+         MORPH 40\n\
+         wait done\n\
+         sleep 1\n\
+         SIM STATE\n",
+    )
+    .unwrap();
+    let log = dir.join("session.log");
+    let out = morphctl(&[
+        "--sim",
+        "--sim-speed",
+        "50",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "run",
+        file.to_str().unwrap(),
+        "--log",
+        log.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        read(&dir.join("starts")).lines().count(),
+        1,
+        "one simulator"
+    );
+    let text = read(&log);
+    assert_eq!(text, stdout, "the log file is the session as printed");
+    // In order: each line sent (>) and received (<), with its time.
+    let mut at = 0;
+    for want in [
+        "> SIM FAULT heater-open tca",
+        "< ok fault=heater-open target=tca",
+        "> MORPH 38",
+        "< alarm: heater-not-heating tca",
+        "> RESET",
+        "< ok cleared=heater-not-heating",
+        "> MORPH 40",
+        "< event: done ",
+        "> SIM STATE",
+        "< ok time_s=",
+        "# script done",
+    ] {
+        let found = text[at..]
+            .find(want)
+            .unwrap_or_else(|| panic!("`{want}` missing after byte {at}:\n{text}"));
+        at += found + want.len();
+    }
+    assert!(
+        text.lines()
+            .all(|l| l.starts_with('[') && l[1..].contains(" s] ")),
+        "{text}"
+    );
+    let last = text.lines().last().unwrap();
+    assert!(heaters_off(&last[last.find("< ").unwrap() + 2..]), "{last}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_bad_script_is_refused_before_the_device_is_started() {
+    let dir = scratch("bad-script");
+    let device = counted_sim(&dir);
+    let file = dir.join("typo.txt");
+    std::fs::write(&file, "MORPH 38\nwait dome\n").unwrap();
+    let out = morphctl(&[
+        "--sim",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "run",
+        file.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        err.contains("typo.txt: line 2: `wait` needs `done` or `alarm`"),
+        "{err}"
+    );
+    assert!(!dir.join("starts").exists(), "the device was started");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_script_that_fails_mid_morph_ends_in_abort_and_the_device_reports_the_heaters_off() {
+    let dir = scratch("run-fails");
+    let device = counted_sim(&dir);
+    let file = dir.join("short-wait.txt");
+    // The morph takes about 25 s of link time; the wait allows 2.
+    std::fs::write(&file, "MORPH 38\nwait done 2\nSTATUS\n").unwrap();
+    let out = morphctl(&[
+        "--sim",
+        "--sim-speed",
+        "2",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "run",
+        file.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{stdout}");
+    assert!(
+        stdout.contains("# line 2: no done within 2 s; stopping the heaters"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("heaters off: ok phase=idle"), "{stdout}");
+    assert!(
+        !stdout.contains("> STATUS\n"),
+        "the script went on after the failure"
+    );
+    // Seen from the device's side: ABORT, then a STATUS with both heaters off.
+    let to = read(&dir.join("to_device.log"));
+    let after_abort = to
+        .split("ABORT\n")
+        .nth(1)
+        .expect("no ABORT reached the device");
+    assert!(after_abort.starts_with("STATUS"), "{to}");
+    last_status_heaters_off(&dir);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sigint_during_a_script_sleep_ends_in_abort_and_heaters_off() {
+    let dir = scratch("run-sigint");
+    let device = counted_sim(&dir);
+    let file = dir.join("sleepy.txt");
+    std::fs::write(&file, "MORPH 38\nsleep 600\n").unwrap();
+    let child = Command::new(MORPHCTL)
+        .args([
+            "--sim",
+            "--sim-speed",
+            "1",
+            "--sim-program",
+            device.to_str().unwrap(),
+            "run",
+            file.to_str().unwrap(),
+        ])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the morph is under way (the device has said `ok` to MORPH and a phase).
+    let t0 = std::time::Instant::now();
+    while !read(&dir.join("from_device.log")).contains("event: phase soften") {
+        assert!(t0.elapsed().as_secs() < 20, "the morph never started");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(128 + libc::SIGINT), "{stdout}");
+    assert!(
+        stdout.contains("interrupted by SIGINT (Ctrl-C); stopping the heaters"),
+        "{stdout}"
+    );
+    last_status_heaters_off(&dir);
+    assert!(read(&dir.join("to_device.log")).contains("ABORT"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A TCP serial port in front of a fresh morph-sim per connection, as the emulated image
+/// serves its USART1: the address and the thread serving it.
+fn tcp_sim(speed: &str) -> (String, std::thread::JoinHandle<()>) {
+    use std::io::{Read, Write};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    let speed = speed.to_string();
+    let handle = std::thread::spawn(move || {
+        let (mut sock, _) = listener.accept().unwrap();
+        let mut sim = Command::new(MORPH_SIM)
+            .args(["--speed", &speed])
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut to_sim = sim.stdin.take().unwrap();
+        let mut from_sim = sim.stdout.take().unwrap();
+        let mut back = sock.try_clone().unwrap();
+        let pump = std::thread::spawn(move || {
+            let mut buf = [0u8; 512];
+            while let Ok(n) = from_sim.read(&mut buf) {
+                if n == 0 || back.write_all(&buf[..n]).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut buf = [0u8; 512];
+        while let Ok(n) = sock.read(&mut buf) {
+            if n == 0 || to_sim.write_all(&buf[..n]).is_err() {
+                break;
+            }
+        }
+        drop(to_sim);
+        let _ = sim.kill();
+        let _ = sim.wait();
+        let _ = pump.join();
+    });
+    (addr, handle)
+}
+
+#[test]
+fn tcp_reaches_a_serial_port_served_over_tcp_and_finds_its_sim_commands() {
+    let dir = scratch("tcp");
+    let (addr, server) = tcp_sim("20");
+    let plot = dir.join("tcp.svg");
+    let out = morphctl(&[
+        "--tcp",
+        &addr,
+        "--tcp-speed",
+        "20",
+        "morph",
+        "40",
+        "--plot",
+        plot.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("event: done"), "{stdout}");
+    // SIM STATE answered over TCP: the plot has the simulated radius.
+    let svg = read(&plot);
+    assert!(svg.contains(&format!("on tcp:{addr}")) && svg.contains("radius (mm)"));
+    server.join().unwrap();
+    // Nothing listening: named as such.
+    let out = morphctl(&["--tcp", &addr, "status"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(err.contains(&format!("cannot connect to {addr}")), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_live_view_without_a_terminal_is_refused_before_the_device_is_started() {
+    let dir = scratch("live");
+    let device = counted_sim(&dir);
+    for args in [&["morph", "38", "--live"][..], &["watch"][..]] {
+        let mut all = vec!["--sim", "--sim-program", device.to_str().unwrap()];
+        all.extend_from_slice(args);
+        let out = morphctl(&all);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains("the live view needs a terminal"), "{err}");
+    }
+    assert!(!dir.join("starts").exists(), "the device was started");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+const MORPH_PLANT: &str = env!("CARGO_BIN_EXE_morph-plant");
+
+/// Runs `morphctl bringup` on the simulator started by `device_body` (a `sh` script body that
+/// gets morph-sim's arguments in `"$@"`); returns the exit code and stdout.
+fn bringup(name: &str, device_body: &str) -> (Option<i32>, String) {
+    let dir = scratch(name);
+    let device = script(&dir, "device.sh", device_body);
+    let out = morphctl(&[
+        "--sim",
+        "--sim-speed",
+        "40",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "bringup",
+    ]);
+    let _ = std::fs::remove_dir_all(&dir);
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr),
+    )
+}
+
+/// The last line: the heaters confirmed off.
+fn ends_heaters_off(out: &str) {
+    let last = out
+        .lines()
+        .rev()
+        .find(|l| l.starts_with("sent ABORT"))
+        .unwrap_or_else(|| panic!("no ABORT at the end:\n{out}"));
+    assert!(
+        heaters_off(&last[last.find("ok phase=").unwrap()..]),
+        "{last}"
+    );
+}
+
+#[test]
+fn bringup_passes_a_healthy_link_lumped_and_hifi_and_ends_with_the_heaters_off() {
+    for plant in ["lumped", "hifi"] {
+        let (code, out) = bringup(
+            &format!("bringup-{plant}"),
+            &format!("exec '{MORPH_SIM}' \"$@\" --plant {plant}"),
+        );
+        assert_eq!(code, Some(0), "{plant}:\n{out}");
+        for want in [
+            "ok   thermistors at rest:",
+            "ok   heater supply: 12.00 V",
+            "ok   PLA heater warms its own thermistor",
+            "ok   TCA heater warms its own thermistor",
+            "ok   ambient thermistor stays put",
+        ] {
+            assert!(out.contains(want), "{plant}: `{want}` missing:\n{out}");
+        }
+        ends_heaters_off(&out);
+    }
+}
+
+#[test]
+fn bringup_names_swapped_thermistor_wires() {
+    // The plant's pla and tca bead temperatures swapped on their way to the board's ADC: the
+    // two thermistor wires on each other's inputs.
+    let swap = r"sed -u -E 's/t_pla_c=([^ ]*) t_tca_c=([^ ]*)/t_pla_c=\2 t_tca_c=\1/'";
+    let (code, out) = bringup(
+        "bringup-swapped",
+        &format!(
+            "exec '{MORPH_SIM}' \"$@\" --plant-cmd \"'{MORPH_PLANT}' --plant lumped | {swap}\""
+        ),
+    );
+    assert_eq!(code, Some(1), "{out}");
+    assert!(
+        out.contains("FAIL PLA and TCA swapped: the PLA heater warmed the tca thermistor"),
+        "{out}"
+    );
+    assert!(out.contains("ok   thermistors at rest:"), "{out}");
+    ends_heaters_off(&out);
+}
+
+#[test]
+fn bringup_names_a_dead_heater_and_refuses_a_faulted_device() {
+    let (code, out) = bringup(
+        "bringup-dead",
+        &format!("{{ echo 'SIM FAULT heater-open tca'; cat; }} | '{MORPH_SIM}' \"$@\" | sed -u '/^ok fault=heater-open/d'"),
+    );
+    assert_eq!(code, Some(1), "{out}");
+    assert!(out.contains("FAIL TCA heater warms no thermistor"), "{out}");
+    assert!(
+        out.contains("ok   PLA heater warms its own thermistor"),
+        "{out}"
+    );
+    ends_heaters_off(&out);
+    // A supply out of range trips the supervisor at rest: bring-up refuses the faulted device
+    // and pulses no heater.
+    let (code, out) = bringup(
+        "bringup-supply",
+        &format!(
+            "{{ echo 'SIM SUPPLY 16'; cat; }} | '{MORPH_SIM}' \"$@\" | sed -u '/^ok supply_v=/d'"
+        ),
+    );
+    assert_eq!(code, Some(1), "{out}");
+    // The trip comes within a few ticks: before the first STATUS or during the rest readings.
+    assert!(
+        out.contains("bring-up stopped: the device is in phase fault, not idle: send RESET")
+            || out.contains("bring-up stopped: the device left idle during the rest readings: phase fault, fault supply-out-of-range"),
+        "{out}"
+    );
+    assert!(!out.contains("HEAT"), "a heater was pulsed:\n{out}");
+    ends_heaters_off(&out);
+}
