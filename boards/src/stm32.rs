@@ -82,12 +82,78 @@ impl SerialReceive for SerialRx {
 
 /// A hardware board's parts.
 pub type HardwareParts = Parts<Sensors, Heaters, Iwdg, SerialTx, SerialRx, SettingsFlash>;
-/// The chip's flash, for the settings area ([`crate::settings_area`]): embassy-stm32's driver
-/// (offsets from the flash start; erase unit the largest sector: the F401's 128 KiB, the G4's
-/// and L4's 2 KiB pages) behind the async NOR-flash trait.
-pub type SettingsFlash = embassy_embedded_hal::adapter::BlockingAsync<
+/// The chip's flash driver behind the async NOR-flash trait the settings store takes.
+type FlashDriver = embassy_embedded_hal::adapter::BlockingAsync<
     embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
 >;
+
+/// The chip's flash, for the settings area ([`crate::settings_area`]): embassy-stm32's driver
+/// (offsets from the flash start; erase unit the largest sector: the F401's 128 KiB, the G4's
+/// and L4's 2 KiB pages). An erase stalls the CPU (code runs from the same bank) for up to
+/// 2 s on the F401, longer than [`WATCHDOG_TIMEOUT_US`]: the watchdog's period is stretched
+/// to [`ERASE_WATCHDOG_S`] for the erase and put back after it. The firmware erases only with
+/// the heaters off (SAVE is refused while a morph runs).
+pub struct SettingsFlash(FlashDriver);
+
+/// The watchdog's period during a flash erase, s (prescaler 256, reload 4095 at the 32 kHz
+/// LSI): above the F401's 2 s worst-case 128 KiB sector erase.
+pub const ERASE_WATCHDOG_S: u32 = 32;
+
+/// Waits until the IWDG has taken its last prescaler and reload writes.
+fn iwdg_settled() {
+    while pac::IWDG.sr().read().0 != 0 {}
+}
+
+/// Writes the IWDG's prescaler and reload (unlocking them first) and reloads the counter.
+fn iwdg_period(pr: u8, rl: u16) {
+    use embassy_stm32::pac::iwdg::vals::{Key, Pr};
+    let w = pac::IWDG;
+    w.kr().write(|k| k.set_key(Key::RESET));
+    w.kr().write(|k| k.set_key(Key::ENABLE));
+    iwdg_settled();
+    w.pr().write(|p| p.set_pr(Pr::from_bits(pr)));
+    w.rlr().write(|r| r.set_rl(rl));
+    iwdg_settled();
+    w.kr().write(|k| k.set_key(Key::RESET));
+}
+
+impl embedded_storage_async::nor_flash::ErrorType for SettingsFlash {
+    type Error = embassy_stm32::flash::Error;
+}
+
+impl embedded_storage_async::nor_flash::ReadNorFlash for SettingsFlash {
+    const READ_SIZE: usize =
+        <FlashDriver as embedded_storage_async::nor_flash::ReadNorFlash>::READ_SIZE;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        self.0.read(offset, bytes).await
+    }
+
+    fn capacity(&self) -> usize {
+        self.0.capacity()
+    }
+}
+
+impl embedded_storage_async::nor_flash::NorFlash for SettingsFlash {
+    const WRITE_SIZE: usize =
+        <FlashDriver as embedded_storage_async::nor_flash::NorFlash>::WRITE_SIZE;
+    const ERASE_SIZE: usize =
+        <FlashDriver as embedded_storage_async::nor_flash::NorFlash>::ERASE_SIZE;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        let w = pac::IWDG;
+        iwdg_settled();
+        let (pr, rl) = (w.pr().read().pr().to_bits(), w.rlr().read().rl());
+        iwdg_period(6, 0xFFF);
+        let r = self.0.erase(from, to).await;
+        iwdg_period(pr, rl);
+        r
+    }
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.0.write(offset, bytes).await
+    }
+}
 /// Both heaters on [`HeaterTimer`].
 pub type Heaters = PwmHeaters<HeaterTimer>;
 
@@ -260,8 +326,8 @@ pub fn parts(
         rx: SerialRx(rx),
         reset_flags,
         last_fatal: crate::reset_record::take(),
-        settings_flash: embassy_embedded_hal::adapter::BlockingAsync::new(
+        settings_flash: SettingsFlash(embassy_embedded_hal::adapter::BlockingAsync::new(
             embassy_stm32::flash::Flash::new_blocking(flash),
-        ),
+        )),
     }
 }
