@@ -17,7 +17,7 @@ use crate::vocab::ResetCause;
 use core::fmt::{self, Write};
 
 /// HELP text, one `data:` line each.
-pub const HELP: [&str; 11] = [
+pub const HELP: [&str; 12] = [
     "MORPH <radius_mm> [auto|paper|gated|boost|closed]  morph to a radius (see RANGE)",
     "STATUS                          phase, temperatures, powers, supply, fault",
     "ABORT                           both heaters off at once, phase idle",
@@ -29,6 +29,7 @@ pub const HELP: [&str; 11] = [
     "STATS                           control-loop timing (us) and reset cause; hardware only",
     "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|WAIT|CLEAR|PANIC|STALL  simulated builds only",
     "SIM WAIT <s>                    run <s> of simulated time, then ok; morph-sim only",
+    "SIM FAULT thermistor-drift <pla|tca|amb> <K/s>  reading drifts from now; negative reads low",
 ];
 
 /// `STATS` on a build that does not time its control loop.
@@ -492,6 +493,32 @@ impl fmt::Display for FaultText<'_> {
     }
 }
 
+/// `SIM FAULT thermistor-drift`: `ok fault=thermistor-drift target=<sensor> rate_k_per_s=<K/s>`.
+pub fn sim_fault_drift(l: &mut OutLine, target: Sensor, rate_k_per_s: f32) {
+    ok_with(
+        l,
+        format_args!(
+            "fault={} target={} rate_k_per_s={}",
+            SimFault::ThermistorDrift.as_str(),
+            target.as_str(),
+            Fixed(rate_k_per_s, 3)
+        ),
+    );
+}
+
+/// `SIM FAULT thermistor-drift` refused: `error: out-of-range drift must be -<max>..<max> K/s`.
+pub fn sim_drift_out_of_range(l: &mut OutLine, max_k_per_s: f32) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!(
+            "drift must be -{}..{} K/s",
+            Fixed(max_k_per_s, 1),
+            Fixed(max_k_per_s, 1)
+        ),
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -538,6 +565,14 @@ mod tests {
         );
         let l = line(|l| sim_fault(l, SimFault::HeaterOpen, Sensor::Tca));
         assert_eq!(l, "ok fault=heater-open target=tca");
+        assert_eq!(
+            line(|l| sim_fault_drift(l, Sensor::Tca, -0.2)),
+            "ok fault=thermistor-drift target=tca rate_k_per_s=-0.200"
+        );
+        assert_eq!(
+            line(|l| sim_drift_out_of_range(l, 10.0)),
+            "error: out-of-range drift must be -10.0..10.0 K/s"
+        );
         assert_eq!(line(|l| sim_supply(l, 5.0)), "ok supply_v=5.00");
         assert_eq!(
             line(|l| sim_supply_out_of_range(l, 30.0)),
