@@ -473,10 +473,9 @@ impl fmt::Display for FaultText<'_> {
             FaultCode::OverTemperature => {
                 write!(l, "over-temperature {s} reads {v} C, above its maximum")
             }
-            FaultCode::HeaterNotHeating => write!(
-                l,
-                "heater-not-heating {s} heater rose only {v} K; check heater wiring and MOSFET"
-            ),
+            FaultCode::HeaterNotHeating => {
+                write!(l, "heater-not-heating {s} rose {v} K; check wiring, MOSFET")
+            }
             FaultCode::HeatingWhileOff => write!(
                 l,
                 "heating-while-off {s} sensor rose {v} K with both heaters off; check its MOSFET"
@@ -489,6 +488,12 @@ impl fmt::Display for FaultText<'_> {
                 Fixed(SUPPLY_MAX_V, 1)
             ),
             FaultCode::PhaseTimeout => write!(l, "phase-timeout phase {s} did not finish in time"),
+            FaultCode::SensorFrozen => {
+                write!(l, "sensor-frozen {s} moved {v} K as its power changed")
+            }
+            FaultCode::SensorImplausible => {
+                write!(l, "sensor-implausible {s} off its expected rise by {v} K")
+            }
         }
     }
 }
@@ -670,7 +675,8 @@ mod alarm_tests {
         let sensors = Sensor::ALL.map(Subject::Sensor);
         let phases = [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release].map(Subject::Phase);
         let heaters = Heater::ALL.map(Subject::Heater);
-        let cases: [(FaultCode, &[Subject]); 9] = [
+        let heated = [Sensor::Pla, Sensor::Tca].map(Subject::Sensor);
+        let cases: [(FaultCode, &[Subject]); 11] = [
             (FaultCode::ThermistorOpen, &sensors),
             (FaultCode::ThermistorShort, &sensors),
             (FaultCode::UnderTemperature, &sensors),
@@ -680,6 +686,8 @@ mod alarm_tests {
             (FaultCode::StaleSensor, &[Subject::Frame]),
             (FaultCode::SupplyOutOfRange, &[Subject::Supply]),
             (FaultCode::PhaseTimeout, &phases),
+            (FaultCode::SensorFrozen, &heated),
+            (FaultCode::SensorImplausible, &heated),
         ];
         cases
             .iter()
