@@ -756,9 +756,11 @@ fn heater_cap_w(heater: Heater) -> f32 {
 /// TCA from 0.4 W. Such a step moves a healthy sensor by several kelvin within seconds (the
 /// model's steady rise is 30 K and 14 K); smaller steps in a closed loop's hold may not.
 pub const FROZEN_POWER_STEP_FRACTION: f32 = 0.2;
-/// Sensor-frozen: how far a watched sensor must move, K (either way). 0.5 K is ten times the
-/// sensor noise; a frozen reading moves by nothing.
-pub const FROZEN_MIN_MOVE_K: f32 = 0.5;
+/// Sensor-frozen: how far a watched sensor must move, K (either way). A frozen reading moves by
+/// nothing; a live one by its noise alone (0.05 K rms, so 0.1 K within a window is all but
+/// certain) plus what the power step does to it, which in still air (time constants five
+/// times water's) can be little within the window.
+pub const FROZEN_MIN_MOVE_K: f32 = 0.1;
 /// Sensor-frozen: the time a watched sensor has to move [`FROZEN_MIN_MOVE_K`], s. The slowest
 /// healthy sensor (the hifi PLA bead, 10 s behind its rod) moves that far within about 3 s of a
 /// 1 W step; 8 s leaves margin and keeps a frozen sensor under the 10 s aim.
@@ -767,19 +769,24 @@ pub const FROZEN_WINDOW_S: f32 = 8.0;
 /// Sensor-implausible, the envelope's floor: this share of the model's steady rise (own heater
 /// plus the other's share, `R_PP_K_PER_W`/`R_TT_K_PER_W` and `R_TP_K_PER_W` times the commanded
 /// powers), reached no faster than [`PLAUS_TAU_SLOW_S`] and then [`PLAUS_LAG_S`] behind. A
-/// bead beside its heater reads a fraction of the heater's mean rise (the hifi link's lowest
-/// measured share over its ensemble sets it).
-pub const PLAUS_LOW_GAIN: f32 = 0.5;
+/// bead beside its heater reads a fraction of the heater's mean rise; 0.3 leaves no alarm on
+/// either ensemble (in water or air) while a dead heater's sensor stays near ambient.
+pub const PLAUS_LOW_GAIN: f32 = 0.3;
 /// Sensor-implausible, the envelope's ceiling: this many times the model's steady rise, reached
-/// with [`PLAUS_TAU_FAST_S`] and left no faster than [`PLAUS_TAU_SLOW_S`] (a hot link cools
-/// slowly). Above the hifi link's highest measured share, with margin.
-pub const PLAUS_HIGH_GAIN: f32 = 1.2;
+/// with [`PLAUS_TAU_FAST_S`] and left no faster than [`PLAUS_CEILING_FALL_S`] (a hot link
+/// cools slowly). The model's resistances are water's; in still air a healthy link rises
+/// several times as far (1.2 tripped healthy morphs in air on both ensembles), so 4.
+pub const PLAUS_HIGH_GAIN: f32 = 4.0;
 /// Sensor-implausible: the envelope's fast time constant, s (the TCA's fast thermal part is
 /// about 1 s; the ceiling rises this fast, the floor falls this fast).
 pub const PLAUS_TAU_FAST_S: f32 = 1.0;
 /// Sensor-implausible: the envelope's slow time constant, s: the floor rises and the ceiling
 /// falls no faster than this (slower than any healthy heating or cooling of this link).
 pub const PLAUS_TAU_SLOW_S: f32 = 30.0;
+/// Sensor-implausible: how slowly the ceiling falls after a power drop, s: in still air the
+/// link cools five times slower than in water (h = 20 against 101 W/(m² K)), and a bead that
+/// cools slower than the ceiling falls would read implausibly hot.
+pub const PLAUS_CEILING_FALL_S: f32 = 200.0;
 /// Sensor-implausible: the floor's extra lag, s (the hifi PLA bead lags its rod by about 10 s).
 pub const PLAUS_LAG_S: f32 = 5.0;
 /// Sensor-implausible: the lag of the heated beads behind a change of the bath, s: the
@@ -796,7 +803,7 @@ pub const PLAUS_MARGIN_K: f32 = 3.0;
 pub const PLAUS_TIME_S: f32 = 3.0;
 const _: () = assert!(PLAUS_LOW_GAIN > 0.0 && PLAUS_LOW_GAIN < 1.0 && PLAUS_HIGH_GAIN > 1.0);
 const _: () = assert!(PLAUS_TAU_FAST_S > 0.0 && PLAUS_TAU_SLOW_S > PLAUS_TAU_FAST_S);
-const _: () = assert!(PLAUS_AMB_TAU_S > 0.0);
+const _: () = assert!(PLAUS_AMB_TAU_S > 0.0 && PLAUS_CEILING_FALL_S >= PLAUS_TAU_SLOW_S);
 const _: () = assert!(PLAUS_MARGIN_K > 0.0 && PLAUS_TIME_S > 0.0 && PLAUS_LAG_S >= 0.0);
 const _: () = assert!(FROZEN_MIN_MOVE_K > 0.0 && FROZEN_WINDOW_S < 10.0);
 const _: () = assert!(FROZEN_POWER_STEP_FRACTION > 0.0 && FROZEN_POWER_STEP_FRACTION < 1.0);
@@ -876,7 +883,7 @@ impl Expectation {
         let tau_hi = if to_hi > *hi {
             PLAUS_TAU_FAST_S
         } else {
-            PLAUS_TAU_SLOW_S
+            PLAUS_CEILING_FALL_S
         };
         approach(hi, to_hi, tau_hi);
         let to_lo = PLAUS_LOW_GAIN * own_k;
