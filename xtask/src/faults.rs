@@ -150,9 +150,11 @@ fn run_case<P: Plant>(mut rig: Rig<P>, case: &FaultCase, phase: Phase, mode: &st
                 .strip_prefix("alarm: ")
                 .and_then(|r| r.split(' ').next())
                 .unwrap_or("?");
+            // `phase-timeout phase <name>`: the subject is the third word.
+            let nth = if code == "phase-timeout" { 2 } else { 1 };
             let subject = a
                 .strip_prefix("alarm: ")
-                .and_then(|r| r.split(' ').nth(1))
+                .and_then(|r| r.split(' ').nth(nth))
                 .unwrap_or("?");
             let s = (rig.now_ms() - t0) as f64 / 1000.0;
             out.alarm = Some((s, format!("{code} {subject}")));
