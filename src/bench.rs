@@ -24,6 +24,11 @@ pub const SIM_AMBIENT_RANGE_C: (f32, f32) = (-10.0, 60.0);
 /// work.
 pub const SIM_WAIT_MAX_S: f32 = 3600.0;
 
+/// Largest drift rate `SIM FAULT thermistor-drift` accepts, K/s, either sign: 10 K/s is far
+/// beyond any plausible-but-wrong reading (it crosses a limit within seconds) and keeps the
+/// offset finite over an hour of simulated time.
+pub const SIM_DRIFT_MAX_K_PER_S: f32 = 10.0;
+
 /// The nominal lumped link: the built-in parameters, nominal heaters (30 Ω wrap, 6.5 Ω TCA)
 /// and a 12 V supply, 3 s thermistor lag. The plant of `morph-sim` and the emulated image.
 pub const NOMINAL_LINK: LumpedSpec = LumpedSpec {
@@ -59,6 +64,9 @@ pub struct Bench<P> {
     thermistor_fault: [Option<SimFault>; 3],
     /// The counts a stuck thermistor reads (taken at its first frame after the fault).
     stuck_counts: [Option<u32>; 3],
+    /// A drifting thermistor's rate, K/s, and when its drift started (its first frame after
+    /// the fault, ms).
+    drift: [Option<(f32, Option<u64>)>; 3],
     heater_open: [bool; 2],
     heater_stuck: [bool; 2],
     output: [CommandWatchdog; 2],
@@ -74,6 +82,7 @@ impl<P: Plant> Bench<P> {
             noise,
             thermistor_fault: [None; 3],
             stuck_counts: [None; 3],
+            drift: [None; 3],
             heater_open: [false; 2],
             heater_stuck: [false; 2],
             output: [CommandWatchdog::default(); 2],
@@ -162,7 +171,11 @@ impl<P: Plant> Bench<P> {
         let beads = [s.t_pla_c, s.t_tca_c, s.t_amb_c];
         let mut counts = [0u32; 3];
         for (i, c) in counts.iter_mut().enumerate() {
-            let t = beads[i] + self.noise_c();
+            let mut t = beads[i] + self.noise_c();
+            if let Some((rate_k_per_s, since)) = &mut self.drift[i] {
+                let since_ms = *since.get_or_insert(sample_ms);
+                t += *rate_k_per_s as f64 * sample_ms.saturating_sub(since_ms) as f64 / 1000.0;
+            }
             let live = self.board.thermistor.counts_for_temp(t as f32);
             *c = match self.thermistor_fault[i] {
                 Some(SimFault::ThermistorOpen) => self.board.thermistor.adc_full_scale,
@@ -188,13 +201,22 @@ impl<P: Plant> Bench<P> {
             }
             SimFault::HeaterOpen => self.heater_open[index.min(1)] = true,
             SimFault::HeaterStuck => self.heater_stuck[index.min(1)] = true,
+            // A drift without a rate is no drift: see [`Bench::inject_drift`].
+            SimFault::ThermistorDrift => {}
         }
+    }
+
+    /// Makes the sensor of [`crate::vocab::Sensor::index`] `index` drift from the truth by
+    /// `rate_k_per_s` (negative: reads low) from its next frame on.
+    pub fn inject_drift(&mut self, index: usize, rate_k_per_s: f32) {
+        self.drift[index.min(2)] = Some((rate_k_per_s, None));
     }
 
     /// Removes every injected fault.
     pub fn clear_faults(&mut self) {
         self.thermistor_fault = [None; 3];
         self.stuck_counts = [None; 3];
+        self.drift = [None; 3];
         self.heater_open = [false; 2];
         self.heater_stuck = [false; 2];
     }
@@ -241,6 +263,14 @@ impl<P: Plant> Bench<P> {
             SimCommand::Fault(kind, target) => {
                 self.inject(kind, target.index());
                 reply::sim_fault(&mut l, kind, target);
+            }
+            SimCommand::Drift(target, rate_k_per_s) => {
+                if !(-SIM_DRIFT_MAX_K_PER_S..=SIM_DRIFT_MAX_K_PER_S).contains(&rate_k_per_s) {
+                    reply::sim_drift_out_of_range(&mut l, SIM_DRIFT_MAX_K_PER_S);
+                } else {
+                    self.inject_drift(target.index(), rate_k_per_s);
+                    reply::sim_fault_drift(&mut l, target, rate_k_per_s);
+                }
             }
             SimCommand::Supply(v) => {
                 if !(0.0..=SIM_SUPPLY_MAX_V).contains(&v) {

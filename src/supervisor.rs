@@ -32,6 +32,12 @@ pub enum FaultCode {
     SupplyOutOfRange,
     /// A morph phase overran its timeout.
     PhaseTimeout,
+    /// A heated sensor did not move while its heater's power changed (a hung ADC channel, a
+    /// bead frozen to something else).
+    SensorFrozen,
+    /// A heated sensor disagreed with the supervisor's thermal expectation for too long
+    /// (drifting, swapped, off its heater, or a heater that died).
+    SensorImplausible,
 }
 
 impl FaultCode {
@@ -47,6 +53,8 @@ impl FaultCode {
             FaultCode::StaleSensor => "stale-sensor",
             FaultCode::SupplyOutOfRange => "supply-out-of-range",
             FaultCode::PhaseTimeout => "phase-timeout",
+            FaultCode::SensorFrozen => "sensor-frozen",
+            FaultCode::SensorImplausible => "sensor-implausible",
         }
     }
 }
@@ -97,7 +105,9 @@ impl Fault {
             (FaultCode::UnderTemperature | FaultCode::OverTemperature, _) => {
                 "PLA_LIMITS, TCA_LIMITS, AMB_LIMITS"
             }
-            (FaultCode::HeaterNotHeating, _) => "HEATING_MIN_GAIN_K, HEATING_MAX_FALL_K",
+            (FaultCode::HeaterNotHeating, _) => {
+                "HEATING_MIN_GAIN_K, HEATING_MAX_FALL_K, HOLD_MAX_FALL_K"
+            }
             (FaultCode::HeatingWhileOff, _) => "OFF_GRACE_S, OFF_MAX_RISE_K",
             (FaultCode::StaleSensor, _) => "STALE_AFTER_MS",
             (FaultCode::SupplyOutOfRange, _) => "SUPPLY_MIN_V, SUPPLY_MAX_V",
@@ -108,6 +118,12 @@ impl Fault {
                 _ => "RELEASE_TIMEOUT_S",
             },
             (FaultCode::PhaseTimeout, _) => "SOFTEN_TIMEOUT_S",
+            (FaultCode::SensorFrozen, _) => {
+                "FROZEN_POWER_STEP_FRACTION, FROZEN_MIN_MOVE_K, FROZEN_WINDOW_S"
+            }
+            (FaultCode::SensorImplausible, _) => {
+                "PLAUS_LOW_GAIN, PLAUS_HIGH_GAIN, PLAUS_MARGIN_K, PLAUS_TIME_S"
+            }
         }
     }
 }
@@ -266,6 +282,11 @@ pub struct Supervisor {
     live_c: [f32; 3],
     watch: [HeatWatch; 2],
     off: [OffWatch; 2],
+    frozen: [FrozenWatch; 2],
+    plaus: [Expectation; 2],
+    hold: [HoldWatch; 2],
+    amb_slow_c: Option<f32>,
+    last_ms: Option<u64>,
 }
 
 impl Default for Supervisor {
@@ -284,6 +305,11 @@ impl Supervisor {
             live_c: [f32::NAN; 3],
             watch: [HeatWatch::default(); 2],
             off: [OffWatch::default(); 2],
+            frozen: [FrozenWatch::default(); 2],
+            plaus: [Expectation::default(); 2],
+            hold: [HoldWatch::default(); 2],
+            amb_slow_c: None,
+            last_ms: None,
         }
     }
 
@@ -369,6 +395,19 @@ impl Supervisor {
             found(f);
         }
         if let Err(f) = self.check_off(now_ms, commanded) {
+            found(f);
+        }
+        let dt_s = self
+            .last_ms
+            .map_or(0.0, |ms| now_ms.saturating_sub(ms) as f32 / 1000.0);
+        self.last_ms = Some(now_ms);
+        if let Err(f) = self.check_frozen(now_ms, commanded) {
+            found(f);
+        }
+        if let Err(f) = self.check_plausible(dt_s, commanded) {
+            found(f);
+        }
+        if let Err(f) = self.check_hold(dt_s, commanded) {
             found(f);
         }
         self.measurements()
@@ -554,6 +593,319 @@ impl Supervisor {
         self.limit_count = [0; 3];
         self.watch = [HeatWatch::default(); 2];
         self.off = [OffWatch::default(); 2];
+        self.frozen = [FrozenWatch::default(); 2];
+        self.plaus = [Expectation::default(); 2];
+        self.hold = [HoldWatch::default(); 2];
+        self.amb_slow_c = None;
+        self.last_ms = None;
+    }
+
+    /// Heater-not-heating while held: a judged heater (at least [`HEATING_MIN_POWER_FRACTION`]
+    /// of its cap) whose sensor falls more than [`HOLD_MAX_FALL_K`] below its recent peak,
+    /// beyond what the recent power drops explain (the model's steady rise of each drop, the
+    /// other heater's through `R_TP_K_PER_W`), trips. Peak and powers are recent maxima that
+    /// relax toward the present with [`HOLD_TAU_S`]. A heater that dies while held (bend, lock)
+    /// loses its sensor's rise within seconds, long before a phase ends and `done` reports a
+    /// radius from it.
+    fn check_hold(&mut self, dt_s: f32, cmd: Powers) -> Result<(), Fault> {
+        let k_peak = (dt_s / HOLD_PEAK_TAU_S).min(1.0);
+        let k_power = (dt_s / HOLD_POWER_TAU_S).min(1.0);
+        let k_cross = (dt_s / HOLD_CROSS_TAU_S).min(1.0);
+        for heater in Heater::ALL {
+            let temp_c = self.live_c[heater.sensor().index()];
+            let own_w = cmd.of(heater);
+            let (r_own, other_w) = match heater {
+                Heater::Pla => (R_PP_K_PER_W, cmd.tca_w),
+                Heater::Tca => (R_TT_K_PER_W, cmd.pla_w),
+            };
+            let w = &mut self.hold[heater.index()];
+            let relax = |x: &mut f32, now: f32, k: f32| *x = now.max(*x + (now - *x) * k);
+            // The recent powers are followed whether judged or not: a heater switched on in a
+            // link still hot from earlier power sees its sensor fall at first.
+            let (own_ref_w, other_ref_w) = w.recent_w.get_or_insert((own_w, other_w));
+            relax(own_ref_w, own_w, k_power);
+            relax(other_ref_w, other_w, k_power);
+            // The other heater's heat reaches this sensor through the link's slow path: its
+            // drop is felt as its lagged power falls, not at once.
+            let other_lag_w = w.other_lag_w.get_or_insert(other_w);
+            *other_lag_w += (other_w - *other_lag_w) * k_cross;
+            let explained_k = r_own * (*own_ref_w - own_w)
+                + R_TP_K_PER_W * (*other_ref_w - other_lag_w.min(*other_ref_w));
+            if !(own_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater)) || !temp_c.is_finite()
+            {
+                w.peak_c = None;
+                continue;
+            }
+            let peak_c = w.peak_c.get_or_insert(temp_c);
+            relax(peak_c, temp_c, k_peak);
+            let fall_k = *peak_c - temp_c - explained_k;
+            if fall_k > HOLD_MAX_FALL_K {
+                return Err(Fault {
+                    code: FaultCode::HeaterNotHeating,
+                    subject: Subject::Heater(heater),
+                    value: -fall_k,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Sensor-frozen: once a heater's commanded power has moved [`FROZEN_POWER_STEP_FRACTION`]
+    /// of its cap away from where its sensor last moved, the sensor must move
+    /// [`FROZEN_MIN_MOVE_K`] (either way) within [`FROZEN_WINDOW_S`].
+    fn check_frozen(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
+        for heater in Heater::ALL {
+            let temp_c = self.live_c[heater.sensor().index()];
+            let w = &mut self.frozen[heater.index()];
+            if !temp_c.is_finite() {
+                *w = FrozenWatch::default();
+                continue;
+            }
+            let own_w = cmd.of(heater);
+            let (ref_w, ref_c) = *w.reference.get_or_insert((own_w, temp_c));
+            if (temp_c - ref_c).abs() >= FROZEN_MIN_MOVE_K {
+                *w = FrozenWatch {
+                    reference: Some((own_w, temp_c)),
+                    since_ms: None,
+                };
+                continue;
+            }
+            let step_w = FROZEN_POWER_STEP_FRACTION * heater_cap_w(heater);
+            if w.since_ms.is_none() && (own_w - ref_w).abs() >= step_w {
+                w.since_ms = Some(now_ms);
+            }
+            if let Some(since) = w.since_ms {
+                if now_ms.saturating_sub(since) as f32 / 1000.0 >= FROZEN_WINDOW_S {
+                    return Err(Fault {
+                        code: FaultCode::SensorFrozen,
+                        subject: Subject::Sensor(heater.sensor()),
+                        value: temp_c - ref_c,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Sensor-implausible: each heated sensor's rise above the ambient sensor must stay within
+    /// the supervisor's envelope of the model's steady rise for the commanded powers (see
+    /// [`Expectation`]) widened by [`PLAUS_MARGIN_K`]; outside it for [`PLAUS_TIME_S`] (a leaky
+    /// count of seconds) trips.
+    fn check_plausible(&mut self, dt_s: f32, cmd: Powers) -> Result<(), Fault> {
+        let amb_c = self.live_c[Sensor::Amb.index()];
+        // A bath that warms or cools moves the ambient bead at once and the heated ones only
+        // as their own lag allows: between the ambient reading and its lagged value either
+        // may be the one to measure from, so the envelope is widened by their difference.
+        let amb_slow_c = match self.amb_slow_c {
+            Some(slow) if amb_c.is_finite() => {
+                slow + (amb_c - slow) * (dt_s / PLAUS_AMB_TAU_S).min(1.0)
+            }
+            _ => amb_c,
+        };
+        self.amb_slow_c = amb_slow_c.is_finite().then_some(amb_slow_c);
+        let amb_spread_k = (amb_c - amb_slow_c).abs();
+        for heater in Heater::ALL {
+            let temp_c = self.live_c[heater.sensor().index()];
+            let e = &mut self.plaus[heater.index()];
+            let rise_k = temp_c - amb_c;
+            if !rise_k.is_finite() {
+                *e = Expectation::default();
+                continue;
+            }
+            let (r_own, other_w) = match heater {
+                Heater::Pla => (R_PP_K_PER_W, cmd.tca_w),
+                Heater::Tca => (R_TT_K_PER_W, cmd.pla_w),
+            };
+            let own_k = r_own * cmd.of(heater);
+            let steady_k = own_k + R_TP_K_PER_W * other_w;
+            let Some(mut off_k) = e.update(dt_s, own_k, steady_k, rise_k) else {
+                continue;
+            };
+            off_k = if off_k > 0.0 {
+                (off_k - amb_spread_k).max(0.0)
+            } else {
+                (off_k + amb_spread_k).min(0.0)
+            };
+            if off_k != 0.0 {
+                e.outside_s = (e.outside_s + dt_s).min(PLAUS_TIME_S);
+            } else {
+                e.outside_s = (e.outside_s - dt_s).max(0.0);
+            }
+            if e.outside_s >= PLAUS_TIME_S {
+                return Err(Fault {
+                    code: FaultCode::SensorImplausible,
+                    subject: Subject::Sensor(heater.sensor()),
+                    value: off_k,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The power cap of `heater`, W.
+fn heater_cap_w(heater: Heater) -> f32 {
+    match heater {
+        Heater::Pla => HeaterConfig::PLA.max_power_w,
+        Heater::Tca => HeaterConfig::TCA.max_power_w,
+    }
+}
+
+/// Sensor-frozen: the share of a heater's power cap its commanded power must move (either way)
+/// away from where its sensor last moved before the sensor is watched: the PLA from 1.0 W, the
+/// TCA from 0.4 W. Such a step moves a healthy sensor by several kelvin within seconds (the
+/// model's steady rise is 30 K and 14 K); smaller steps in a closed loop's hold may not.
+pub const FROZEN_POWER_STEP_FRACTION: f32 = 0.2;
+/// Sensor-frozen: how far a watched sensor must move, K (either way). A frozen reading moves by
+/// nothing; a live one by its noise alone (0.05 K rms, so 0.1 K within a window is all but
+/// certain) plus what the power step does to it, which in still air (time constants five
+/// times water's) can be little within the window.
+pub const FROZEN_MIN_MOVE_K: f32 = 0.1;
+/// Sensor-frozen: the time a watched sensor has to move [`FROZEN_MIN_MOVE_K`], s. The slowest
+/// healthy sensor (the hifi PLA bead, 10 s behind its rod) moves that far within about 3 s of a
+/// 1 W step; 8 s leaves margin and keeps a frozen sensor under the 10 s aim.
+pub const FROZEN_WINDOW_S: f32 = 8.0;
+
+/// Sensor-implausible, the envelope's floor: this share of the model's steady rise (own heater
+/// plus the other's share, `R_PP_K_PER_W`/`R_TT_K_PER_W` and `R_TP_K_PER_W` times the commanded
+/// powers), reached no faster than [`PLAUS_TAU_SLOW_S`] and then [`PLAUS_LAG_S`] behind. A
+/// bead beside its heater reads a fraction of the heater's mean rise; 0.3 leaves no alarm on
+/// either ensemble (in water or air) while a dead heater's sensor stays near ambient.
+pub const PLAUS_LOW_GAIN: f32 = 0.3;
+/// Sensor-implausible, the envelope's ceiling: this many times the model's steady rise, reached
+/// with [`PLAUS_TAU_FAST_S`] and left no faster than [`PLAUS_CEILING_FALL_S`] (a hot link
+/// cools slowly). The model's resistances are water's; in still air a healthy link rises
+/// several times as far (1.2 tripped healthy morphs in air on both ensembles), so 4.
+pub const PLAUS_HIGH_GAIN: f32 = 4.0;
+/// Sensor-implausible: the envelope's fast time constant, s (the TCA's fast thermal part is
+/// about 1 s; the ceiling rises this fast, the floor falls this fast).
+pub const PLAUS_TAU_FAST_S: f32 = 1.0;
+/// Sensor-implausible: the envelope's slow time constant, s: the floor rises and the ceiling
+/// falls no faster than this (slower than any healthy heating or cooling of this link).
+pub const PLAUS_TAU_SLOW_S: f32 = 30.0;
+/// Sensor-implausible: how slowly the ceiling falls after a power drop, s: in still air the
+/// link cools five times slower than in water (h = 20 against 101 W/(m² K)), and a bead that
+/// cools slower than the ceiling falls would read implausibly hot.
+pub const PLAUS_CEILING_FALL_S: f32 = 200.0;
+/// Sensor-implausible: the floor's extra lag, s (the hifi PLA bead lags its rod by about 10 s).
+pub const PLAUS_LAG_S: f32 = 5.0;
+/// Sensor-implausible: the lag of the heated beads behind a change of the bath, s: the
+/// envelope is widened by the ambient reading's distance from its value lagged by this much
+/// (a bath warmed from 22 to 46 °C moves the ambient bead within seconds, the PLA rod's bead
+/// over a minute).
+pub const PLAUS_AMB_TAU_S: f32 = 60.0;
+/// Sensor-implausible: the envelope is widened by this much either side, K. A link at rest
+/// reads within a kelvin or two of its bath; a sensor reading 3 K colder than the bath it is
+/// in, or 3 K hotter than any heat it is given can explain, is wrong.
+pub const PLAUS_MARGIN_K: f32 = 3.0;
+/// Sensor-implausible: seconds outside the envelope before a trip, counted leaky (+dt outside,
+/// −dt inside), so one noisy excursion never trips.
+pub const PLAUS_TIME_S: f32 = 3.0;
+const _: () = assert!(PLAUS_LOW_GAIN > 0.0 && PLAUS_LOW_GAIN < 1.0 && PLAUS_HIGH_GAIN > 1.0);
+const _: () = assert!(PLAUS_TAU_FAST_S > 0.0 && PLAUS_TAU_SLOW_S > PLAUS_TAU_FAST_S);
+const _: () = assert!(PLAUS_AMB_TAU_S > 0.0 && PLAUS_CEILING_FALL_S >= PLAUS_TAU_SLOW_S);
+const _: () = assert!(PLAUS_MARGIN_K > 0.0 && PLAUS_TIME_S > 0.0 && PLAUS_LAG_S >= 0.0);
+const _: () = assert!(FROZEN_MIN_MOVE_K > 0.0 && FROZEN_WINDOW_S < 10.0);
+const _: () = assert!(FROZEN_POWER_STEP_FRACTION > 0.0 && FROZEN_POWER_STEP_FRACTION < 1.0);
+
+/// Heater-not-heating while held: the largest unexplained fall of a judged heater's sensor
+/// below its recent peak, K (see `Supervisor::check_hold`). A dead TCA's bead loses several
+/// kelvin within seconds; the largest healthy unexplained fall measured on the hifi ensemble
+/// (a bead relaxing to that link's lower equilibrium) sets it.
+pub const HOLD_MAX_FALL_K: f32 = 4.0;
+/// Heater-not-heating while held: how fast the recent peak relaxes toward the present reading,
+/// s. A healthy sensor falling at r K/s stays about r × this below its recent peak: 10 s
+/// forgives the slow healthy relaxations (well under 0.5 K/s) but not a dead TCA's bead,
+/// which loses its rise at several K/s.
+pub const HOLD_PEAK_TAU_S: f32 = 30.0;
+/// Heater-not-heating while held: the lag of the other heater's heat at this sensor, s (the
+/// PLA rod's cooling, about 20 s, carries a PLA power drop to the TCA's bead).
+pub const HOLD_CROSS_TAU_S: f32 = 20.0;
+/// Heater-not-heating while held: how fast the recent powers relax toward the present, s. A
+/// power drop explains a fall for about this long: the hifi TCA bead keeps losing the PLA's
+/// heat for tens of seconds after the PLA heater goes off in lock.
+pub const HOLD_POWER_TAU_S: f32 = 60.0;
+const _: () = assert!(HOLD_MAX_FALL_K > 0.0 && HOLD_MAX_FALL_K < HEATING_MAX_FALL_K);
+const _: () = assert!(HOLD_PEAK_TAU_S > 0.0 && HOLD_POWER_TAU_S >= HOLD_PEAK_TAU_S);
+const _: () = assert!(HOLD_CROSS_TAU_S > 0.0);
+
+/// One heater's held watch: its sensor's recent peak while judged, °C, and its own and the
+/// other heater's recent commanded power, W.
+#[derive(Clone, Copy, Debug, Default)]
+struct HoldWatch {
+    peak_c: Option<f32>,
+    recent_w: Option<(f32, f32)>,
+    other_lag_w: Option<f32>,
+}
+
+/// One heated sensor's sensor-frozen watch.
+#[derive(Clone, Copy, Debug, Default)]
+struct FrozenWatch {
+    /// The power and reading when the sensor last moved (W, °C).
+    reference: Option<(f32, f32)>,
+    /// Since when the power has been a step away with the sensor unmoved, ms.
+    since_ms: Option<u64>,
+}
+
+/// One heated sensor's expected rise above ambient: the supervisor's own first-order envelope
+/// of the model's steady rise for the commanded powers (no strategy's observer: the supervisor
+/// judges the controller, it does not share its model). From the first reading it starts at
+/// the reading itself (a warm link is not implausible).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Expectation {
+    /// The ceiling, the floor before its lag and the floor, K above ambient (`None`: no
+    /// reading yet).
+    envelope_k: Option<(f32, f32, f32)>,
+    /// Seconds outside the envelope (leaky).
+    outside_s: f32,
+}
+
+impl Expectation {
+    /// The envelope now, without its margin: (ceiling, floor), K above ambient.
+    pub fn bounds_k(&self) -> Option<(f32, f32)> {
+        self.envelope_k.map(|(hi, _, lo)| (hi, lo))
+    }
+
+    /// Moves the envelope `dt_s` toward the model's steady rise: the ceiling toward `steady_k`
+    /// (both heaters' shares, K), the floor toward `own_k` (the own heater's alone: the hifi
+    /// link couples the heaters less than the model, so the other's share is no floor), and
+    /// returns how far `rise_k` (the reading's rise above ambient, K) lies outside it widened by
+    /// [`PLAUS_MARGIN_K`] (negative below, 0 inside), or `None` on the first reading.
+    pub fn update(&mut self, dt_s: f32, own_k: f32, steady_k: f32, rise_k: f32) -> Option<f32> {
+        let Some((hi, lo1, lo)) = self.envelope_k.as_mut() else {
+            self.envelope_k = Some((rise_k.max(0.0), rise_k, rise_k));
+            return None;
+        };
+        let approach = |x: &mut f32, to: f32, tau_s: f32| {
+            *x += (to - *x) * (dt_s / tau_s).min(1.0);
+        };
+        let to_hi = PLAUS_HIGH_GAIN * steady_k;
+        let tau_hi = if to_hi > *hi {
+            PLAUS_TAU_FAST_S
+        } else {
+            PLAUS_CEILING_FALL_S
+        };
+        approach(hi, to_hi, tau_hi);
+        let to_lo = PLAUS_LOW_GAIN * own_k;
+        let tau_lo = if to_lo > *lo1 {
+            PLAUS_TAU_SLOW_S
+        } else {
+            PLAUS_TAU_FAST_S
+        };
+        approach(lo1, to_lo, tau_lo);
+        if *lo1 > *lo {
+            approach(lo, *lo1, PLAUS_LAG_S.max(dt_s));
+        } else {
+            *lo = *lo1;
+        }
+        let (hi, lo) = (*hi + PLAUS_MARGIN_K, *lo - PLAUS_MARGIN_K);
+        Some(if rise_k > hi {
+            rise_k - hi
+        } else if rise_k < lo {
+            rise_k - lo
+        } else {
+            0.0
+        })
     }
 }
 
@@ -686,5 +1038,60 @@ mod tests {
             FaultCode::SupplyOutOfRange
         );
         assert!(Supervisor::new().condition_clear(0, &nan).is_err());
+    }
+
+    #[test]
+    fn a_frozen_sensor_trips_after_a_power_step_and_a_moving_one_never_does() {
+        let on = Powers {
+            pla_w: 0.0,
+            tca_w: 1.0,
+        };
+        let (mut frozen, mut moving) = (Supervisor::new(), Supervisor::new());
+        let mut tripped_s = None;
+        for tick in 0..200u64 {
+            let ms = tick * 100;
+            let cmd = if ms < 2000 { Powers::default() } else { on };
+            let warming = 22.0 + 20.0 * (1.0 - libm::expf(-(ms as f32 - 2000.0).max(0.0) / 4000.0));
+            assert!(moving
+                .check(ms, &frame(ms, 22.0, warming), cmd, Phase::Bend)
+                .is_ok());
+            if tripped_s.is_none() {
+                if let Err(f) = frozen.check(ms, &frame(ms, 22.0, 22.0), cmd, Phase::Bend) {
+                    assert_eq!(f.code, FaultCode::SensorFrozen);
+                    assert_eq!(f.subject, Subject::Sensor(Sensor::Tca));
+                    tripped_s = Some((ms - 2000) as f32 / 1000.0);
+                }
+            }
+        }
+        // Judged from the first tick the step is seen (the commanded power lags one tick).
+        let s = tripped_s.expect("frozen sensor never tripped");
+        assert!((FROZEN_WINDOW_S..FROZEN_WINDOW_S + 0.3).contains(&s), "{s}");
+    }
+
+    #[test]
+    fn the_expectation_holds_a_healthy_first_order_sensor_and_rejects_a_drift() {
+        let dt_s = 0.1;
+        let (mut healthy, mut drifting) = (Expectation::default(), Expectation::default());
+        let mut rise_k = 0.0f32;
+        let mut tripped_s = None;
+        for tick in 0..3000u32 {
+            let t_s = tick as f32 * dt_s;
+            // 1 W into the TCA for 100 s, then off: the sensor follows with 3 s, at 60 % of
+            // the model's rise (a bead reading less than its heater's mean).
+            let own_k = if t_s < 100.0 { R_TT_K_PER_W } else { 0.0 };
+            rise_k += (0.6 * own_k - rise_k) * dt_s / 3.0;
+            assert_eq!(
+                healthy.update(dt_s, own_k, own_k, rise_k).unwrap_or(0.0),
+                0.0,
+                "{t_s}"
+            );
+            let off = drifting
+                .update(dt_s, own_k, own_k, rise_k - 0.2 * t_s)
+                .unwrap_or(0.0);
+            if off < 0.0 && tripped_s.is_none() {
+                tripped_s = Some(t_s);
+            }
+        }
+        assert!(tripped_s.is_some());
     }
 }

@@ -13,6 +13,7 @@ use common::{Bench, Link};
 use morphlink::controller::Outputs;
 use morphlink::protocol::{classify, LineKind};
 use morphlink::vocab::Phase;
+use morphlink_plant::Plant;
 
 const ZERO: Outputs = Outputs {
     pla_duty: 0.0,
@@ -125,6 +126,20 @@ fn bench_in(link: Link, phase: Phase, target_mm: f32, mode: &str, window_s: f64)
 fn checked(link: Link, test: &str, cases: usize) {
     println!("{test} on {link:?}: {cases} cases");
     assert!(cases > 0, "{test} on {link:?} checked nothing");
+}
+
+/// What catches a dead heater: the heater check or a plausibility check (its sensor no longer
+/// where its power puts it, or not moving as its power changes), whichever is first.
+const DEAD_HEATER_CODES: &[&str] = &["heater-not-heating", "sensor-implausible", "sensor-frozen"];
+/// What catches a stuck (frozen) thermistor.
+const STUCK_SENSOR_CODES: &[&str] = &["heater-not-heating", "sensor-frozen", "sensor-implausible"];
+
+/// The fault code of an alarm line.
+fn code_of(alarm: &str) -> &str {
+    alarm
+        .strip_prefix("alarm: ")
+        .and_then(|r| r.split(' ').next())
+        .unwrap_or("")
 }
 
 /// [`expect_alarm`] for an alarm with any of `codes`.
@@ -325,9 +340,11 @@ fn a_dead_heater_trips_heater_not_heating_wherever_it_is_on(link: Link) {
                 cases += 1;
                 // Injecting at the start of the phase: re-enter it fresh for bend/lock.
                 assert!(b.send(&format!("SIM FAULT heater-open {heater}"))[0].starts_with("ok"));
-                let a = expect_alarm(&mut b, "heater-not-heating", 60.0);
+                // A dead heater is caught by the heater check or, its sensor no longer where its
+                // power puts it, by the plausibility check: whichever is first.
+                let a = expect_alarm_of(&mut b, DEAD_HEATER_CODES, 60.0);
                 assert!(a.contains(heater), "{a}");
-                assert_latched(&mut b, "heater-not-heating");
+                assert_latched(&mut b, code_of(&a));
                 // Nothing to wait for: the heaters are off; RESET is allowed once sensors are fine.
                 assert!(b.send("SIM CLEAR")[0].starts_with("ok"));
                 assert!(b.send("RESET")[0].starts_with("ok"));
@@ -410,7 +427,7 @@ fn a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph(lin
                 let a = b.alarms_since(n);
                 assert!(
                     a.len() == 1
-                        && a[0].starts_with("alarm: heater-not-heating ")
+                        && DEAD_HEATER_CODES.contains(&code_of(&a[0]))
                         && a[0].contains(heater),
                     "{mode} {phase:?} {heater}: {a:?}"
                 );
@@ -421,7 +438,7 @@ fn a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph(lin
             // paper switches the TCA on only 20 s after MORPH.
             // The band timeout (`HEATING_BAND_TIMEOUT_S`, 30 s) may be what catches a dead TCA.
             let trip_s = 60.0;
-            let a = expect_alarm(&mut b, "heater-not-heating", trip_s);
+            let a = expect_alarm_of(&mut b, DEAD_HEATER_CODES, trip_s);
             assert!(a.contains(heater), "{mode} {phase:?} {heater}: {a}");
         }
     }
@@ -442,28 +459,31 @@ fn a_stuck_heater_trips_over_temperature_in_every_phase(link: Link) {
                 };
                 cases += 1;
                 assert!(b.send(&format!("SIM FAULT heater-stuck {heater}"))[0].starts_with("ok"));
-                // With both heaters commanded off for a while (idle), heating-while-off sees the
-                // stuck heater first; the over-temperature still alarms when the limit is
-                // crossed (the supervisor watches a latched link too).
                 let n = b.lines.len();
-                let first =
-                    expect_alarm_of(&mut b, &["over-temperature", "heating-while-off"], 120.0);
+                // Seen as a sensor above any rise its commanded power explains, as heating while
+                // off, or at the limit; the over-temperature still alarms when the limit is
+                // crossed (the supervisor watches a latched link too).
+                let first = expect_alarm_of(
+                    &mut b,
+                    &[
+                        "over-temperature",
+                        "heating-while-off",
+                        "sensor-implausible",
+                    ],
+                    120.0,
+                );
                 assert!(first.contains(heater), "{first}");
-                let code = if first.starts_with("alarm: heating-while-off") {
+                let code = code_of(&first);
+                if code != "over-temperature" {
                     assert!(
-                        b.run_until(120.0, |b| b.alarms_since(n).len() >= 2),
+                        b.run_until(120.0, |b| b
+                            .alarms_since(n)
+                            .iter()
+                            .any(|a| a.starts_with("alarm: over-temperature "))),
                         "{phase:?} {heater}: {:?}",
                         &b.lines[n..]
                     );
-                    let a = b.alarms_since(n);
-                    assert!(
-                        a[1].starts_with("alarm: over-temperature ") && a[1].contains(heater),
-                        "{a:?}"
-                    );
-                    "heating-while-off"
-                } else {
-                    "over-temperature"
-                };
+                }
                 assert_latched(&mut b, code);
                 // Still hot: refused. After the MOSFET is replaced (SIM CLEAR) and the link cooled: ok.
                 assert_reset_rules(&mut b, &["SIM CLEAR"], 120.0);
@@ -692,7 +712,7 @@ fn a_stuck_thermistor_trips_once_its_heater_is_on(link: Link) {
             assert_eq!(r, [format!("ok fault=thermistor-stuck target={sensor}")]);
             assert_eq!(b.send(&format!("MORPH 35 {mode}")), ["ok"]);
             let t0 = b.rig.now_ms();
-            let a = expect_alarm(&mut b, "heater-not-heating", 60.0);
+            let a = expect_alarm_of(&mut b, STUCK_SENSOR_CODES, 60.0);
             assert!(a.contains(sensor), "{mode} {sensor}: {a}");
             println!(
                 "{link:?} {mode}: {sensor} thermistor stuck, tripped {:.1} s after MORPH",
@@ -708,7 +728,131 @@ fn a_stuck_thermistor_trips_once_its_heater_is_on(link: Link) {
     );
 }
 
+/// The alarm line names its settings and the README section (`settings` is the start of the
+/// list in parentheses).
+fn assert_names(alarm: &str, settings: &str) {
+    assert!(
+        alarm.contains(&format!("({settings}")) && alarm.contains("see README \"Safety defaults\""),
+        "{alarm}"
+    );
+}
+
+fn a_drifting_thermistor_at_rest_trips_sensor_implausible(link: Link) {
+    let mut cases = 0;
+    for sensor in ["pla", "tca"] {
+        for rate in ["-0.2", "0.2"] {
+            let mut b = Bench::on(link);
+            b.run_for(20.0);
+            let r = b.send(&format!("SIM FAULT thermistor-drift {sensor} {rate}"));
+            assert!(r[0].starts_with("ok fault=thermistor-drift"), "{r:?}");
+            let t0 = b.rig.now_ms();
+            // Reading high with both heaters off is also heating-while-off: whichever is first.
+            let a = expect_alarm_of(&mut b, &["sensor-implausible", "heating-while-off"], 30.0);
+            let s = (b.rig.now_ms() - t0) as f64 / 1000.0;
+            println!("{link:?}: {sensor} drifting {rate} K/s at rest tripped after {s:.1} s");
+            assert!(a.contains(sensor), "{a}");
+            let code = code_of(&a);
+            if code == "sensor-implausible" {
+                assert_names(&a, "PLAUS_LOW_GAIN");
+            } else {
+                assert!(rate == "0.2", "{a}");
+            }
+            assert!(s < 20.0, "{sensor} {rate}: {s} s");
+            assert_latched(&mut b, code);
+            cases += 1;
+        }
+    }
+    checked(
+        link,
+        "a_drifting_thermistor_at_rest_trips_sensor_implausible",
+        cases,
+    );
+}
+
+fn a_drifting_thermistor_in_a_morph_trips_before_the_link_overheats(link: Link) {
+    let mut cases = 0;
+    for mode in ["auto", "gated", "closed"] {
+        for sensor in ["pla", "tca"] {
+            for rate in ["-0.2", "0.2"] {
+                let Some(mut b) = bench_in(link, Phase::Bend, 38.0, mode, 300.0) else {
+                    continue;
+                };
+                assert!(
+                    b.send(&format!("SIM FAULT thermistor-drift {sensor} {rate}"))[0]
+                        .starts_with("ok")
+                );
+                let n = b.lines.len();
+                let mut peak = [f64::MIN; 2];
+                let mut morphs = 0;
+                let end = b.rig.now_ms() + 600_000;
+                // The link is morphed once more when idle, so the drift meets heat; then it
+                // rests (a sensor reading high is found at rest, by heating-while-off at the
+                // latest: reading high, the controller heats less, the safe direction).
+                while b.rig.now_ms() < end && b.phase() != Phase::Fault {
+                    b.tick();
+                    let t = b.rig.plant().truth();
+                    peak = [peak[0].max(t.pla_c), peak[1].max(t.tca_c)];
+                    if b.rig.ctrl.idle() && morphs < 1 {
+                        morphs += 1;
+                        assert_eq!(b.send(&format!("MORPH 38 {mode}")), ["ok"]);
+                    }
+                }
+                let a = b.alarms_since(n);
+                assert!(!a.is_empty(), "{mode} {sensor} {rate}: no alarm");
+                // The true temperatures stay under the limits while the drift is found.
+                assert!(
+                    peak[0] < 130.0 && peak[1] < 130.0,
+                    "{mode} {sensor} {rate}: peak {peak:?} ({a:?})"
+                );
+                println!(
+                    "{link:?} {mode}: {sensor} drifting {rate} K/s: {:?}, peak {peak:?}",
+                    a[0].split(';').next()
+                );
+                cases += 1;
+            }
+        }
+    }
+    checked(
+        link,
+        "a_drifting_thermistor_in_a_morph_trips_before_the_link_overheats",
+        cases,
+    );
+}
+
+fn a_frozen_thermistor_trips_when_its_heater_power_steps(link: Link) {
+    let mut cases = 0;
+    for mode in ["auto", "paper", "gated", "closed"] {
+        // Frozen in soften: the PLA's power steps down at bend (4 W to the hold power), or
+        // the TCA's steps up, and the frozen reading does not move.
+        for sensor in ["pla", "tca"] {
+            let Some(mut b) = bench_in(link, Phase::Soften, 38.0, mode, 60.0) else {
+                continue;
+            };
+            assert!(b.send(&format!("SIM FAULT thermistor-stuck {sensor}"))[0].starts_with("ok"));
+            let a = expect_alarm_of(
+                &mut b,
+                &["sensor-frozen", "sensor-implausible", "heater-not-heating"],
+                60.0,
+            );
+            assert!(a.contains(sensor), "{mode} {sensor}: {a}");
+            println!(
+                "{link:?} {mode}: {sensor} frozen in soften: {:?}",
+                a.split(';').next()
+            );
+            cases += 1;
+        }
+    }
+    checked(
+        link,
+        "a_frozen_thermistor_trips_when_its_heater_power_steps",
+        cases,
+    );
+}
+
 on_both_links!(
+    a_drifting_thermistor_at_rest_trips_sensor_implausible,
+    a_drifting_thermistor_in_a_morph_trips_before_the_link_overheats,
+    a_frozen_thermistor_trips_when_its_heater_power_steps,
     a_stuck_thermistor_trips_once_its_heater_is_on,
     a_latched_link_stays_supervised,
     a_stuck_heater_below_the_limit_trips_heating_while_off,

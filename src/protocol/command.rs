@@ -10,12 +10,13 @@ const SENSORS: [Sensor; 3] = [Sensor::Pla, Sensor::Tca, Sensor::Amb];
 /// Every [`Medium`], for matching wire words.
 const MEDIA: [Medium; 2] = [Medium::Water, Medium::Air];
 /// Every [`SimFault`], for matching wire words.
-const SIM_FAULTS: [SimFault; 5] = [
+const SIM_FAULTS: [SimFault; 6] = [
     SimFault::ThermistorOpen,
     SimFault::ThermistorShort,
     SimFault::ThermistorStuck,
     SimFault::HeaterOpen,
     SimFault::HeaterStuck,
+    SimFault::ThermistorDrift,
 ];
 
 /// Finds the item whose wire word equals `word`, ignoring ASCII case.
@@ -174,6 +175,9 @@ fn parse_sim<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<SimCommand, 
         SimCommand::Ambient(_) => "SIM AMBIENT takes one temperature.",
         SimCommand::Medium(_) => "SIM MEDIUM takes one medium.",
         SimCommand::Wait(_) => "SIM WAIT takes one duration in s.",
+        SimCommand::Drift(..) => {
+            "SIM FAULT thermistor-drift takes a sensor and a rate in K/s, e.g. SIM FAULT thermistor-drift tca -0.2."
+        }
     };
     no_more(args, extra)?;
     Ok(sim)
@@ -185,8 +189,11 @@ fn parse_sim_fault<'a>(args: &mut impl Iterator<Item = &'a str>) -> Result<SimCo
         .next()
         .and_then(|word| lookup(&SIM_FAULTS, word, SimFault::as_str))
         .ok_or(bad(
-            "SIM FAULT needs thermistor-open, thermistor-short, thermistor-stuck, heater-open or heater-stuck.",
+            "SIM FAULT needs thermistor-open, thermistor-short, thermistor-stuck, thermistor-drift, heater-open or heater-stuck.",
         ))?;
+    if kind == SimFault::ThermistorDrift {
+        return parse_sim_drift(args);
+    }
     let target = match args.next() {
         None => Sensor::Pla,
         Some(word) => lookup(&SENSORS, word, Sensor::as_str)
@@ -256,4 +263,18 @@ fn parse_heat<'a>(args: impl Iterator<Item = &'a str>) -> Result<Command, ProtoE
         power_w: number(w[1], USAGE)?,
         duration_s: number(w[2], USAGE)?,
     })
+}
+
+/// `SIM FAULT thermistor-drift <pla|tca|amb> <K/s>` after `thermistor-drift`: both are
+/// required (a drift has no sensible default rate). Whether the rate is within the bench's
+/// bound is decided by the bench.
+fn parse_sim_drift<'a>(args: &mut impl Iterator<Item = &'a str>) -> Result<SimCommand, ProtoError> {
+    const NEEDS: &str =
+        "SIM FAULT thermistor-drift needs a sensor (pla, tca or amb) and a rate in K/s, e.g. SIM FAULT thermistor-drift tca -0.2.";
+    let sensor = args
+        .next()
+        .and_then(|word| lookup(&SENSORS, word, Sensor::as_str))
+        .ok_or(bad(NEEDS))?;
+    let rate_k_per_s = number(args.next(), NEEDS)?;
+    Ok(SimCommand::Drift(sensor, rate_k_per_s))
 }

@@ -76,6 +76,10 @@ pub enum SimFault {
     HeaterOpen,
     /// MOSFET shorted: the heater runs at full supply power whatever is commanded.
     HeaterStuck,
+    /// Thermistor drifting: its reading moves away from the truth at a steady rate from the
+    /// moment of injection (a cracked bead, a failing pull-up); `SIM FAULT thermistor-drift
+    /// <pla|tca|amb> <K/s>`, negative reads low ([`SimCommand::Drift`]).
+    ThermistorDrift,
 }
 
 /// Simulator-only commands (`SIM ...`), answered by `morph-sim` and emulated builds.
@@ -105,6 +109,10 @@ pub enum SimCommand {
     /// thread mode), to prove the watchdog: it fires within its timeout, heaters off, and the
     /// next boot says `reset=watchdog`; the host simulator refuses it.
     Stall,
+    /// `SIM FAULT thermistor-drift <pla|tca|amb> <K/s>`: the sensor's reading drifts from the
+    /// truth by this rate, K/s, from the moment of injection (negative: reads low); the rate
+    /// is bounded by `morphlink::bench::SIM_DRIFT_MAX_K_PER_S`.
+    Drift(Sensor, f32),
 }
 
 /// A parsed command line.
@@ -282,7 +290,7 @@ impl Medium {
 
 impl SimFault {
     /// The lowercase wire word (`thermistor-open`, `thermistor-short`, `thermistor-stuck`,
-    /// `heater-open`, `heater-stuck`).
+    /// `heater-open`, `heater-stuck`, `thermistor-drift`).
     pub fn as_str(self) -> &'static str {
         match self {
             SimFault::ThermistorOpen => "thermistor-open",
@@ -290,6 +298,7 @@ impl SimFault {
             SimFault::ThermistorStuck => "thermistor-stuck",
             SimFault::HeaterOpen => "heater-open",
             SimFault::HeaterStuck => "heater-stuck",
+            SimFault::ThermistorDrift => "thermistor-drift",
         }
     }
 }
@@ -555,6 +564,23 @@ mod tests {
             sim("SIM FAULT heater-stuck TCA"),
             SimCommand::Fault(SimFault::HeaterStuck, Sensor::Tca)
         );
+        assert_eq!(
+            sim("SIM FAULT thermistor-drift tca -0.2"),
+            SimCommand::Drift(Sensor::Tca, -0.2)
+        );
+        assert_eq!(
+            sim("sim fault THERMISTOR-DRIFT amb 1"),
+            SimCommand::Drift(Sensor::Amb, 1.0)
+        );
+        for bad in [
+            "SIM FAULT thermistor-drift",
+            "SIM FAULT thermistor-drift tca",
+            "SIM FAULT thermistor-drift tca fast",
+            "SIM FAULT thermistor-drift tca 0.2 more",
+            "SIM FAULT thermistor-drift heater 0.2",
+        ] {
+            assert_eq!(code(bad), Some(ErrorCode::BadArgument), "{bad}");
+        }
         assert_eq!(sim("SIM SUPPLY 4.5"), SimCommand::Supply(4.5));
         assert_eq!(sim("SIM AMBIENT -5"), SimCommand::Ambient(-5.0));
         assert_eq!(sim("SIM MEDIUM air"), SimCommand::Medium(Medium::Air));

@@ -17,7 +17,7 @@ use crate::vocab::ResetCause;
 use core::fmt::{self, Write};
 
 /// HELP text, one `data:` line each.
-pub const HELP: [&str; 14] = [
+pub const HELP: [&str; 15] = [
     "MORPH <radius_mm> [auto|paper|gated|boost|closed]  morph to a radius (see RANGE)",
     "STATUS                          phase, temperatures, powers, supply, fault, targets, mode",
     "ABORT                           both heaters off at once, phase idle",
@@ -29,6 +29,7 @@ pub const HELP: [&str; 14] = [
     "STATS                           control-loop timing (us) and reset cause; hardware only",
     "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|WAIT|CLEAR|PANIC|STALL  simulated builds only",
     "SIM WAIT <s>                    run <s> of simulated time, then ok; morph-sim only",
+    "SIM FAULT thermistor-drift <pla|tca|amb> <K/s>  reading drifts from now; negative reads low",
     "CONFIG [SET <name> <value>|RESET]  list, change or reset the settings",
     "SAVE                            write the settings to flash (idle only)",
     "HEAT <pla|tca> <power_w> <s>    one heater at a low power for a while (bring-up)",
@@ -503,10 +504,9 @@ impl fmt::Display for FaultText<'_> {
             FaultCode::OverTemperature => {
                 write!(l, "over-temperature {s} reads {v} C, above its maximum")
             }
-            FaultCode::HeaterNotHeating => write!(
-                l,
-                "heater-not-heating {s} heater rose only {v} K; check heater wiring and MOSFET"
-            ),
+            FaultCode::HeaterNotHeating => {
+                write!(l, "heater-not-heating {s} rose {v} K; check wiring, MOSFET")
+            }
             FaultCode::HeatingWhileOff => write!(
                 l,
                 "heating-while-off {s} sensor rose {v} K with both heaters off; check its MOSFET"
@@ -519,6 +519,12 @@ impl fmt::Display for FaultText<'_> {
                 Fixed(SUPPLY_MAX_V, 1)
             ),
             FaultCode::PhaseTimeout => write!(l, "phase-timeout phase {s} did not finish in time"),
+            FaultCode::SensorFrozen => {
+                write!(l, "sensor-frozen {s} moved {v} K as its power changed")
+            }
+            FaultCode::SensorImplausible => {
+                write!(l, "sensor-implausible {s} off its expected rise by {v} K")
+            }
         }
     }
 }
@@ -534,6 +540,31 @@ pub const ERR_BUSY_HEATING: ProtoError = ProtoError {
     code: ErrorCode::Busy,
     text: "a HEAT pulse runs; send ABORT first",
 };
+/// `SIM FAULT thermistor-drift`: `ok fault=thermistor-drift target=<sensor> rate_k_per_s=<K/s>`.
+pub fn sim_fault_drift(l: &mut OutLine, target: Sensor, rate_k_per_s: f32) {
+    ok_with(
+        l,
+        format_args!(
+            "fault={} target={} rate_k_per_s={}",
+            SimFault::ThermistorDrift.as_str(),
+            target.as_str(),
+            Fixed(rate_k_per_s, 3)
+        ),
+    );
+}
+
+/// `SIM FAULT thermistor-drift` refused: `error: out-of-range drift must be -<max>..<max> K/s`.
+pub fn sim_drift_out_of_range(l: &mut OutLine, max_k_per_s: f32) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!(
+            "drift must be -{}..{} K/s",
+            Fixed(max_k_per_s, 1),
+            Fixed(max_k_per_s, 1)
+        ),
+    );
+}
 
 #[cfg(test)]
 mod tests {
@@ -645,6 +676,14 @@ mod tests {
         );
         let l = line(|l| sim_fault(l, SimFault::HeaterOpen, Sensor::Tca));
         assert_eq!(l, "ok fault=heater-open target=tca");
+        assert_eq!(
+            line(|l| sim_fault_drift(l, Sensor::Tca, -0.2)),
+            "ok fault=thermistor-drift target=tca rate_k_per_s=-0.200"
+        );
+        assert_eq!(
+            line(|l| sim_drift_out_of_range(l, 10.0)),
+            "error: out-of-range drift must be -10.0..10.0 K/s"
+        );
         assert_eq!(line(|l| sim_supply(l, 5.0)), "ok supply_v=5.00");
         assert_eq!(
             line(|l| sim_supply_out_of_range(l, 30.0)),
@@ -742,7 +781,8 @@ mod alarm_tests {
         let sensors = Sensor::ALL.map(Subject::Sensor);
         let phases = [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release].map(Subject::Phase);
         let heaters = Heater::ALL.map(Subject::Heater);
-        let cases: [(FaultCode, &[Subject]); 9] = [
+        let heated = [Sensor::Pla, Sensor::Tca].map(Subject::Sensor);
+        let cases: [(FaultCode, &[Subject]); 11] = [
             (FaultCode::ThermistorOpen, &sensors),
             (FaultCode::ThermistorShort, &sensors),
             (FaultCode::UnderTemperature, &sensors),
@@ -752,6 +792,8 @@ mod alarm_tests {
             (FaultCode::StaleSensor, &[Subject::Frame]),
             (FaultCode::SupplyOutOfRange, &[Subject::Supply]),
             (FaultCode::PhaseTimeout, &phases),
+            (FaultCode::SensorFrozen, &heated),
+            (FaultCode::SensorImplausible, &heated),
         ];
         cases
             .iter()

@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 
 mod boards;
 mod emulate;
+mod faults;
 mod strategies;
 use morphlink_host::workspace::Workspace;
 use std::process::ExitCode;
@@ -29,6 +30,8 @@ enum Task {
     Strategies(strategies::Args),
     /// Build the emulated firmware and boot it under QEMU (b-l475e-iot01a).
     Emulate(emulate::Args),
+    /// Inject every fault in every phase on the hifi and lumped links: the detection-time table.
+    Faults(faults::Args),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +44,7 @@ fn main() -> ExitCode {
         Task::Boards => boards::run(&ws),
         Task::Strategies(a) => strategies::run(&a, &ws.root),
         Task::Emulate(a) => emulate::run(&a, &ws),
+        Task::Faults(a) => faults::run(&a),
     });
     match result {
         Ok(()) => ExitCode::SUCCESS,

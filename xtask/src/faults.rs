@@ -1,0 +1,273 @@
+//! `cargo xtask faults`: the fault detection-time table. Every injectable fault (`SIM FAULT`
+//! kinds per sensor and heater, `SIM SUPPLY` out of range) in every phase of a morph to
+//! [`TARGET_MM`] on the nominal hifi link (the headline) and the nominal lumped link beside it:
+//! the time from injection to the first alarm, the alarm, and the peak TRUE temperatures of
+//! the PLA rod and the TCA (the plant's truth, not the beads) from injection to the alarm,
+//! against the 130 °C limits. Prints a Markdown table (docs/safety.md holds one run of it).
+//!
+//! A fault injected in idle or release where nothing heats (a dead heater) can only show once
+//! heat is asked for: there the run sends the next `MORPH` [`IDLE_BEFORE_MORPH_S`] after
+//! injection (or after the running morph ended), and the time still counts from injection.
+
+use morphlink::bench::Noise;
+use morphlink::protocol::{classify, LineKind, Mode};
+use morphlink::supervisor::{PLA_LIMITS, TCA_LIMITS};
+use morphlink::vocab::Phase;
+use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
+use morphlink_plant::Plant;
+use morphlink_sim::{LinkSetup, Rig};
+use std::fmt::Write as _;
+
+/// The morph every fault is injected into, mm (the README's example).
+pub const TARGET_MM: f32 = 38.0;
+/// Longest wait for an alarm after injection, s (a phase timeout comes within it).
+pub const MAX_WAIT_S: f64 = 600.0;
+/// Idle time before the next `MORPH` once the link is idle after injection, s.
+pub const IDLE_BEFORE_MORPH_S: f64 = 30.0;
+/// Drift rate of the drift faults, K/s (the 0.2 K/s, either way).
+pub const DRIFT_K_PER_S: f32 = 0.2;
+/// Aim for an open or stuck heater, s.
+pub const AIM_HEATER_S: f64 = 10.0;
+/// Aim for a plausible-but-wrong sensor (stuck or drifting), s.
+pub const AIM_SENSOR_S: f64 = 20.0;
+
+/// Options of the task.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The MORPH mode of every run (auto, paper, gated, boost, closed).
+    #[arg(long, default_value = "auto")]
+    pub mode: String,
+}
+
+/// One injectable fault: its `SIM` line and the aim it is held to.
+struct FaultCase {
+    /// The name in the table.
+    name: String,
+    /// The `SIM` line that injects it.
+    line: String,
+    /// Its detection-time aim, s (`None`: none stated).
+    aim_s: Option<f64>,
+}
+
+/// Every injectable fault.
+fn cases() -> Vec<FaultCase> {
+    let mut v = Vec::new();
+    for sensor in ["pla", "tca", "amb"] {
+        for kind in ["thermistor-open", "thermistor-short", "thermistor-stuck"] {
+            v.push(FaultCase {
+                name: format!("{kind} {sensor}"),
+                line: format!("SIM FAULT {kind} {sensor}"),
+                aim_s: (kind == "thermistor-stuck").then_some(AIM_SENSOR_S),
+            });
+        }
+        for rate in [-DRIFT_K_PER_S, DRIFT_K_PER_S] {
+            v.push(FaultCase {
+                name: format!("thermistor-drift {sensor} {rate:+.1} K/s"),
+                line: format!("SIM FAULT thermistor-drift {sensor} {rate}"),
+                aim_s: Some(AIM_SENSOR_S),
+            });
+        }
+    }
+    for heater in ["pla", "tca"] {
+        for kind in ["heater-open", "heater-stuck"] {
+            v.push(FaultCase {
+                name: format!("{kind} {heater}"),
+                line: format!("SIM FAULT {kind} {heater}"),
+                aim_s: Some(AIM_HEATER_S),
+            });
+        }
+    }
+    for volts in ["5", "20"] {
+        v.push(FaultCase {
+            name: format!("supply {volts} V"),
+            line: format!("SIM SUPPLY {volts}"),
+            aim_s: None,
+        });
+    }
+    v
+}
+
+/// What one injection gave.
+struct Outcome {
+    /// Seconds from injection to the first alarm, and the alarm's code (`None`: none within
+    /// [`MAX_WAIT_S`]).
+    alarm: Option<(f64, String)>,
+    /// A `done` came between injection and the alarm (the radius it reports is in doubt).
+    done_first: bool,
+    /// Peak true PLA and TCA temperatures from injection to the alarm, °C.
+    peak_c: [f64; 2],
+    /// A `MORPH` had to be sent after injection (the fault only shows with heat).
+    next_morph: bool,
+}
+
+/// Runs `case` injected in `phase` of a morph in `mode` on `rig`.
+fn run_case<P: Plant>(mut rig: Rig<P>, case: &FaultCase, phase: Phase, mode: &str) -> Outcome {
+    let mut lines: Vec<String> = Vec::new();
+    let send = |rig: &mut Rig<P>, line: &str, lines: &mut Vec<String>| {
+        rig.handle_line(line, &mut |l: &str| lines.push(l.to_string()));
+    };
+    for _ in 0..20 {
+        rig.tick();
+    }
+    let morph = format!("MORPH {TARGET_MM} {mode}");
+    if phase != Phase::Idle {
+        send(&mut rig, &morph, &mut lines);
+        let end = rig.now_ms() + 300_000;
+        while rig.ctrl.phase() != phase && rig.now_ms() < end {
+            rig.tick();
+            rig.drain_events(&mut |_| {});
+        }
+        for _ in 0..5 {
+            rig.tick();
+        }
+        rig.drain_events(&mut |_| {});
+    }
+    let reached = rig.ctrl.phase() == phase;
+    send(&mut rig, &case.line, &mut lines);
+    let t0 = rig.now_ms();
+    let mut out = Outcome {
+        alarm: None,
+        done_first: false,
+        peak_c: [f64::NAN; 2],
+        next_morph: false,
+    };
+    if !reached {
+        return out;
+    }
+    let mut idle_since: Option<u64> = None;
+    let mut peak = [f64::MIN; 2];
+    while rig.now_ms() - t0 < (MAX_WAIT_S * 1000.0) as u64 {
+        rig.tick();
+        let t = rig.plant().truth();
+        peak = [peak[0].max(t.pla_c), peak[1].max(t.tca_c)];
+        let mut events = Vec::new();
+        rig.drain_events(&mut |l| events.push(l.to_string()));
+        if events.iter().any(|l| classify(l) == LineKind::Done) {
+            out.done_first = true;
+        }
+        if let Some(a) = events.iter().find(|l| classify(l) == LineKind::Alarm) {
+            let code = a
+                .strip_prefix("alarm: ")
+                .and_then(|r| r.split(' ').next())
+                .unwrap_or("?");
+            // `phase-timeout phase <name>`: the subject is the third word.
+            let nth = if code == "phase-timeout" { 2 } else { 1 };
+            let subject = a
+                .strip_prefix("alarm: ")
+                .and_then(|r| r.split(' ').nth(nth))
+                .unwrap_or("?");
+            let s = (rig.now_ms() - t0) as f64 / 1000.0;
+            out.alarm = Some((s, format!("{code} {subject}")));
+            break;
+        }
+        if rig.ctrl.idle() && !out.next_morph {
+            let since = *idle_since.get_or_insert(rig.now_ms());
+            if (rig.now_ms() - since) as f64 / 1000.0 >= IDLE_BEFORE_MORPH_S {
+                out.next_morph = true;
+                send(&mut rig, &morph, &mut lines);
+            }
+        }
+    }
+    out.peak_c = peak;
+    out
+}
+
+/// One table cell: the time and alarm, and whether the aim and the limits held.
+fn cell(o: &Outcome, aim_s: Option<f64>) -> String {
+    let limit_c = PLA_LIMITS.max_c.min(TCA_LIMITS.max_c) as f64;
+    let mut s = match &o.alarm {
+        None if o.peak_c[0].is_nan() => "phase not reached".to_string(),
+        None => format!("**no alarm in {MAX_WAIT_S:.0} s**"),
+        Some((t, code)) => {
+            let mut s = format!("{t:.1} s `{code}`");
+            if let Some(aim) = aim_s {
+                if *t > aim {
+                    s.push_str(&format!(" **(aim {aim:.0} s missed)**"));
+                }
+            }
+            s
+        }
+    };
+    if o.next_morph {
+        s.push_str(" (next MORPH)");
+    }
+    if o.done_first {
+        s.push_str(" **after done**");
+    }
+    if !o.peak_c[0].is_nan() {
+        let over = o.peak_c.iter().any(|&c| c > limit_c);
+        s.push_str(&format!(
+            "; peak {:.0}/{:.0} °C{}",
+            o.peak_c[0],
+            o.peak_c[1],
+            if over { " **over limit**" } else { "" }
+        ));
+    }
+    s
+}
+
+/// Runs the task: prints the Markdown table.
+pub fn run(args: &Args) -> Result<(), String> {
+    let mode = args.mode.as_str();
+    if !morphlink::protocol::MODES
+        .iter()
+        .any(|m: &Mode| m.as_str() == mode)
+    {
+        return Err(format!(
+            "--mode {mode}: not a MORPH mode (auto, paper, gated, boost, closed)"
+        ));
+    }
+    let hifi = Hifi::new(
+        HifiSpec::nominal(morphlink::link::LINK, Grid::Reduced)
+            .map_err(|e| format!("hifi nominal: {e}"))?,
+    )
+    .map_err(|e| format!("hifi nominal: {e}"))?;
+    let lumped = LinkSetup::NOMINAL;
+    let phases = [
+        Phase::Idle,
+        Phase::Soften,
+        Phase::Bend,
+        Phase::Lock,
+        Phase::Release,
+    ];
+    let cases = cases();
+    let jobs: Vec<(usize, Phase)> = (0..cases.len())
+        .flat_map(|c| phases.iter().map(move |&p| (c, p)))
+        .collect();
+    let rows: Vec<(String, String)> = std::thread::scope(|scope| {
+        let chunks: Vec<_> = jobs
+            .chunks(jobs.len().div_ceil(2))
+            .map(|chunk| {
+                let (hifi, cases) = (&hifi, &cases);
+                scope.spawn(move || {
+                    chunk
+                        .iter()
+                        .map(|&(c, p)| {
+                            let case = &cases[c];
+                            let h = run_case(
+                                Rig::with_plant(hifi.clone(), Noise::NOMINAL),
+                                case,
+                                p,
+                                mode,
+                            );
+                            let l = run_case(Rig::new(lumped), case, p, mode);
+                            (cell(&h, case.aim_s), cell(&l, case.aim_s))
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        chunks.into_iter().flat_map(|h| h.join().unwrap()).collect()
+    });
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "| fault | phase | hifi: time to alarm, alarm; peak true PLA/TCA | lumped: the same |"
+    );
+    let _ = writeln!(t, "| --- | --- | --- | --- |");
+    for (&(c, p), (h, l)) in jobs.iter().zip(&rows) {
+        let _ = writeln!(t, "| {} | {} | {h} | {l} |", cases[c].name, p.as_str());
+    }
+    print!("{t}");
+    Ok(())
+}
