@@ -69,6 +69,12 @@ pub fn parse_line(line: &str) -> Result<Option<Command>, ProtoError> {
             return no_more(args, extra).map(|()| Some(command));
         }
     }
+    if first.eq_ignore_ascii_case("TUNE") {
+        return no_more(args, "TUNE takes no arguments.").map(|()| Some(Command::Tune));
+    }
+    if first.eq_ignore_ascii_case("MEASURED") {
+        return parse_measured(args).map(Some);
+    }
     if first.eq_ignore_ascii_case("MORPH") {
         parse_morph(args).map(Some)
     } else if first.eq_ignore_ascii_case("SIM") {
@@ -196,4 +202,19 @@ fn number(word: Option<&str>, text: &'static str) -> Result<f32, ProtoError> {
     word.and_then(crate::fixed::parse_decimal)
         .filter(|v| v.is_finite())
         .ok_or(bad(text))
+}
+
+/// `MEASURED <radius_mm>`: one plain positive number of mm.
+fn parse_measured<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<Command, ProtoError> {
+    let radius = args.next().ok_or(bad(
+        "MEASURED needs the radius you measured in mm, e.g. MEASURED 38.2.",
+    ))?;
+    let radius_mm = crate::fixed::parse_decimal(radius).ok_or(bad(
+        "MEASURED radius must be a plain number of mm, e.g. MEASURED 38.2.",
+    ))?;
+    if !radius_mm.is_finite() || radius_mm <= 0.0 {
+        return Err(bad("MEASURED radius must be greater than 0 mm."));
+    }
+    no_more(args, "MEASURED takes one radius in mm.")?;
+    Ok(Command::Measured { radius_mm })
 }

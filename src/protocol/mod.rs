@@ -11,6 +11,7 @@
 pub mod client;
 pub mod command;
 pub mod reply;
+pub mod tune_reply;
 
 pub use client::{classify, is_final_reply, LineKind};
 pub use command::parse_line;
@@ -135,6 +136,13 @@ pub enum Command {
     Stats,
     /// `SIM ...` (simulated builds only).
     Sim(SimCommand),
+    /// `TUNE`: the thermal autotune (see [`crate::tune`]).
+    Tune,
+    /// `MEASURED <radius_mm>`: the radius the user measured after the last finished morph.
+    Measured {
+        /// Measured radius, mm.
+        radius_mm: f32,
+    },
 }
 
 /// Error codes of `error: <code> <text>` replies (kebab-case on the wire).
@@ -159,6 +167,10 @@ pub enum ErrorCode {
     /// Input was lost while the line arrived (receive buffer full, UART overrun); the line
     /// was not run.
     Overrun,
+    /// MEASURED with no finished morph to attach the radius to.
+    NoFinishedMorph,
+    /// MEASURED again for a morph whose radius is already counted.
+    AlreadyMeasured,
 }
 
 /// A protocol error: a code and a sentence for the user.
@@ -183,6 +195,8 @@ impl ErrorCode {
             ErrorCode::LineTooLong => "line-too-long",
             ErrorCode::Unsupported => "unsupported",
             ErrorCode::Overrun => "overrun",
+            ErrorCode::NoFinishedMorph => "no-finished-morph",
+            ErrorCode::AlreadyMeasured => "already-measured",
         }
     }
 }

@@ -59,6 +59,9 @@ pub struct Observer {
     disturbance_k: [f64; 2],
     ambient_c: f64,
     smooth_c: [[f64; 2]; 2],
+    /// Share of its node's rise above the surroundings each thermistor reads (PLA, TCA): the
+    /// link's calibration ([`crate::calibration::Calibration::sensor_gain`]), 1 by default.
+    sensor_gain: [f64; 2],
 }
 
 impl Observer {
@@ -74,6 +77,7 @@ impl Observer {
         disturbance_k: [0.0; 2],
         ambient_c: 0.0,
         smooth_c: [[f64::NAN; 2]; 2],
+        sensor_gain: [1.0; 2],
     };
 
     /// A model at rest at `ambient_c` (°C) with the built-in link parameters.
@@ -87,6 +91,7 @@ impl Observer {
             disturbance_k: [0.0; 2],
             ambient_c: ambient_c as f64,
             smooth_c: [[f64::NAN; 2]; 2],
+            sensor_gain: [1.0; 2],
         }
     }
 
@@ -94,10 +99,35 @@ impl Observer {
     /// `t_pla_c`, the TCA's side at `t_tca_c`, the bulk at their mean. Used at MORPH, when the
     /// link may still be warm from a previous morph.
     pub fn from_measured(t_pla_c: f32, t_tca_c: f32, t_amb_c: f32) -> Self {
+        Self::from_measured_with_gains(t_pla_c, t_tca_c, t_amb_c, [1.0, 1.0])
+    }
+
+    /// As [`Observer::from_measured`], for thermistors that read `gains` (PLA, TCA) of their
+    /// node's rise above the surroundings: the nodes start at the rise the readings imply.
+    pub fn from_measured_with_gains(
+        t_pla_c: f32,
+        t_tca_c: f32,
+        t_amb_c: f32,
+        gains: [f32; 2],
+    ) -> Self {
         let mut o = Observer::new(t_amb_c);
-        let (p, t) = (t_pla_c as f64, t_tca_c as f64);
+        let g = gains.map(|g| {
+            if g.is_finite() && g > 0.1 {
+                g as f64
+            } else {
+                1.0
+            }
+        });
+        o.sensor_gain = g;
+        let amb = if t_amb_c.is_finite() {
+            t_amb_c as f64
+        } else {
+            o.ambient_c
+        };
+        let (sp, st) = (t_pla_c as f64, t_tca_c as f64);
+        let (p, t) = (amb + (sp - amb) / g[0], amb + (st - amb) / g[1]);
         o.net.temp_c = [t, t, p, p, 0.5 * (p + t)];
-        o.sensor_c = [p, t];
+        o.sensor_c = [sp, st];
         o
     }
 
@@ -117,7 +147,8 @@ impl Observer {
         let keep = lag_remaining(dt, SENSOR_TAU_S as f64);
         for n in [HeatedNode::Pla, HeatedNode::Tca] {
             let i = n.index();
-            let t = self.net.temp_c[model_nodes(n).0];
+            let node = self.net.temp_c[model_nodes(n).0];
+            let t = self.ambient_c + self.sensor_gain[i] * (node - self.ambient_c);
             self.sensor_c[i] = t + (self.sensor_c[i] - t) * keep;
         }
     }
@@ -163,12 +194,18 @@ impl Observer {
 
     /// The observer's estimate of a heated node's true temperature, °C.
     pub fn estimate_c(&self, n: HeatedNode) -> f32 {
-        (self.net.temp_c[model_nodes(n).0] + self.disturbance_k[n.index()]) as f32
+        (self.net.temp_c[model_nodes(n).0] + self.node_disturbance_k(n.index())) as f32
+    }
+
+    /// The disturbance learnt in the thermistor's space, taken to the node's (divided by the
+    /// thermistor's gain), K.
+    fn node_disturbance_k(&self, i: usize) -> f64 {
+        self.disturbance_k[i] / self.sensor_gain[i]
     }
 
     /// Current disturbance estimate of a heated node, K (estimate − model).
     pub fn disturbance_k(&self, n: HeatedNode) -> f32 {
-        self.disturbance_k[n.index()] as f32
+        self.node_disturbance_k(n.index()) as f32
     }
 
     /// Heater power, W, that brings the model's node `n` to `target_c` (°C) within about
