@@ -164,10 +164,12 @@ fn rejection(l: &mut OutLine, why: &Rejection) {
 fn fitted_values(l: &mut OutLine, c: &Calibration) {
     let _ = write!(
         l,
-        "pla_rise_k_per_w={} tca_rise_k_per_w={} pla_to_tca_k_per_w={} pla_tau_s={} tca_tau_s={}",
+        "pla_rise_k_per_w={} tca_rise_k_per_w={} pla_to_tca_k_per_w={} tca_to_pla_k_per_w={} \
+         pla_tau_s={} tca_tau_s={}",
         Fixed(c.pla_rise_k_per_w, 2),
         Fixed(c.tca_rise_k_per_w, 2),
         Fixed(c.pla_to_tca_k_per_w, 2),
+        Fixed(c.tca_to_pla_k_per_w, 2),
         Fixed(c.pla_tau_s, 1),
         Fixed(c.tca_tau_s, 1)
     );
@@ -221,6 +223,14 @@ pub fn tune_event(l: &mut OutLine, e: &TuneEvent) {
                 TuneFailure::Fit(what, why) => {
                     let _ = write!(l, "{} fit: ", what.as_str());
                     rejection(l, why);
+                }
+                TuneFailure::TooFast(h, rise_k) => {
+                    let _ = write!(
+                        l,
+                        "{} rose {} K, far faster than in water (still air?)",
+                        h.as_str(),
+                        Fixed(*rise_k, 1)
+                    );
                 }
             }
             let _ = write!(

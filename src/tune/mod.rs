@@ -45,6 +45,11 @@ pub const TUNE_PLA_S: f32 = 90.0;
 /// (PLA, TCA): in still air the same powers rise five times as much; the tune then stays
 /// 60 K under the supervisor's limits and its fit fails on the bounds, as it should.
 pub const TUNE_MAX_RISE_K: [f32; 2] = [32.0, 40.0];
+/// A step capped by [`TUNE_MAX_RISE_K`] before this share of its length fails the tune: in
+/// water the thermistors rise about a third of the cap per time constant, so reaching it this
+/// early is still air (five times the rise), where the model strategies' thermal model does not
+/// hold and a fit of the short record would still pass the bounds.
+pub const TUNE_EARLY_CAP_SHARE: f32 = 0.6;
 /// `TUNE` starts only from a link at rest: PLA and TCA within this of the ambient, K (a warm
 /// link cooling during the test would read as a weaker heater).
 pub const TUNE_START_MAX_RISE_K: f32 = 3.0;
@@ -118,7 +123,9 @@ pub enum Fitted {
     /// A heater's own thermistor: rise per watt and time constant.
     Own(Heater),
     /// The TCA thermistor's rise per PLA watt.
-    Coupling,
+    PlaToTca,
+    /// The PLA thermistor's rise per TCA watt.
+    TcaToPla,
 }
 
 impl Fitted {
@@ -126,7 +133,8 @@ impl Fitted {
     pub fn as_str(self) -> &'static str {
         match self {
             Fitted::Own(h) => h.as_str(),
-            Fitted::Coupling => "pla_to_tca",
+            Fitted::PlaToTca => "pla_to_tca",
+            Fitted::TcaToPla => "tca_to_pla",
         }
     }
 }
@@ -149,6 +157,9 @@ pub enum TuneFailure {
     Tripped,
     /// A fit failed on both methods.
     Fit(Fitted, Rejection),
+    /// A heated step reached [`TUNE_MAX_RISE_K`] before [`TUNE_EARLY_CAP_SHARE`] of its
+    /// length: far faster than in water (still air?); the heater and its rise in kelvin.
+    TooFast(Heater, f32),
 }
 
 /// Progress of a tune, for `event: tune ...` lines.
@@ -376,6 +387,14 @@ impl Tune {
             TuneStep::Pla => pla - self.base_c[0] >= TUNE_MAX_RISE_K[0],
             _ => false,
         };
+        if capped && in_step_s < TUNE_EARLY_CAP_SHARE * self.step.length_s() {
+            let (h, rise) = if self.step == TuneStep::Tca {
+                (Heater::Tca, tca - self.base_c[1])
+            } else {
+                (Heater::Pla, pla - self.base_c[0])
+            };
+            return self.fail(TuneFailure::TooFast(h, rise), emit);
+        }
         if in_step_s + 1e-3 >= self.step.length_s() || capped || self.n >= TUNE_MAX_SAMPLES {
             match self.step {
                 TuneStep::Settle => {
@@ -406,6 +425,22 @@ impl Tune {
                         Err(why) => {
                             return self.fail(TuneFailure::Fit(Fitted::Own(Heater::Tca), why), emit)
                         }
+                    }
+                    let c = &self.rec[1][..self.n];
+                    match fit_checked(c, TUNE_TCA_W, "tca_to_pla_k_per_w", None) {
+                        Ok((r, tau, method)) => {
+                            self.cal.tca_to_pla_k_per_w = r;
+                            emit(TuneEvent::Fit {
+                                what: Fitted::TcaToPla,
+                                rise_k_per_w: r,
+                                tau_s: tau,
+                                method,
+                            });
+                        }
+                        Err(why) => emit(TuneEvent::Kept {
+                            what: Fitted::TcaToPla,
+                            why,
+                        }),
                     }
                     self.enter(TuneStep::Cool, now_ms, emit);
                 }
@@ -441,14 +476,14 @@ impl Tune {
             Ok((r, tau, method)) => {
                 self.cal.pla_to_tca_k_per_w = r;
                 emit(TuneEvent::Fit {
-                    what: Fitted::Coupling,
+                    what: Fitted::PlaToTca,
                     rise_k_per_w: r,
                     tau_s: tau,
                     method,
                 });
             }
             Err(why) => emit(TuneEvent::Kept {
-                what: Fitted::Coupling,
+                what: Fitted::PlaToTca,
                 why,
             }),
         }

@@ -7,6 +7,7 @@
 use clap::{Parser, Subcommand};
 
 mod boards;
+mod calibration;
 mod emulate;
 mod strategies;
 use morphlink_host::workspace::Workspace;
@@ -29,6 +30,8 @@ enum Task {
     Strategies(strategies::Args),
     /// Build the emulated firmware and boot it under QEMU (b-l475e-iot01a).
     Emulate(emulate::Args),
+    /// TUNE and MEASURED over a mismatch ensemble: docs/calibration.csv, .svg, .png.
+    Calibration(calibration::Args),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +44,7 @@ fn main() -> ExitCode {
         Task::Boards => boards::run(&ws),
         Task::Strategies(a) => strategies::run(&a, &ws.root),
         Task::Emulate(a) => emulate::run(&a, &ws),
+        Task::Calibration(a) => calibration::run(&a, &ws.root),
     });
     match result {
         Ok(()) => ExitCode::SUCCESS,

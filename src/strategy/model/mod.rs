@@ -92,6 +92,10 @@ impl ModelDrive {
                     s.cal.sensor_gain(HeatedNode::Pla),
                     s.cal.sensor_gain(HeatedNode::Tca),
                 ],
+                [
+                    s.cal.cross_gain(HeatedNode::Pla),
+                    s.cal.cross_gain(HeatedNode::Tca),
+                ],
             ),
             tca_target_c,
             last_ms: s.now_ms,
