@@ -494,7 +494,7 @@ mod tests {
         assert!((b - 0.8).abs() < 0.02 && a.abs() < 0.5, "{a} {b}");
         for x in [25.0f32, 30.0, 50.0] {
             let aim = c.aim_rise_k(0.8 * x);
-            assert!((aim - x).abs() < 0.5, "{x}: {aim}");
+            assert!((aim - x).abs() < 1.0, "{x}: {aim}");
         }
         // One report moves the slope most of the way.
         let mut one = Calibration::default();

@@ -426,7 +426,9 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
     // CSV: one row per evaluated morph.
     let mut csv = String::from("plant,draw,air,stage,measured,target_mm,time_s,error_pct,tune\n");
     for r in &results {
-        for e in &r.evals {
+        for (k, e) in r.evals.iter().enumerate() {
+            // The link's TUNE line once, on its first row.
+            let tune_line = if k == 0 { r.tune_line.as_str() } else { "" };
             let _ = writeln!(
                 csv,
                 "{},{},{},{},{},{:.2},{:.1},{:.3},\"{}\"",
@@ -438,7 +440,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                 e.target_mm,
                 e.time_s,
                 e.error_pct,
-                r.tune_line.replace('"', "'")
+                tune_line.replace('"', "'")
             );
         }
     }
