@@ -486,6 +486,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                 }
             }
         }
+        println!("\n(aims: |error| p95 <= {AIM_ERROR_PCT} %, time p50 <= {AIM_TIME_S} s)");
         println!("\nPer target, water links, after TUNE + 3 measured:\n");
         println!("| target | time p50 | \\|error\\| p50 | \\|error\\| p95 | failed |");
         println!("| --- | --- | --- | --- | --- |");
