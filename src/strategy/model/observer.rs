@@ -163,9 +163,16 @@ impl Observer {
         }
         let dt = dt_s as f64;
         let (tca_w, pla_w) = (tca_w.max(0.0) as f64, pla_w.max(0.0) as f64);
-        self.net.advance(dt, tca_w, pla_w, self.ambient_c);
-        self.alone[Heater::Pla.index()].advance(dt, 0.0, pla_w, self.ambient_c);
-        self.alone[Heater::Tca.index()].advance(dt, tca_w, 0.0, self.ambient_c);
+        // One call site for the three networks (the firmware's f64 is soft-float: one copy of
+        // the step, not three inlined).
+        let [pla_alone, tca_alone] = &mut self.alone;
+        for (net, t_w, p_w) in [
+            (&mut self.net, tca_w, pla_w),
+            (pla_alone, 0.0, pla_w),
+            (tca_alone, tca_w, 0.0),
+        ] {
+            net.advance(dt, t_w, p_w, self.ambient_c);
+        }
         let keep = lag_remaining(dt, SENSOR_TAU_S as f64);
         for n in [HeatedNode::Pla, HeatedNode::Tca] {
             let i = n.index();
