@@ -5,8 +5,9 @@
 //! Per tick: ADC counts → classified temperatures and supply volts → supervisor (a trip turns
 //! both heaters off in this same tick and latches) → sequencer → watts → PWM duties.
 
+use crate::calibration::{Calibration, CalibrationError};
 use crate::heater::HeaterConfig;
-use crate::protocol::{self, reply, Command, Mode, OutLine, SimCommand};
+use crate::protocol::{self, reply, tune_reply, Command, Mode, OutLine, SimCommand};
 use crate::pulse::Pulse;
 use crate::sequencer::{SeqEvent, Sequencer};
 use crate::settings::codec::{self, Blob, LoadError};
@@ -16,6 +17,7 @@ use crate::stats::LoopTiming;
 use crate::supervisor::{Fault, FaultCode, Faults, Frame, Subject, Supervisor};
 use crate::table;
 use crate::thermistor::ThermistorConfig;
+use crate::tune::{Tune, TuneEvent, TuneFailure, TuneTick};
 use crate::vocab::{Heater, Phase, Powers};
 use heapless::Deque;
 
@@ -128,6 +130,8 @@ pub enum Event {
     Alarm(Fault),
     /// What the boot did with the stored settings.
     Config(ConfigEvent),
+    /// `TUNE` progress.
+    Tune(TuneEvent),
 }
 
 /// What the boot did with the stored settings ([`Controller::load_settings`]).
@@ -170,7 +174,38 @@ pub struct Controller {
     save_request: Option<Blob>,
     /// A running `HEAT` pulse (only while idle: a morph or a fault ends it).
     pulse: Option<Pulse>,
+    /// This link's calibration (TUNE, MEASURED), read by the strategies at MORPH.
+    cal: Calibration,
+    /// The tune under way, if any (the sequencer is idle meanwhile).
+    tune: Option<Tune>,
+    /// The last morph started, for MEASURED.
+    last: Option<LastMorph>,
 }
+
+/// What MEASURED needs of the last morph.
+#[derive(Clone, Copy, Debug)]
+struct LastMorph {
+    /// The strategy that ran (`auto` resolved).
+    mode: Mode,
+    /// TCA power the table gave it (scaled), W.
+    power_w: f32,
+    /// Ambient at MORPH, °C.
+    ambient_c: f32,
+    /// The TCA map in effect, `(a, b)`.
+    map: (f32, f32),
+    /// The radius `done` reported, mm (NaN until done).
+    done_mm: f32,
+    /// A MEASURED report has been counted for it.
+    counted: bool,
+}
+
+/// MEASURED accepts radii this share beyond the table's range on either side: a link that
+/// misses its table by more than the model ever did (1.8 mm, 5 %) still reports, twice that is
+/// not a radius this link reached.
+pub const MEASURED_RANGE_MARGIN: f32 = 0.1;
+/// Least table power a power-strategy report scales, W: near the table's 0 W end a ratio of
+/// powers says nothing.
+pub const MEASURED_MIN_POWER_W: f32 = 0.1;
 
 /// How many distinct faults are remembered as alarmed until RESET; beyond it the oldest is
 /// forgotten (and would alarm again).
@@ -197,6 +232,9 @@ impl Controller {
             storage: false,
             save_request: None,
             pulse: None,
+            cal: Calibration::DEFAULT,
+            tune: None,
+            last: None,
         }
     }
 
@@ -239,9 +277,9 @@ impl Controller {
         self.phase() == Phase::Idle
     }
 
-    /// True while a morph or a `HEAT` pulse is under way (not idle, not faulted).
+    /// True while a morph, a `TUNE` or a `HEAT` pulse is under way (not idle, not faulted).
     pub fn busy(&self) -> bool {
-        self.seq.busy() || self.pulse.is_some()
+        self.seq.busy() || self.pulse.is_some() || self.tune.is_some()
     }
 
     fn push(&mut self, e: Event) {
@@ -267,6 +305,9 @@ impl Controller {
 
     fn trip(&mut self, fault: Fault) {
         self.pulse = None;
+        if self.tune.take().is_some() {
+            self.push(Event::Tune(TuneEvent::Failed(TuneFailure::Tripped)));
+        }
         self.seq.latch(fault);
         self.powers = Powers::default();
         self.outputs = Outputs::default();
@@ -311,12 +352,42 @@ impl Controller {
         if self.fault().is_some() {
             return self.outputs;
         }
+        if let Some(mut t) = self.tune.take() {
+            let mut tune_events: heapless::Vec<TuneEvent, 4> = heapless::Vec::new();
+            let r = t.tick(now_ms, &m, &mut |e| {
+                let _ = tune_events.push(e);
+            });
+            for e in tune_events {
+                self.push(Event::Tune(e));
+            }
+            let p = match r {
+                TuneTick::Run(p) => {
+                    self.tune = Some(t);
+                    p
+                }
+                TuneTick::Done(cal) => {
+                    self.cal = cal;
+                    Powers::default()
+                }
+                TuneTick::Failed(_) => Powers::default(),
+            };
+            self.powers = p;
+            let v = frame.supply_v;
+            self.outputs = Outputs {
+                pla_duty: self.cfg.pla_heater.duty(p.pla_w, v),
+                tca_duty: self.cfg.tca_heater.duty(p.tca_w, v),
+            };
+            return self.outputs;
+        }
         let mut seq_events: heapless::Vec<SeqEvent, 4> = heapless::Vec::new();
         self.seq.set_supply_v(frame.supply_v);
         let result = self.seq.step(now_ms, &m, &mut |e| {
             let _ = seq_events.push(e);
         });
         for e in seq_events {
+            if let (SeqEvent::Done { radius_mm, .. }, Some(last)) = (e, self.last.as_mut()) {
+                last.done_mm = radius_mm;
+            }
             self.push(Event::Seq(e));
         }
         // A HEAT pulse drives its heater while no morph runs, until its own clock ends it.
@@ -383,6 +454,9 @@ impl Controller {
                     self.seq.abort();
                 }
                 self.pulse = None;
+                if self.tune.take().is_some() {
+                    self.push(Event::Tune(TuneEvent::Failed(TuneFailure::Aborted)));
+                }
                 self.powers = Powers::default();
                 self.outputs = Outputs::default();
                 out(protocol::OK);
@@ -406,7 +480,7 @@ impl Controller {
                 out(&l);
             }
             Command::Help => {
-                for h in reply::HELP {
+                for h in reply::HELP.iter().chain(tune_reply::HELP.iter()) {
                     l.clear();
                     reply::data(&mut l, h);
                     out(&l);
@@ -428,6 +502,8 @@ impl Controller {
                 power_w,
                 duration_s,
             } => self.heat(now_ms, heater, power_w, duration_s, out),
+            Command::Tune => self.start_tune(now_ms, out),
+            Command::Measured { radius_mm } => self.measured(radius_mm, out),
         }
     }
 
@@ -454,13 +530,15 @@ impl Controller {
         }
     }
 
-    /// Whether heating must be refused now (a fault latched, a morph running, no reading yet):
+    /// Whether heating must be refused now (a fault latched, a morph or TUNE running, no reading
     /// if so, writes the refusal into `l`. MORPH and HEAT share it.
     fn refused(&self, l: &mut OutLine) -> bool {
         if let Some(f) = self.fault() {
             reply::fault_latched(l, f.code);
         } else if self.seq.busy() {
             reply::busy_morphing(l, self.seq.phase());
+        } else if self.tune.is_some() {
+            tune_reply::busy_tuning(l);
         } else if self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan() {
             reply::busy_no_reading(l);
         } else {
@@ -492,12 +570,22 @@ impl Controller {
                 reply::radius_out_of_range(&mut l, r.min_mm, r.max_mm);
                 out(&l);
             }
-            Ok(power_w) => {
+            Ok(table_w) => {
                 out(protocol::OK);
+                let power_w = (table_w * self.cal.power_scale()).min(HeaterConfig::TCA.max_power_w);
                 let mut first: heapless::Vec<SeqEvent, 2> = heapless::Vec::new();
                 let m = self.sup.measurements();
+                self.last = Some(LastMorph {
+                    mode: crate::strategy::AnyStrategy::resolve(mode),
+                    power_w,
+                    ambient_c: m.t_amb_c,
+                    map: self.cal.map(),
+                    done_mm: f32::NAN,
+                    counted: false,
+                });
+                let cal = self.cal;
                 self.seq
-                    .start_from(now_ms, radius_mm, power_w, mode, &m, &mut |e| {
+                    .start_from(now_ms, radius_mm, power_w, mode, &m, &cal, &mut |e| {
                         let _ = first.push(e);
                     });
                 for e in first {
@@ -576,6 +664,7 @@ impl Controller {
                 };
                 reply::config_defaults_event(&mut l, why.as_str(), setting)
             }
+            Event::Tune(e) => tune_reply::tune_event(&mut l, &e),
         }
         Some(l)
     }
@@ -693,5 +782,141 @@ fn row(spec: &Spec, value: f32) -> reply::SettingRow<'static> {
         max: spec.max,
         decimals: spec.decimals,
         choices: spec.choices,
+    }
+}
+
+/// TUNE, MEASURED and the calibration (see [`crate::tune`], [`crate::calibration`]).
+impl Controller {
+    /// This link's calibration.
+    pub fn calibration(&self) -> Calibration {
+        self.cal
+    }
+
+    /// Replaces the calibration (a settings shell restoring a stored one): refused, changing
+    /// nothing, unless every field is within its range.
+    pub fn set_calibration(&mut self, cal: Calibration) -> Result<(), CalibrationError> {
+        for i in 0..crate::calibration::FIELD_COUNT {
+            let v = cal.get(i).ok_or(CalibrationError::NoSuchField)?;
+            let f = crate::calibration::FIELDS[i];
+            if !(v >= f.min && v <= f.max) {
+                return Err(CalibrationError::OutOfRange(f));
+            }
+        }
+        self.cal = cal;
+        Ok(())
+    }
+
+    /// True while a TUNE runs.
+    pub fn tuning(&self) -> bool {
+        self.tune.is_some()
+    }
+
+    /// The step of the TUNE under way, if one runs.
+    pub fn tune_step(&self) -> Option<crate::tune::TuneStep> {
+        self.tune.as_ref().map(|t| t.step_now())
+    }
+
+    fn start_tune(&mut self, now_ms: u64, out: &mut impl FnMut(&str)) {
+        let mut l = OutLine::new();
+        if let Some(f) = self.fault() {
+            reply::fault_latched(&mut l, f.code);
+            return out(&l);
+        }
+        if self.seq.busy() {
+            reply::busy_morphing(&mut l, self.seq.phase());
+            return out(&l);
+        }
+        if self.tune.is_some() {
+            tune_reply::busy_tuning(&mut l);
+            return out(&l);
+        }
+        if self.pulse.is_some() {
+            return out(&protocol::format_error(&reply::ERR_BUSY_HEATING));
+        }
+        let m = self.sup.measurements();
+        if self.frame.is_none()
+            || !(m.t_pla_c.is_finite() && m.t_tca_c.is_finite() && m.t_amb_c.is_finite())
+        {
+            reply::busy_no_reading(&mut l);
+            return out(&l);
+        }
+        for h in Heater::ALL {
+            let rise_k = m.of(h.sensor()) - m.t_amb_c;
+            if rise_k > crate::tune::TUNE_START_MAX_RISE_K {
+                tune_reply::tune_link_warm(&mut l, h, rise_k);
+                return out(&l);
+            }
+        }
+        tune_reply::tune_started(&mut l, crate::tune::TUNE_TOTAL_S);
+        out(&l);
+        let mut first: heapless::Vec<TuneEvent, 2> = heapless::Vec::new();
+        self.tune = Some(Tune::new(now_ms, self.cal, &mut |e| {
+            let _ = first.push(e);
+        }));
+        for e in first {
+            self.push(Event::Tune(e));
+        }
+    }
+
+    fn measured(&mut self, radius_mm: f32, out: &mut impl FnMut(&str)) {
+        use crate::strategy::model::target;
+        let mut l = OutLine::new();
+        if self.seq.busy() {
+            reply::busy_morphing(&mut l, self.seq.phase());
+            return out(&l);
+        }
+        if self.tune.is_some() {
+            tune_reply::busy_tuning(&mut l);
+            return out(&l);
+        }
+        let (min_mm, max_mm) = table::range_mm();
+        let (lo, hi) = (
+            min_mm * (1.0 - MEASURED_RANGE_MARGIN),
+            max_mm * (1.0 + MEASURED_RANGE_MARGIN),
+        );
+        if !(radius_mm >= lo && radius_mm <= hi) {
+            tune_reply::measured_out_of_range(&mut l, lo, hi);
+            return out(&l);
+        }
+        let Some(last) = self.last.filter(|m| m.done_mm.is_finite()) else {
+            tune_reply::measured_no_morph(&mut l);
+            return out(&l);
+        };
+        if last.counted {
+            tune_reply::measured_twice(&mut l);
+            return out(&l);
+        }
+        let amb = last.ambient_c;
+        match last.mode {
+            Mode::Boost | Mode::Closed => {
+                // The estimate's rise at lock, undone from the reported radius through the map
+                // that was in effect, and the rise the measured radius needs.
+                let (a, b) = last.map;
+                let reported_rise = target::lock_temp_for_final_radius_c(last.done_mm, amb) - amb;
+                let x = (reported_rise - a) / b;
+                let y = target::lock_temp_for_final_radius_c(radius_mm, amb) - amb;
+                match self.cal.fold_map(x, y) {
+                    Ok((a, b)) => tune_reply::measured_map(&mut l, a, b, self.cal.map_count),
+                    Err(()) => tune_reply::measured_implausible(&mut l),
+                }
+            }
+            _ => {
+                let need = table::power_for_radius_w(radius_mm).unwrap_or(0.0);
+                if !(need >= MEASURED_MIN_POWER_W) || !(last.power_w >= MEASURED_MIN_POWER_W) {
+                    tune_reply::measured_implausible(&mut l);
+                    return out(&l);
+                }
+                match self.cal.fold_power(last.power_w / need) {
+                    Ok(scale) => tune_reply::measured_power(&mut l, scale, self.cal.power_count),
+                    Err(()) => tune_reply::measured_implausible(&mut l),
+                }
+            }
+        }
+        if !l.starts_with(protocol::ERROR_TAG) {
+            if let Some(m) = self.last.as_mut() {
+                m.counted = true;
+            }
+        }
+        out(&l);
     }
 }

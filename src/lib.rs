@@ -12,6 +12,7 @@
 
 #[cfg(feature = "sim")]
 pub mod bench;
+pub mod calibration;
 pub mod controller;
 pub mod fixed;
 pub mod heater;
@@ -26,4 +27,5 @@ pub mod strategy;
 pub mod supervisor;
 pub mod table;
 pub mod thermistor;
+pub mod tune;
 pub mod vocab;

@@ -207,6 +207,7 @@ impl Sequencer {
         tca_power_w: f32,
         mode: Mode,
         m: &Measurements,
+        cal: &crate::calibration::Calibration,
         emit: &mut impl FnMut(SeqEvent),
     ) {
         let start = Start {
@@ -214,6 +215,7 @@ impl Sequencer {
             radius_mm,
             tca_power_w,
             m,
+            cal,
         };
         let strategy = self.strategy.insert(AnyStrategy::new(mode, &start));
         self.at.target_mm = radius_mm;
@@ -353,7 +355,15 @@ mod tests {
                 t_tca_c: amb,
                 t_amb_c: amb,
             };
-            self.start_from(now_ms, radius_mm, tca_power_w, mode, &m, emit);
+            self.start_from(
+                now_ms,
+                radius_mm,
+                tca_power_w,
+                mode,
+                &m,
+                &crate::calibration::Calibration::DEFAULT,
+                emit,
+            );
         }
 
         /// The strategy a morph in `mode` runs (`auto` resolved to [`AUTO_STRATEGY`]).

@@ -319,3 +319,55 @@ fn an_over_long_line_from_the_device_is_skipped_reported_and_not_buffered() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn sigint_during_a_tune_sends_abort_and_the_device_reports_the_heaters_off() {
+    let dir = scratch("sigint-tune");
+    let device = recording_sim(&dir);
+    let args = [
+        "--sim",
+        "--sim-speed",
+        "4",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "tune",
+    ];
+    let (child, out) = start(&args);
+    let t0 = Instant::now();
+    loop {
+        let l = out
+            .recv_timeout(Duration::from_secs(30))
+            .expect("morphctl printed the tca step");
+        if l.starts_with("event: tune step tca") {
+            break;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(30), "no tca step");
+    }
+    // Into the heated step.
+    std::thread::sleep(Duration::from_millis(1500));
+    // SAFETY: kill(2) on our own child's pid.
+    assert_eq!(
+        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) },
+        0
+    );
+    let (status, err) = finish(child, Duration::from_secs(20));
+    assert_eq!(status.code(), Some(130), "{err}");
+    assert!(err.contains("sent ABORT"), "{err}");
+    let to = eventually(&dir.join("to_device.log"), |t| t.contains("ABORT\nSTATUS"));
+    assert!(to.contains("TUNE\n"), "{to}");
+    let from = eventually(&dir.join("from_device.log"), |t| {
+        t.lines()
+            .rfind(|l| l.starts_with("ok phase="))
+            .is_some_and(heaters_off)
+    });
+    let statuses: Vec<&str> = from
+        .lines()
+        .filter(|l| l.starts_with("ok phase="))
+        .collect();
+    assert!(
+        statuses.iter().any(|s| !s.contains(" p_tca_w=0.000 ")),
+        "the tune was heating before the signal:\n{from}"
+    );
+    assert!(heaters_off(statuses.last().unwrap()), "{from}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -74,6 +74,12 @@ pub fn parse_line(line: &str) -> Result<Option<Command>, ProtoError> {
             return no_more(args, extra).map(|()| Some(command));
         }
     }
+    if first.eq_ignore_ascii_case("TUNE") {
+        return no_more(args, "TUNE takes no arguments.").map(|()| Some(Command::Tune));
+    }
+    if first.eq_ignore_ascii_case("MEASURED") {
+        return parse_measured(args).map(Some);
+    }
     if first.eq_ignore_ascii_case("MORPH") {
         parse_morph(args).map(Some)
     } else if first.eq_ignore_ascii_case("SIM") {
@@ -277,4 +283,19 @@ fn parse_sim_drift<'a>(args: &mut impl Iterator<Item = &'a str>) -> Result<SimCo
         .ok_or(bad(NEEDS))?;
     let rate_k_per_s = number(args.next(), NEEDS)?;
     Ok(SimCommand::Drift(sensor, rate_k_per_s))
+}
+
+/// `MEASURED <radius_mm>`: one plain positive number of mm.
+fn parse_measured<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<Command, ProtoError> {
+    let radius = args.next().ok_or(bad(
+        "MEASURED needs the radius you measured in mm, e.g. MEASURED 38.2.",
+    ))?;
+    let radius_mm = crate::fixed::parse_decimal(radius).ok_or(bad(
+        "MEASURED radius must be a plain number of mm, e.g. MEASURED 38.2.",
+    ))?;
+    if !radius_mm.is_finite() || radius_mm <= 0.0 {
+        return Err(bad("MEASURED radius must be greater than 0 mm."));
+    }
+    no_more(args, "MEASURED takes one radius in mm.")?;
+    Ok(Command::Measured { radius_mm })
 }

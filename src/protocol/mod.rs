@@ -11,6 +11,7 @@
 pub mod client;
 pub mod command;
 pub mod reply;
+pub mod tune_reply;
 
 pub use client::{classify, is_final_reply, LineKind};
 pub use command::parse_line;
@@ -157,6 +158,13 @@ pub enum Command {
         /// Duration, s.
         duration_s: f32,
     },
+    /// `TUNE`: the thermal autotune (see [`crate::tune`]).
+    Tune,
+    /// `MEASURED <radius_mm>`: the radius the user measured after the last finished morph.
+    Measured {
+        /// Measured radius, mm.
+        radius_mm: f32,
+    },
 }
 
 /// What `CONFIG` does.
@@ -236,6 +244,10 @@ pub enum ErrorCode {
     Overrun,
     /// The settings storage failed (SAVE did not complete).
     Storage,
+    /// MEASURED with no finished morph to attach the radius to.
+    NoFinishedMorph,
+    /// MEASURED again for a morph whose radius is already counted.
+    AlreadyMeasured,
 }
 
 /// A protocol error: a code and a sentence for the user.
@@ -261,6 +273,8 @@ impl ErrorCode {
             ErrorCode::Unsupported => "unsupported",
             ErrorCode::Overrun => "overrun",
             ErrorCode::Storage => "storage",
+            ErrorCode::NoFinishedMorph => "no-finished-morph",
+            ErrorCode::AlreadyMeasured => "already-measured",
         }
     }
 }

@@ -12,13 +12,19 @@ use crate::vocab::{Measurements, Phase, Powers};
 pub struct Boost {
     /// The model it drives.
     pub drive: ModelDrive,
+    /// This link's TCA map from MEASURED reports (see
+    /// [`crate::calibration::Calibration::map`]).
+    map: (f32, f32),
 }
 
 impl Boost {
     /// For a morph starting as `s` says: the TCA aims at the radius's temperature.
     pub fn new(s: &Start) -> Self {
+        let map = s.cal.map();
+        let need = target::tca_temp_for_radius_c(s.radius_mm);
         Boost {
-            drive: ModelDrive::new(s, target::tca_temp_for_radius_c(s.radius_mm)),
+            drive: ModelDrive::new(s, target::calibrated_aim_c(map, need, s.m.t_amb_c)),
+            map,
         }
     }
 }
@@ -43,7 +49,7 @@ impl Strategy for Boost {
 
     fn radius_estimate_mm(&self, m: &Measurements) -> f32 {
         let tca_c = self.drive.observer().model_c(HeatedNode::Tca);
-        target::final_radius_mm(tca_c, m.t_amb_c)
+        target::calibrated_final_radius_mm(self.map, tca_c, m.t_amb_c)
     }
 
     fn powers(&mut self, phase: Phase, t: &Tick) -> Powers {

@@ -33,15 +33,21 @@ const _: () =
 pub struct Closed {
     /// The model it corrects and drives.
     pub drive: ModelDrive,
+    /// This link's TCA map from MEASURED reports, `(a, b)` (see
+    /// [`crate::calibration::Calibration::map`]).
+    map: (f32, f32),
 }
 
 impl Closed {
     /// For a morph starting as `s` says: the TCA aims at the lock temperature whose shape after
     /// release is the target, in the measured surroundings.
     pub fn new(s: &Start) -> Self {
-        let t = target::lock_temp_for_final_radius_c(s.radius_mm, s.m.t_amb_c);
+        let map = s.cal.map();
+        let need = target::lock_temp_for_final_radius_c(s.radius_mm, s.m.t_amb_c);
+        let t = target::calibrated_aim_c(map, need, s.m.t_amb_c);
         Closed {
             drive: ModelDrive::new(s, t),
+            map,
         }
     }
 
@@ -89,7 +95,7 @@ impl Strategy for Closed {
 
     fn radius_estimate_mm(&self, m: &Measurements) -> f32 {
         let tca_c = self.drive.observer().estimate_c(HeatedNode::Tca);
-        target::final_radius_mm(tca_c, m.t_amb_c)
+        target::calibrated_final_radius_mm(self.map, tca_c, m.t_amb_c)
     }
 
     fn powers(&mut self, phase: Phase, t: &Tick) -> Powers {

@@ -137,6 +137,8 @@ pub struct Start<'a> {
     pub tca_power_w: f32,
     /// Temperatures at MORPH.
     pub m: &'a Measurements,
+    /// This link's calibration (TUNE's thermistor gains, MEASURED's TCA map).
+    pub cal: &'a crate::calibration::Calibration,
 }
 
 /// The strategy a morph runs, one of the four: the single place that dispatches on it.

@@ -185,4 +185,10 @@ impl Bench {
         line.split(' ')
             .find_map(|w| w.strip_prefix(&format!("{key}=")).map(str::to_string))
     }
+
+    /// Every alarm line so far.
+    #[allow(dead_code)]
+    pub fn alarms(&self) -> Vec<String> {
+        self.alarms_since(0)
+    }
 }

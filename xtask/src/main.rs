@@ -7,6 +7,7 @@
 use clap::{Parser, Subcommand};
 
 mod boards;
+mod calibration;
 mod emulate;
 mod faults;
 mod strategies;
@@ -32,6 +33,8 @@ enum Task {
     Emulate(emulate::Args),
     /// Inject every fault in every phase on the hifi and lumped links: the detection-time table.
     Faults(faults::Args),
+    /// TUNE and MEASURED over a mismatch ensemble: docs/calibration.csv, .svg, .png.
+    Calibration(calibration::Args),
 }
 
 fn main() -> ExitCode {
@@ -45,6 +48,7 @@ fn main() -> ExitCode {
         Task::Strategies(a) => strategies::run(&a, &ws.root),
         Task::Emulate(a) => emulate::run(&a, &ws),
         Task::Faults(a) => faults::run(&a),
+        Task::Calibration(a) => calibration::run(&a, &ws.root),
     });
     match result {
         Ok(()) => ExitCode::SUCCESS,

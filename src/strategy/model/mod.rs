@@ -93,7 +93,19 @@ impl ModelDrive {
     pub fn new(s: &Start, tca_target_c: f32) -> Self {
         let m = s.m;
         ModelDrive {
-            observer: Observer::from_measured(m.t_pla_c, m.t_tca_c, m.t_amb_c),
+            observer: Observer::from_measured_with_gains(
+                m.t_pla_c,
+                m.t_tca_c,
+                m.t_amb_c,
+                [
+                    s.cal.sensor_gain(HeatedNode::Pla),
+                    s.cal.sensor_gain(HeatedNode::Tca),
+                ],
+                [
+                    s.cal.cross_gain(HeatedNode::Pla),
+                    s.cal.cross_gain(HeatedNode::Tca),
+                ],
+            ),
             tca_target_c,
             last_ms: s.now_ms,
             applied: Powers::default(),

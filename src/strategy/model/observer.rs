@@ -59,6 +59,16 @@ pub struct Observer {
     disturbance_k: [f64; 2],
     ambient_c: f64,
     smooth_c: [[f64; 2]; 2],
+    /// Share of its node's rise above the surroundings each thermistor reads (PLA, TCA): the
+    /// link's calibration ([`crate::calibration::Calibration::sensor_gain`]), 1 by default.
+    sensor_gain: [f64; 2],
+    /// Share of the other heater's part of its node's rise each thermistor reads (PLA, TCA):
+    /// [`crate::calibration::Calibration::cross_gain`]; a bead beside one heater sees the
+    /// other's heat at another share than its own heater's.
+    cross_gain: [f64; 2],
+    /// The same network driven by each heater alone (PLA, TCA), from the surroundings: the
+    /// other heater's part of each node's rise.
+    alone: [Network; 2],
 }
 
 impl Observer {
@@ -74,6 +84,13 @@ impl Observer {
         disturbance_k: [0.0; 2],
         ambient_c: 0.0,
         smooth_c: [[f64::NAN; 2]; 2],
+        sensor_gain: [1.0; 2],
+        cross_gain: [1.0; 2],
+        alone: [Network {
+            capacity_j_k: [1.0; node::COUNT],
+            conductance_w_k: [0.0; 5],
+            temp_c: [0.0; node::COUNT],
+        }; 2],
     };
 
     /// A model at rest at `ambient_c` (°C) with the built-in link parameters.
@@ -87,6 +104,9 @@ impl Observer {
             disturbance_k: [0.0; 2],
             ambient_c: ambient_c as f64,
             smooth_c: [[f64::NAN; 2]; 2],
+            sensor_gain: [1.0; 2],
+            cross_gain: [1.0; 2],
+            alone: [net; 2],
         }
     }
 
@@ -94,10 +114,44 @@ impl Observer {
     /// `t_pla_c`, the TCA's side at `t_tca_c`, the bulk at their mean. Used at MORPH, when the
     /// link may still be warm from a previous morph.
     pub fn from_measured(t_pla_c: f32, t_tca_c: f32, t_amb_c: f32) -> Self {
+        Self::from_measured_with_gains(t_pla_c, t_tca_c, t_amb_c, [1.0, 1.0], [1.0, 1.0])
+    }
+
+    /// As [`Observer::from_measured`], for thermistors that read `gains` (PLA, TCA) of their
+    /// own heater's part of their node's rise above the surroundings and `cross` of the other
+    /// heater's: the nodes start at the rise the readings imply.
+    pub fn from_measured_with_gains(
+        t_pla_c: f32,
+        t_tca_c: f32,
+        t_amb_c: f32,
+        gains: [f32; 2],
+        cross: [f32; 2],
+    ) -> Self {
         let mut o = Observer::new(t_amb_c);
-        let (p, t) = (t_pla_c as f64, t_tca_c as f64);
+        let g = gains.map(|g| {
+            if g.is_finite() && g > 0.1 {
+                g as f64
+            } else {
+                1.0
+            }
+        });
+        o.sensor_gain = g;
+        o.cross_gain = cross.map(|g| {
+            if g.is_finite() && g >= 0.0 {
+                g as f64
+            } else {
+                1.0
+            }
+        });
+        let amb = if t_amb_c.is_finite() {
+            t_amb_c as f64
+        } else {
+            o.ambient_c
+        };
+        let (sp, st) = (t_pla_c as f64, t_tca_c as f64);
+        let (p, t) = (amb + (sp - amb) / g[0], amb + (st - amb) / g[1]);
         o.net.temp_c = [t, t, p, p, 0.5 * (p + t)];
-        o.sensor_c = [p, t];
+        o.sensor_c = [sp, st];
         o
     }
 
@@ -108,16 +162,30 @@ impl Observer {
             self.ambient_c = ambient_c as f64;
         }
         let dt = dt_s as f64;
-        self.net.advance(
-            dt,
-            tca_w.max(0.0) as f64,
-            pla_w.max(0.0) as f64,
-            self.ambient_c,
-        );
+        let (tca_w, pla_w) = (tca_w.max(0.0) as f64, pla_w.max(0.0) as f64);
+        // One call site for the three networks (the firmware's f64 is soft-float: one copy of
+        // the step, not three inlined).
+        let [pla_alone, tca_alone] = &mut self.alone;
+        for (net, t_w, p_w) in [
+            (&mut self.net, tca_w, pla_w),
+            (pla_alone, 0.0, pla_w),
+            (tca_alone, tca_w, 0.0),
+        ] {
+            net.advance(dt, t_w, p_w, self.ambient_c);
+        }
         let keep = lag_remaining(dt, SENSOR_TAU_S as f64);
         for n in [HeatedNode::Pla, HeatedNode::Tca] {
             let i = n.index();
-            let t = self.net.temp_c[model_nodes(n).0];
+            let at = model_nodes(n).0;
+            let node = self.net.temp_c[at];
+            let other = match n {
+                Heater::Pla => Heater::Tca,
+                Heater::Tca => Heater::Pla,
+            };
+            let cross_k = self.alone[other.index()].temp_c[at] - self.ambient_c;
+            let t = self.ambient_c
+                + self.sensor_gain[i] * (node - self.ambient_c)
+                + (self.cross_gain[i] - self.sensor_gain[i]) * cross_k;
             self.sensor_c[i] = t + (self.sensor_c[i] - t) * keep;
         }
     }
@@ -163,12 +231,18 @@ impl Observer {
 
     /// The observer's estimate of a heated node's true temperature, °C.
     pub fn estimate_c(&self, n: HeatedNode) -> f32 {
-        (self.net.temp_c[model_nodes(n).0] + self.disturbance_k[n.index()]) as f32
+        (self.net.temp_c[model_nodes(n).0] + self.node_disturbance_k(n.index())) as f32
+    }
+
+    /// The disturbance learnt in the thermistor's space, taken to the node's (divided by the
+    /// thermistor's gain), K.
+    fn node_disturbance_k(&self, i: usize) -> f64 {
+        self.disturbance_k[i] / self.sensor_gain[i]
     }
 
     /// Current disturbance estimate of a heated node, K (estimate − model).
     pub fn disturbance_k(&self, n: HeatedNode) -> f32 {
-        self.disturbance_k[n.index()] as f32
+        self.node_disturbance_k(n.index()) as f32
     }
 
     /// Heater power, W, that brings the model's node `n` to `target_c` (°C) within about

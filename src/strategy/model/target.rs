@@ -62,6 +62,26 @@ pub fn final_radius_mm(lock_tca_c: f32, ambient_c: f32) -> f32 {
     (1e3 / released_curvature_per_m(lock, ambient_c as f64)) as f32
 }
 
+/// The estimate's TCA temperature, °C, to aim at so that the link is at `need_c` (°C), through
+/// this link's measured map `(a, b)` ([`crate::calibration::Calibration::map`]: the needed rise
+/// above `ambient_c` is `a + b ×` the estimate's), at most [`TARGET_MAX_C`].
+pub fn calibrated_aim_c(map: (f32, f32), need_c: f32, ambient_c: f32) -> f32 {
+    let (a, b) = map;
+    let aim = ambient_c + (need_c - ambient_c - a) / b;
+    if aim.is_finite() {
+        aim.min(TARGET_MAX_C)
+    } else {
+        need_c
+    }
+}
+
+/// Radius after release, mm, for a lock at the estimate's TCA temperature `estimate_c` (°C),
+/// through this link's map `(a, b)` (see [`calibrated_aim_c`]).
+pub fn calibrated_final_radius_mm(map: (f32, f32), estimate_c: f32, ambient_c: f32) -> f32 {
+    let (a, b) = map;
+    final_radius_mm(ambient_c + a + b * (estimate_c - ambient_c), ambient_c)
+}
+
 /// TCA temperature, °C, at which the soft link has curvature `kappa_per_m`, clamped to
 /// [0 °C, [`TARGET_MAX_C`]] (curvature grows with temperature over that range).
 fn temp_for_curvature_c(kappa_per_m: f64) -> f32 {

@@ -7,6 +7,7 @@ mod link;
 mod live;
 mod script;
 mod telemetry;
+mod tune;
 
 use clap::{Parser, Subcommand};
 use link::{default_sim_program, field, Link, LinkError, Target, REPLY_TIMEOUT_S};
@@ -139,6 +140,19 @@ enum Cmd {
     Config {
         #[command(subcommand)]
         cmd: Option<config::ConfigCmd>,
+    /// Fit the thermal model to this link (TUNE, under 3 minutes of heating); Ctrl-C aborts.
+    Tune,
+    /// Guided calibration: morph to a few radii, send each measured radius (MEASURED).
+    Calibrate {
+        /// Radii to morph to, mm (default: three across RANGE).
+        #[arg(long, value_delimiter = ',')]
+        radii: Vec<f32>,
+        /// The measured radii, mm, in order (default: asked after each morph).
+        #[arg(long, value_delimiter = ',')]
+        measured: Vec<f32>,
+        /// Strategy: auto, paper, gated, boost or closed.
+        #[arg(long, default_value = "auto")]
+        mode: String,
     },
 }
 
@@ -357,6 +371,19 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
             Ok(end_script(&mut link, end, &mut log))
         }
         Cmd::Plot { .. } => unreachable!("handled above"),
+        Cmd::Tune => {
+            let speed = if link.simulated { cli.sim_speed } else { 1.0 };
+            Ok(tune::tune(&mut link, speed))
+        }
+        Cmd::Calibrate {
+            radii,
+            measured,
+            mode,
+        } => {
+            let speed = if link.simulated { cli.sim_speed } else { 1.0 };
+            let poll = Duration::from_secs_f64(DEFAULT_POLL_MS as f64 / 1000.0 / speed);
+            tune::calibrate(&mut link, &radii, &measured, &mode, poll)
+        }
     }
 }
 

@@ -1,0 +1,172 @@
+//! `morphctl tune` (TUNE, followed to its end) and `morphctl calibrate` (guided: morphs to a few
+//! radii, asks for each measured radius, sends MEASURED). A signal, a lost reply or an error
+//! while TUNE heats ends in ABORT and a heaters-off STATUS, as for MORPH ([`super::finish`]).
+
+use super::{finish, morph, MorphEnd, MorphOpts};
+use crate::link::{field, Link, LinkError, REPLY_TIMEOUT_S};
+use morphlink::protocol::client::{classify, LineKind};
+use std::io::BufRead;
+use std::process::ExitCode;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+/// Where in the reachable range `calibrate` morphs by default (fractions from the tightest):
+/// spread so MEASURED fits the map's slope, inside the ends (the calibration benchmark's).
+pub const CALIBRATE_FRACTIONS: [f64; 3] = [0.15, 0.5, 0.85];
+/// How much longer than the tune's announced length morphctl waits for its end before it
+/// calls the link lost and sends ABORT: a factor.
+pub const TUNE_WAIT_FACTOR: f64 = 1.5;
+/// The line that stores the calibration once the device has settings storage (`SAVE`), sent
+/// after the last MEASURED; `None` while the firmware has none.
+pub const SAVE_LINE: Option<&str> = None;
+
+/// Runs TUNE and follows its events to `event: tune done` (exit 0), `event: tune failed` or an
+/// alarm (exit 1, heaters already off); anything else ends in ABORT.
+pub fn tune(link: &mut Link, speed: f64) -> ExitCode {
+    let end = run_tune(link, speed);
+    finish(link, end)
+}
+
+fn run_tune(link: &mut Link, speed: f64) -> MorphEnd {
+    let mut events: Vec<String> = Vec::new();
+    let reply = match link.command("TUNE", REPLY_TIMEOUT_S, &mut |l| events.push(l.to_string())) {
+        Ok((_, r)) => r,
+        Err(LinkError::Closed(e)) => return MorphEnd::Failed(e),
+        Err(e) => return MorphEnd::Broken(e),
+    };
+    if classify(&reply) != LineKind::Ok {
+        return MorphEnd::Failed(format!("TUNE refused: {reply}"));
+    }
+    let total_s: f64 = field(&reply, "total_s")
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(180.0);
+    println!("TUNE: about {total_s} s of link time; Ctrl-C stops it with the heaters off");
+    let limit = Duration::from_secs_f64(total_s * TUNE_WAIT_FACTOR / speed.max(1e-3) + 10.0);
+    let start = Instant::now();
+    loop {
+        for e in events.drain(..) {
+            println!("{e}");
+            if e.starts_with("event: tune done") {
+                return MorphEnd::Finished(ExitCode::SUCCESS);
+            }
+            if e.starts_with("event: tune failed") || classify(&e) == LineKind::Alarm {
+                return MorphEnd::Finished(ExitCode::FAILURE);
+            }
+        }
+        if start.elapsed() > limit {
+            return MorphEnd::Broken(LinkError::Timeout(format!(
+                "no end of TUNE within {} s",
+                limit.as_secs()
+            )));
+        }
+        match link.recv(Duration::from_millis(500)) {
+            Ok(Some(l)) => events.push(l),
+            Ok(None) => {
+                // Still there? A STATUS a second keeps a lost link from going unnoticed.
+                if let Err(e) = link.command("STATUS", REPLY_TIMEOUT_S, &mut |l| {
+                    events.push(l.to_string())
+                }) {
+                    return MorphEnd::Broken(e);
+                }
+            }
+            Err(e) => return MorphEnd::Broken(e),
+        }
+    }
+}
+
+/// Reads one line from stdin in a thread, so a signal still ends the wait.
+fn ask(link: &Link, prompt: &str) -> Result<Option<String>, String> {
+    println!("{prompt}");
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let mut s = String::new();
+        let r = std::io::stdin().lock().read_line(&mut s).map(|n| (n, s));
+        let _ = tx.send(r);
+    });
+    loop {
+        if let Some(sig) = link.signal() {
+            return Err(format!("interrupted by {}", crate::link::signal_name(sig)));
+        }
+        match rx.recv_timeout(Duration::from_millis(100)) {
+            Ok(Ok((0, _))) => return Ok(None),
+            Ok(Ok((_, s))) => return Ok(Some(s.trim().to_string())),
+            Ok(Err(e)) => return Err(format!("cannot read stdin: {e}")),
+            Err(mpsc::RecvTimeoutError::Timeout) => {}
+            Err(mpsc::RecvTimeoutError::Disconnected) => return Ok(None),
+        }
+    }
+}
+
+/// `calibrate`: for each radius (default [`CALIBRATE_FRACTIONS`] of RANGE), MORPH in `mode`,
+/// then the measured radius (from `measured`, else asked on stdin; empty skips) as MEASURED.
+pub fn calibrate(
+    link: &mut Link,
+    radii: &[f32],
+    measured: &[f32],
+    mode: &str,
+    poll: Duration,
+) -> Result<ExitCode, String> {
+    let radii: Vec<f32> = if radii.is_empty() {
+        let (_, range) = link
+            .command("RANGE", REPLY_TIMEOUT_S, &mut |l| println!("{l}"))
+            .map_err(String::from)?;
+        let num = |k: &str| field(&range, k).and_then(|v| v.parse::<f64>().ok());
+        let (min, max) = num("min_mm")
+            .zip(num("max_mm"))
+            .ok_or(format!("RANGE answered `{range}`"))?;
+        CALIBRATE_FRACTIONS
+            .iter()
+            .map(|f| ((min + (max - min) * f) * 10.0).round() as f32 / 10.0)
+            .collect()
+    } else {
+        radii.to_vec()
+    };
+    let mut counted = 0;
+    for (i, &r) in radii.iter().enumerate() {
+        println!("calibrate: morph {} of {} to {r} mm", i + 1, radii.len());
+        let opts = MorphOpts {
+            radius_mm: r,
+            mode: mode.to_string(),
+            poll,
+            timeout_s: super::DEFAULT_MORPH_TIMEOUT_S,
+        };
+        let end = morph(link, &opts, &mut Vec::new(), &mut None);
+        let finished_ok = matches!(&end, MorphEnd::Finished(c) if *c == ExitCode::SUCCESS);
+        let code = finish(link, end);
+        if !finished_ok {
+            return Ok(code);
+        }
+        let value = match measured.get(i) {
+            Some(v) => Some(v.to_string()),
+            None => ask(
+                link,
+                &format!("measured radius of this morph, mm (target {r}; empty to skip):"),
+            )?,
+        };
+        let Some(value) = value.filter(|v| !v.is_empty()) else {
+            println!("calibrate: skipped");
+            continue;
+        };
+        let (_, reply) = link
+            .command(&format!("MEASURED {value}"), REPLY_TIMEOUT_S, &mut |l| {
+                println!("{l}")
+            })
+            .map_err(String::from)?;
+        println!("{reply}");
+        if classify(&reply) == LineKind::Ok {
+            counted += 1;
+        }
+    }
+    if let (Some(save), true) = (SAVE_LINE, counted > 0) {
+        let (_, reply) = link
+            .command(save, REPLY_TIMEOUT_S, &mut |l| println!("{l}"))
+            .map_err(String::from)?;
+        println!("{reply}");
+    }
+    println!("calibrate: {counted} measured morph(s) counted");
+    Ok(if counted > 0 {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
+}

@@ -1,0 +1,527 @@
+//! This link's calibration: what `TUNE` fitted and what `MEASURED` learnt, in one struct of
+//! plain `f32` fields the [`crate::controller::Controller`] owns and the strategies read.
+//!
+//! [`Calibration::default`] is the compiled-in link (`link.toml`'s lumped model, no measured
+//! morph), so a link that was never tuned behaves as before. Every field has a row in
+//! [`FIELDS`] (name, unit, allowed range) and is read and written by index
+//! ([`Calibration::get`], [`Calibration::set`]), so a settings registry can list, range-check and
+//! store the group without knowing its meaning. [`Calibration::set`] refuses a value outside its
+//! row's range and changes nothing then.
+//!
+//! Two corrections live here:
+//! - **thermal** (from `TUNE`): the steady rise per watt each thermistor shows of its own heater.
+//!   The observer of `boost`/`closed` models each thermistor as reading that share of its
+//!   node's rise ([`Calibration::sensor_gain`]): a bead beside a heater reads a fraction of the
+//!   heater's mean rise, and without this the observer takes the shortfall for a cold heater.
+//! - **map** (from `MEASURED` after a `boost`/`closed` morph): the TCA temperature map in the
+//!   thermistor's space. Each report pairs the estimate's TCA rise at lock, `x` (what the
+//!   thermistors said), with the rise the mechanics need for the radius measured, `y`; the map
+//!   `y = a + b·x` is the least-squares line through the reports, pulled towards `a = 0, b = 1`
+//!   by a prior worth [`MAP_PRIOR_WEIGHT`] reports ([`Calibration::map`]). After a `paper`/
+//!   `gated` morph the report scales the table's power instead ([`Calibration::power_scale`]).
+
+use crate::link::{R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W};
+
+/// One calibration field's description: its name (the settings key), unit and allowed range.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FieldInfo {
+    /// Name, lower-case with its unit (`tca_rise_k_per_w`).
+    pub name: &'static str,
+    /// Unit as shown to the user (`K/W`, `s`, `1`).
+    pub unit: &'static str,
+    /// Smallest allowed value.
+    pub min: f32,
+    /// Largest allowed value.
+    pub max: f32,
+    /// What the field is, one line.
+    pub doc: &'static str,
+}
+
+/// Smallest rise per watt `TUNE` accepts, as a share of the model's: a bead that sees under a
+/// third of its heater's rise is off its heater (or the link is in a stirred bath far from the
+/// model), and the observer would amplify its noise threefold.
+pub const RISE_MIN_SHARE: f32 = 0.3;
+/// Largest rise per watt `TUNE` accepts, as a share of the model's: a bead cannot read more
+/// than its heater; 1.5 allows 50 % weaker convection than the model's water. Still air (about
+/// five times the rise) is outside: the model strategies assume water.
+pub const RISE_MAX_SHARE: f32 = 1.5;
+/// Time constants `TUNE` accepts, s: the TCA's thermistor responds within about 2 s at the
+/// fastest (bead on the fibre), the PLA's within 200 s at the slowest (a loose bead on a rod
+/// in still water); outside, the fit is not of this link.
+pub const TAU_RANGE_S: (f32, f32) = (2.0, 200.0);
+/// Default time constant of the TCA thermistor's step response, s: `TUNE`'s result on the
+/// nominal lumped link (`cargo test --release --test tune a_healthy -- --nocapture`, which
+/// prints every fitted value).
+pub const DEFAULT_TCA_TAU_S: f32 = 12.6;
+/// Default time constant of the PLA thermistor's step response, s (as
+/// [`DEFAULT_TCA_TAU_S`]).
+pub const DEFAULT_PLA_TAU_S: f32 = 21.7;
+/// Weight of the map's prior (`a = 0, b = 1`), in reports: one report moves the map most of the
+/// way to what it shows (split between offset and slope by the prior's shape); three reports
+/// at different radii fit it almost freely.
+pub const MAP_PRIOR_WEIGHT: f32 = 0.2;
+/// Weight of the offset's prior (`a = 0`), in reports.
+pub const MAP_OFFSET_PRIOR_WEIGHT: f32 = 100.0;
+/// TCA rise that scales the slope's prior, K: a mid-range rise (the table spans 12–63 K), so
+/// the prior on `b` weighs like a report there.
+pub const MAP_PRIOR_RISE_K: f32 = 35.0;
+/// Reports the map remembers at full weight; beyond it older reports fade (their sums are
+/// scaled down), so a link that changes is followed. Eight reports at 0.3 mm each average the
+/// measuring error to about 0.1 mm.
+pub const MEASURED_MEMORY: f32 = 8.0;
+/// Largest correction of the map at any rise in [`MAP_SPAN_K`], K: 25 K is about 7 mm of
+/// radius in the middle of the range, four times the largest miss of the paper's model on its
+/// own link and above the 3.5 mm the most biased high-fidelity links miss by before
+/// calibration. A report that would need more is refused as a measuring mistake.
+pub const MAP_MAX_CORRECTION_K: f32 = 25.0;
+/// The TCA rises the map's correction is judged over, K: the table's span (12–63 K) with a
+/// margin.
+pub const MAP_SPAN_K: (f32, f32) = (0.0, 70.0);
+/// Allowed range of the map's slope: a bead reads at least half and at most twice the rise
+/// the mechanics need.
+pub const MAP_SLOPE_RANGE: (f32, f32) = (0.5, 2.0);
+/// Allowed range of the table's power scale: ± a factor of 2 (a heater of twice or half the
+/// nominal resistance is outside any link the table was made for).
+pub const POWER_SCALE_RANGE: (f32, f32) = (0.5, 2.0);
+
+/// Number of fields.
+pub const FIELD_COUNT: usize = 14;
+
+/// Every field, in index order (the order of [`Calibration::get`] / [`Calibration::set`]).
+pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
+    FieldInfo {
+        name: "pla_rise_k_per_w",
+        unit: "K/W",
+        min: RISE_MIN_SHARE * R_PP_K_PER_W,
+        max: RISE_MAX_SHARE * R_PP_K_PER_W,
+        doc: "steady PLA thermistor rise per PLA watt (TUNE)",
+    },
+    FieldInfo {
+        name: "tca_rise_k_per_w",
+        unit: "K/W",
+        min: RISE_MIN_SHARE * R_TT_K_PER_W,
+        max: RISE_MAX_SHARE * R_TT_K_PER_W,
+        doc: "steady TCA thermistor rise per TCA watt (TUNE)",
+    },
+    FieldInfo {
+        name: "pla_to_tca_k_per_w",
+        unit: "K/W",
+        min: 0.0,
+        max: RISE_MAX_SHARE * R_TP_K_PER_W * 2.0,
+        doc: "steady TCA thermistor rise per PLA watt (TUNE)",
+    },
+    FieldInfo {
+        name: "tca_to_pla_k_per_w",
+        unit: "K/W",
+        min: 0.0,
+        max: RISE_MAX_SHARE * R_TP_K_PER_W * 2.0,
+        doc: "steady PLA thermistor rise per TCA watt (TUNE)",
+    },
+    FieldInfo {
+        name: "pla_tau_s",
+        unit: "s",
+        min: TAU_RANGE_S.0,
+        max: TAU_RANGE_S.1,
+        doc: "PLA thermistor step-response time constant (TUNE)",
+    },
+    FieldInfo {
+        name: "tca_tau_s",
+        unit: "s",
+        min: TAU_RANGE_S.0,
+        max: TAU_RANGE_S.1,
+        doc: "TCA thermistor step-response time constant (TUNE)",
+    },
+    FieldInfo {
+        name: "map_count",
+        unit: "1",
+        min: 0.0,
+        max: MEASURED_MEMORY,
+        doc: "MEASURED reports in the TCA map (weight)",
+    },
+    FieldInfo {
+        name: "map_sum_x_k",
+        unit: "K",
+        min: -MEASURED_MEMORY * 110.0,
+        max: MEASURED_MEMORY * 110.0,
+        doc: "sum of estimated TCA rises at lock",
+    },
+    FieldInfo {
+        name: "map_sum_y_k",
+        unit: "K",
+        min: -MEASURED_MEMORY * 110.0,
+        max: MEASURED_MEMORY * 110.0,
+        doc: "sum of TCA rises the measured radii need",
+    },
+    FieldInfo {
+        name: "map_sum_xx_k2",
+        unit: "K2",
+        min: 0.0,
+        max: MEASURED_MEMORY * 110.0 * 110.0,
+        doc: "sum of squared estimated rises",
+    },
+    FieldInfo {
+        name: "map_sum_xy_k2",
+        unit: "K2",
+        min: -MEASURED_MEMORY * 110.0 * 110.0,
+        max: MEASURED_MEMORY * 110.0 * 110.0,
+        doc: "sum of estimated times needed rises",
+    },
+    FieldInfo {
+        name: "power_count",
+        unit: "1",
+        min: 0.0,
+        max: MEASURED_MEMORY,
+        doc: "MEASURED reports in the power scale (weight)",
+    },
+    FieldInfo {
+        name: "power_sum_ratio",
+        unit: "1",
+        min: 0.0,
+        max: MEASURED_MEMORY * POWER_SCALE_RANGE.1,
+        doc: "sum of power needed over table power",
+    },
+    FieldInfo {
+        name: "version",
+        unit: "1",
+        min: 1.0,
+        max: 1.0,
+        doc: "calibration layout version",
+    },
+];
+
+/// This link's calibration (see the module docs). Plain fields with units in their names.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Calibration {
+    /// Steady PLA thermistor rise per PLA watt, K/W.
+    pub pla_rise_k_per_w: f32,
+    /// Steady TCA thermistor rise per TCA watt, K/W.
+    pub tca_rise_k_per_w: f32,
+    /// Steady TCA thermistor rise per PLA watt (the PLA-to-TCA coupling), K/W.
+    pub pla_to_tca_k_per_w: f32,
+    /// Steady PLA thermistor rise per TCA watt (the TCA-to-PLA coupling), K/W.
+    pub tca_to_pla_k_per_w: f32,
+    /// PLA thermistor step-response time constant, s.
+    pub pla_tau_s: f32,
+    /// TCA thermistor step-response time constant, s.
+    pub tca_tau_s: f32,
+    /// Weight of the `MEASURED` reports in the TCA map (a count that fades past
+    /// [`MEASURED_MEMORY`]).
+    pub map_count: f32,
+    /// Sum of the estimated TCA rises at lock `x`, K.
+    pub map_sum_x_k: f32,
+    /// Sum of the needed rises `y`, K.
+    pub map_sum_y_k: f32,
+    /// Sum of `x²`, K².
+    pub map_sum_xx_k2: f32,
+    /// Sum of `x·y`, K².
+    pub map_sum_xy_k2: f32,
+    /// Weight of the reports in the power scale.
+    pub power_count: f32,
+    /// Sum of the reported power ratios (power the radius needed / the table's power).
+    pub power_sum_ratio: f32,
+    /// Layout version (1): a stored calibration of another layout is not this one.
+    pub version: f32,
+}
+
+impl Default for Calibration {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Why a value was refused by [`Calibration::set`] or a report by a fold.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CalibrationError {
+    /// No field has this index.
+    NoSuchField,
+    /// The value is NaN, infinite or outside the field's range.
+    OutOfRange(FieldInfo),
+}
+
+impl Calibration {
+    /// The compiled-in link: the lumped model's rises, the nominal time constants, no report.
+    pub const DEFAULT: Calibration = Calibration {
+        pla_rise_k_per_w: R_PP_K_PER_W,
+        tca_rise_k_per_w: R_TT_K_PER_W,
+        pla_to_tca_k_per_w: R_TP_K_PER_W,
+        tca_to_pla_k_per_w: R_TP_K_PER_W,
+        pla_tau_s: DEFAULT_PLA_TAU_S,
+        tca_tau_s: DEFAULT_TCA_TAU_S,
+        map_count: 0.0,
+        map_sum_x_k: 0.0,
+        map_sum_y_k: 0.0,
+        map_sum_xx_k2: 0.0,
+        map_sum_xy_k2: 0.0,
+        power_count: 0.0,
+        power_sum_ratio: 0.0,
+        version: 1.0,
+    };
+
+    fn slot(&mut self, index: usize) -> Option<&mut f32> {
+        Some(match index {
+            0 => &mut self.pla_rise_k_per_w,
+            1 => &mut self.tca_rise_k_per_w,
+            2 => &mut self.pla_to_tca_k_per_w,
+            3 => &mut self.tca_to_pla_k_per_w,
+            4 => &mut self.pla_tau_s,
+            5 => &mut self.tca_tau_s,
+            6 => &mut self.map_count,
+            7 => &mut self.map_sum_x_k,
+            8 => &mut self.map_sum_y_k,
+            9 => &mut self.map_sum_xx_k2,
+            10 => &mut self.map_sum_xy_k2,
+            11 => &mut self.power_count,
+            12 => &mut self.power_sum_ratio,
+            13 => &mut self.version,
+            _ => return None,
+        })
+    }
+
+    /// Field number `index`'s value (see [`FIELDS`]), or `None` past the last.
+    pub fn get(&self, index: usize) -> Option<f32> {
+        let mut c = *self;
+        c.slot(index).map(|v| *v)
+    }
+
+    /// Sets field number `index` to `value` if it is within the field's range; otherwise
+    /// changes nothing and says why.
+    pub fn set(&mut self, index: usize, value: f32) -> Result<(), CalibrationError> {
+        let info = *FIELDS.get(index).ok_or(CalibrationError::NoSuchField)?;
+        if !(value >= info.min && value <= info.max) {
+            return Err(CalibrationError::OutOfRange(info));
+        }
+        *self.slot(index).ok_or(CalibrationError::NoSuchField)? = value;
+        Ok(())
+    }
+
+    /// True if every field is within its range (a calibration read from storage is used only
+    /// then).
+    pub fn valid(&self) -> bool {
+        (0..FIELD_COUNT).all(|i| {
+            let v = self.get(i).unwrap_or(f32::NAN);
+            v >= FIELDS[i].min && v <= FIELDS[i].max
+        })
+    }
+
+    /// Share of its node's rise the thermistor of `heater` reads (its fitted rise per watt over
+    /// the model's), clamped to the accepted range: what the observer multiplies its modelled
+    /// rise by before comparing it with the reading.
+    pub fn sensor_gain(&self, heater: crate::vocab::Heater) -> f32 {
+        let (fit, model) = match heater {
+            crate::vocab::Heater::Pla => (self.pla_rise_k_per_w, R_PP_K_PER_W),
+            crate::vocab::Heater::Tca => (self.tca_rise_k_per_w, R_TT_K_PER_W),
+        };
+        let g = fit / model;
+        if g.is_finite() {
+            g.clamp(RISE_MIN_SHARE, RISE_MAX_SHARE)
+        } else {
+            1.0
+        }
+    }
+
+    /// Share of the other heater's part of its node's rise the thermistor of `heater` reads
+    /// (its fitted coupling over the model's), in `[0, 3]`.
+    pub fn cross_gain(&self, heater: crate::vocab::Heater) -> f32 {
+        let fit = match heater {
+            crate::vocab::Heater::Pla => self.tca_to_pla_k_per_w,
+            crate::vocab::Heater::Tca => self.pla_to_tca_k_per_w,
+        };
+        let g = fit / R_TP_K_PER_W;
+        if g.is_finite() {
+            g.clamp(0.0, 3.0)
+        } else {
+            1.0
+        }
+    }
+
+    /// The TCA map `(a, b)`: the rise the mechanics need is `a + b × the estimate's rise`, K.
+    /// `(0, 1)` with no report.
+    pub fn map(&self) -> (f32, f32) {
+        map_of(
+            self.map_count,
+            self.map_sum_x_k,
+            self.map_sum_y_k,
+            self.map_sum_xx_k2,
+            self.map_sum_xy_k2,
+        )
+    }
+
+    /// The estimate's TCA rise to aim at so that the link's true rise is `need_rise_k`, K.
+    pub fn aim_rise_k(&self, need_rise_k: f32) -> f32 {
+        let (a, b) = self.map();
+        (need_rise_k - a) / b
+    }
+
+    /// The rise the mechanics see for an estimate's rise `estimate_rise_k`, K.
+    pub fn true_rise_k(&self, estimate_rise_k: f32) -> f32 {
+        let (a, b) = self.map();
+        a + b * estimate_rise_k
+    }
+
+    /// Adds one report to the TCA map: the estimate's rise at lock `x_k` and the rise the
+    /// measured radius needs `y_k`. Refused, changing nothing, if the resulting map would be
+    /// outside [`MAP_SLOPE_RANGE`] or correct by more than [`MAP_MAX_CORRECTION_K`] within the
+    /// table's span.
+    pub fn fold_map(&mut self, x_k: f32, y_k: f32) -> Result<(f32, f32), ()> {
+        let mut next = *self;
+        if next.map_count + 1.0 > MEASURED_MEMORY {
+            let keep = (MEASURED_MEMORY - 1.0) / next.map_count;
+            next.map_count *= keep;
+            next.map_sum_x_k *= keep;
+            next.map_sum_y_k *= keep;
+            next.map_sum_xx_k2 *= keep;
+            next.map_sum_xy_k2 *= keep;
+        }
+        next.map_count += 1.0;
+        next.map_sum_x_k += x_k;
+        next.map_sum_y_k += y_k;
+        next.map_sum_xx_k2 += x_k * x_k;
+        next.map_sum_xy_k2 += x_k * y_k;
+        let (a, b) = next.map();
+        let worst = [MAP_SPAN_K.0, MAP_SPAN_K.1]
+            .iter()
+            .map(|&x| (a + (b - 1.0) * x).abs())
+            .fold(0.0f32, f32::max);
+        let ok = x_k.is_finite()
+            && y_k.is_finite()
+            && b >= MAP_SLOPE_RANGE.0
+            && b <= MAP_SLOPE_RANGE.1
+            && worst <= MAP_MAX_CORRECTION_K
+            && next.valid();
+        if !ok {
+            return Err(());
+        }
+        *self = next;
+        Ok((a, b))
+    }
+
+    /// The table power's scale for the power strategies: the mean of the reported ratios,
+    /// with a prior of 1 worth [`MAP_PRIOR_WEIGHT`] reports.
+    pub fn power_scale(&self) -> f32 {
+        let s = (self.power_sum_ratio + MAP_PRIOR_WEIGHT) / (self.power_count + MAP_PRIOR_WEIGHT);
+        if s.is_finite() {
+            s.clamp(POWER_SCALE_RANGE.0, POWER_SCALE_RANGE.1)
+        } else {
+            1.0
+        }
+    }
+
+    /// Adds one report to the power scale: the power the measured radius needed over the
+    /// table's power for it. Refused, changing nothing, outside [`POWER_SCALE_RANGE`].
+    pub fn fold_power(&mut self, ratio: f32) -> Result<f32, ()> {
+        if !(ratio >= POWER_SCALE_RANGE.0 && ratio <= POWER_SCALE_RANGE.1) {
+            return Err(());
+        }
+        let mut next = *self;
+        if next.power_count + 1.0 > MEASURED_MEMORY {
+            let keep = (MEASURED_MEMORY - 1.0) / next.power_count;
+            next.power_count *= keep;
+            next.power_sum_ratio *= keep;
+        }
+        next.power_count += 1.0;
+        next.power_sum_ratio += ratio;
+        if !next.valid() {
+            return Err(());
+        }
+        *self = next;
+        Ok(self.power_scale())
+    }
+}
+
+/// The ridge least-squares line through the sums, pulled towards `(0, 1)`.
+fn map_of(n: f32, sx: f32, sy: f32, sxx: f32, sxy: f32) -> (f32, f32) {
+    let la = MAP_OFFSET_PRIOR_WEIGHT;
+    let lb = MAP_PRIOR_WEIGHT * MAP_PRIOR_RISE_K * MAP_PRIOR_RISE_K;
+    // Normal equations of Σ(y − a − b x)² + la·a² + lb·(b − 1)².
+    let (m00, m01, m11) = (n + la, sx, sxx + lb);
+    let (r0, r1) = (sy, sxy + lb);
+    let det = m00 * m11 - m01 * m01;
+    if !(det.abs() > 1e-6) {
+        return (0.0, 1.0);
+    }
+    let a = (r0 * m11 - m01 * r1) / det;
+    let b = (m00 * r1 - m01 * r0) / det;
+    if a.is_finite() && b.is_finite() {
+        (a, b.clamp(MAP_SLOPE_RANGE.0, MAP_SLOPE_RANGE.1))
+    } else {
+        (0.0, 1.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_the_compiled_in_link_and_within_range() {
+        let c = Calibration::default();
+        assert!(c.valid());
+        assert_eq!(c.map(), (0.0, 1.0));
+        assert_eq!(c.power_scale(), 1.0);
+        assert!((c.sensor_gain(crate::vocab::Heater::Tca) - 1.0).abs() < 1e-6);
+        assert!((c.cross_gain(crate::vocab::Heater::Pla) - 1.0).abs() < 1e-6);
+        for (i, f) in FIELDS.iter().enumerate() {
+            let v = c.get(i).unwrap();
+            assert!(v >= f.min && v <= f.max, "{}: {v}", f.name);
+        }
+        assert_eq!(c.get(FIELD_COUNT), None);
+    }
+
+    #[test]
+    fn set_refuses_out_of_range_and_changes_nothing() {
+        let mut c = Calibration::default();
+        for bad in [f32::NAN, -1.0, 1e9, f32::INFINITY] {
+            assert!(matches!(
+                c.set(1, bad),
+                Err(CalibrationError::OutOfRange(_))
+            ));
+        }
+        assert_eq!(c, Calibration::default());
+        assert_eq!(c.set(99, 1.0), Err(CalibrationError::NoSuchField));
+        c.set(1, 30.0).unwrap();
+        assert_eq!(c.tca_rise_k_per_w, 30.0);
+        assert_eq!(c.get(1), Some(30.0));
+    }
+
+    #[test]
+    fn three_reports_fit_the_map_s_slope_and_hold_its_offset() {
+        // The link needs 0.8 × the estimate's rise (a bead reading high).
+        let mut c = Calibration::default();
+        for x in [20.0f32, 40.0, 60.0] {
+            c.fold_map(x, 0.8 * x).unwrap();
+        }
+        let (a, b) = c.map();
+        assert!((b - 0.8).abs() < 0.02 && a.abs() < 0.5, "{a} {b}");
+        for x in [25.0f32, 30.0, 50.0] {
+            let aim = c.aim_rise_k(0.8 * x);
+            assert!((aim - x).abs() < 1.0, "{x}: {aim}");
+        }
+        // One report moves the slope most of the way.
+        let mut one = Calibration::default();
+        one.fold_map(40.0, 36.0).unwrap();
+        let (_, b1) = one.map();
+        assert!(b1 < 0.94 && b1 > 0.89, "{b1}");
+    }
+
+    #[test]
+    fn absurd_reports_are_refused_and_change_nothing() {
+        let mut c = Calibration::default();
+        assert!(c.fold_map(30.0, 90.0).is_err());
+        assert!(c.fold_map(f32::NAN, 30.0).is_err());
+        assert_eq!(c, Calibration::default());
+        assert!(c.fold_power(5.0).is_err());
+        assert!(c.fold_power(f32::NAN).is_err());
+        assert_eq!(c, Calibration::default());
+    }
+
+    #[test]
+    fn old_reports_fade_past_the_memory() {
+        let mut c = Calibration::default();
+        for _ in 0..40 {
+            c.fold_power(1.2).unwrap();
+        }
+        assert!(c.power_count <= MEASURED_MEMORY);
+        assert!((c.power_scale() - 1.2).abs() < 0.02);
+        assert!(c.valid());
+    }
+}

@@ -1,0 +1,242 @@
+//! The wire text of `TUNE` and `MEASURED`: their replies, refusals and `event: tune ...` lines
+//! (kept beside [`super::reply`], the rest of the protocol's text).
+
+use super::reply::error;
+use super::{ErrorCode, OutLine, EVENT_TAG, OK};
+use crate::calibration::{Calibration, CalibrationError};
+use crate::fixed::Fixed;
+use crate::tune::{Rejection, TuneEvent, TuneFailure, TUNE_START_MAX_RISE_K};
+use crate::vocab::Heater;
+use core::fmt::Write;
+
+/// The README section that explains TUNE, MEASURED and their settings.
+pub const CALIBRATION_README_SECTION: &str = "Tune and calibrate";
+
+/// HELP lines of the two commands (appended to [`super::reply::HELP`]).
+pub const HELP: [&str; 2] = [
+    "TUNE                            fit the thermal model to this link (heats, <3 min)",
+    "MEASURED <radius_mm>            the radius measured after the last morph (calibrates)",
+];
+
+/// TUNE accepted: `ok total_s=<s>`.
+pub fn tune_started(l: &mut OutLine, total_s: f32) {
+    let _ = write!(l, "{OK} total_s={}", Fixed(total_s, 0));
+}
+
+/// TUNE or MORPH or MEASURED refused while a tune runs: `error: busy a tune is running; ...`.
+pub fn busy_tuning(l: &mut OutLine) {
+    error(
+        l,
+        ErrorCode::Busy,
+        format_args!("a tune is running; wait for event: tune done or send ABORT"),
+    );
+}
+
+/// TUNE refused on a warm link: `error: busy the <heater> thermistor reads <k> K above
+/// ambient; ...`.
+pub fn tune_link_warm(l: &mut OutLine, heater: Heater, rise_k: f32) {
+    error(
+        l,
+        ErrorCode::Busy,
+        format_args!(
+            "the {} thermistor reads {} K above ambient; TUNE starts from a link at rest \
+             (within {} K), try again when it has cooled",
+            heater.as_str(),
+            Fixed(rise_k, 1),
+            Fixed(TUNE_START_MAX_RISE_K, 1)
+        ),
+    );
+}
+
+/// MEASURED accepted after a model-strategy morph: `ok map_offset_k=<a> map_slope=<b>
+/// reports=<n>`.
+pub fn measured_map(l: &mut OutLine, a_k: f32, b: f32, reports: f32) {
+    let _ = write!(
+        l,
+        "{OK} map_offset_k={} map_slope={} reports={}",
+        Fixed(a_k, 2),
+        Fixed(b, 3),
+        Fixed(reports, 1)
+    );
+}
+
+/// MEASURED accepted after a power-strategy morph: `ok power_scale=<s> reports=<n>`.
+pub fn measured_power(l: &mut OutLine, scale: f32, reports: f32) {
+    let _ = write!(
+        l,
+        "{OK} power_scale={} reports={}",
+        Fixed(scale, 3),
+        Fixed(reports, 1)
+    );
+}
+
+/// MEASURED with nothing to attach it to.
+pub fn measured_no_morph(l: &mut OutLine) {
+    error(
+        l,
+        ErrorCode::NoFinishedMorph,
+        format_args!(
+            "no finished morph to attach the radius to; MORPH, wait for event: done, then \
+             measure (see README \"{CALIBRATION_README_SECTION}\")"
+        ),
+    );
+}
+
+/// A second MEASURED for the same morph.
+pub fn measured_twice(l: &mut OutLine) {
+    error(
+        l,
+        ErrorCode::AlreadyMeasured,
+        format_args!(
+            "this morph's radius is already counted (each morph counts once); MORPH again"
+        ),
+    );
+}
+
+/// MEASURED outside what the link can reach: `error: out-of-range measured radius must be
+/// <min>..<max> mm`.
+pub fn measured_out_of_range(l: &mut OutLine, min_mm: f32, max_mm: f32) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!(
+            "measured radius must be {}..{} mm (what this link can reach)",
+            Fixed(min_mm, 2),
+            Fixed(max_mm, 2)
+        ),
+    );
+}
+
+/// MEASURED whose correction would leave the calibration's bounds: nothing changed.
+pub fn measured_implausible(l: &mut OutLine) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!(
+            "that radius would move the calibration outside its bounds; unchanged, check the \
+             measurement (see README \"{CALIBRATION_README_SECTION}\")"
+        ),
+    );
+}
+
+/// A calibration value refused (by index, for a settings shell).
+pub fn calibration_refused(l: &mut OutLine, e: CalibrationError) {
+    match e {
+        CalibrationError::NoSuchField => error(
+            l,
+            ErrorCode::BadArgument,
+            format_args!("no such calibration field"),
+        ),
+        CalibrationError::OutOfRange(f) => error(
+            l,
+            ErrorCode::OutOfRange,
+            format_args!(
+                "{} must be {}..{} {}",
+                f.name,
+                Fixed(f.min, 3),
+                Fixed(f.max, 3),
+                f.unit
+            ),
+        ),
+    }
+}
+
+fn rejection(l: &mut OutLine, why: &Rejection) {
+    match why {
+        Rejection::NoFit => {
+            let _ = l.push_str("no rising, settling record (both methods failed)");
+        }
+        Rejection::OutOfBounds(f, v) => {
+            let _ = write!(
+                l,
+                "{}={} outside {}..{} {}",
+                f.name,
+                Fixed(*v, 2),
+                Fixed(f.min, 2),
+                Fixed(f.max, 2),
+                f.unit
+            );
+        }
+    }
+}
+
+/// The fitted values of a finished tune, `name=value` each.
+fn fitted_values(l: &mut OutLine, c: &Calibration) {
+    let _ = write!(
+        l,
+        "pla_rise_k_per_w={} tca_rise_k_per_w={} pla_to_tca_k_per_w={} tca_to_pla_k_per_w={} \
+         pla_tau_s={} tca_tau_s={}",
+        Fixed(c.pla_rise_k_per_w, 2),
+        Fixed(c.tca_rise_k_per_w, 2),
+        Fixed(c.pla_to_tca_k_per_w, 2),
+        Fixed(c.tca_to_pla_k_per_w, 2),
+        Fixed(c.pla_tau_s, 1),
+        Fixed(c.tca_tau_s, 1)
+    );
+}
+
+/// One `event: tune ...` line.
+pub fn tune_event(l: &mut OutLine, e: &TuneEvent) {
+    let _ = write!(l, "{EVENT_TAG} tune ");
+    match e {
+        TuneEvent::Step { step, t_s, power_w } => {
+            let _ = write!(
+                l,
+                "step {} t={} power_w={}",
+                step.as_str(),
+                Fixed(*t_s, 1),
+                Fixed(*power_w, 2)
+            );
+        }
+        TuneEvent::Fit {
+            what,
+            rise_k_per_w,
+            tau_s,
+            method,
+        } => {
+            let _ = write!(
+                l,
+                "fit {} rise_k_per_w={} tau_s={} method={}",
+                what.as_str(),
+                Fixed(*rise_k_per_w, 2),
+                Fixed(*tau_s, 1),
+                method.as_str()
+            );
+        }
+        TuneEvent::Kept { what, why } => {
+            let _ = write!(l, "kept {} old value: ", what.as_str());
+            rejection(l, why);
+        }
+        TuneEvent::Done(c) => {
+            let _ = l.push_str("done ");
+            fitted_values(l, c);
+        }
+        TuneEvent::Failed(f) => {
+            let _ = l.push_str("failed ");
+            match f {
+                TuneFailure::Aborted => {
+                    let _ = l.push_str("aborted");
+                }
+                TuneFailure::Tripped => {
+                    let _ = l.push_str("safety trip (see the alarm)");
+                }
+                TuneFailure::Fit(what, why) => {
+                    let _ = write!(l, "{} fit: ", what.as_str());
+                    rejection(l, why);
+                }
+                TuneFailure::TooFast(h, rise_k) => {
+                    let _ = write!(
+                        l,
+                        "{} rose {} K, far faster than in water (still air?)",
+                        h.as_str(),
+                        Fixed(*rise_k, 1)
+                    );
+                }
+            }
+            let _ = write!(
+                l,
+                "; heaters off, calibration kept (see README \"{CALIBRATION_README_SECTION}\")"
+            );
+        }
+    }
+}

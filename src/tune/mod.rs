@@ -1,0 +1,493 @@
+//! `TUNE`: the thermal autotune. A bounded test heats each heater in turn and fits, from this
+//! link's own thermistors, the steady rise per watt each one shows of its heater, their time
+//! constants and the PLA-to-TCA coupling ([`crate::calibration::Calibration`]'s thermal fields).
+//!
+//! Steps (each a [`TuneStep`]): `settle` (heaters off, the baseline), `tca` ([`TUNE_TCA_W`] for
+//! [`TUNE_TCA_S`]), `cool` (heaters off, [`TUNE_COOL_S`]), `pla` ([`TUNE_PLA_W`] for
+//! [`TUNE_PLA_S`]). Bounded in power (both well under the heater caps), temperature (a step ends
+//! early once its thermistor has risen [`TUNE_MAX_RISE_K`]) and time ([`TUNE_TOTAL_S`], under 3
+//! minutes). It runs through `Controller::step` under the supervisor, every check active: the
+//! powers are at least the share of the caps the heater-not-heating check judges, so a dead
+//! heater trips it as in a morph, and ABORT or any trip ends the tune with both heaters off and
+//! the calibration as it was.
+//!
+//! Every fitted value is checked for sign and bounds before use (Marlin #27181: a negative
+//! constant ran a heater away): the ranges of [`crate::calibration::FIELDS`]. The asymptotic
+//! fit comes first; where it fails or is out of bounds the least-squares fit is tried
+//! ([`fit`]); where both fail the tune fails, says why and keeps the old values. Only the
+//! coupling may fail alone: it is then kept and the tune still ends `done`.
+
+pub mod fit;
+
+use crate::calibration::{Calibration, FieldInfo, FIELDS, TAU_RANGE_S};
+use crate::heater::HeaterConfig;
+use crate::supervisor::HEATING_MIN_POWER_FRACTION;
+use crate::vocab::{Heater, Measurements, Powers};
+use fit::{Method, StepFit};
+
+/// Heaters off before the first step, s: the baseline is the mean over it.
+pub const TUNE_SETTLE_S: f32 = 5.0;
+/// TCA power of its step, W: 0.6 W rises the TCA about 20 K in water (the table's middle),
+/// and is 1.5 times the share of the cap the heater-not-heating check judges, so the check
+/// runs.
+pub const TUNE_TCA_W: f32 = 0.6;
+/// Length of the TCA step, s: about four of its thermistor's time constants.
+pub const TUNE_TCA_S: f32 = 45.0;
+/// Heaters off between the steps, s: the TCA falls back within a few kelvin.
+pub const TUNE_COOL_S: f32 = 30.0;
+/// PLA power of its step, W: the least the heater-not-heating check judges (20 % of the 5 W
+/// cap), about 30 K of rise in water: under the glass transition in all but the warmest
+/// water.
+pub const TUNE_PLA_W: f32 = 1.0;
+/// Length of the PLA step, s: about three of its thermistor's time constants.
+pub const TUNE_PLA_S: f32 = 90.0;
+/// A heated step ends early once its thermistor has risen this far above the baseline, K
+/// (PLA, TCA): in still air the same powers rise five times as much; the tune then stays
+/// 60 K under the supervisor's limits and its fit fails on the bounds, as it should.
+pub const TUNE_MAX_RISE_K: [f32; 2] = [32.0, 40.0];
+/// A step capped by [`TUNE_MAX_RISE_K`] before this share of its length fails the tune: in
+/// water the thermistors rise about a third of the cap per time constant, so reaching it this
+/// early is still air (five times the rise), where the model strategies' thermal model does not
+/// hold and a fit of the short record would still pass the bounds.
+pub const TUNE_EARLY_CAP_SHARE: f32 = 0.6;
+/// `TUNE` starts only from a link at rest: PLA and TCA within this of the ambient, K (a warm
+/// link cooling during the test would read as a weaker heater).
+pub const TUNE_START_MAX_RISE_K: f32 = 3.0;
+/// Sample period of the fit's record, s (each sample the mean of this second's ticks).
+pub const TUNE_SAMPLE_S: f32 = 1.0;
+/// Samples a step can hold (the longer step).
+pub const TUNE_MAX_SAMPLES: usize = 90;
+/// Whole test, s.
+pub const TUNE_TOTAL_S: f32 = TUNE_SETTLE_S + TUNE_TCA_S + TUNE_COOL_S + TUNE_PLA_S;
+// At most 3 minutes under water, and each step's record fits.
+const _: () = assert!(TUNE_TOTAL_S <= 180.0);
+const _: () = assert!(TUNE_PLA_S / TUNE_SAMPLE_S <= TUNE_MAX_SAMPLES as f32);
+const _: () = assert!(TUNE_TCA_S / TUNE_SAMPLE_S <= TUNE_MAX_SAMPLES as f32);
+// Both steps are judged by the heater-not-heating check, and well under the caps.
+const _: () = assert!(TUNE_PLA_W >= HEATING_MIN_POWER_FRACTION * HeaterConfig::PLA.max_power_w);
+const _: () = assert!(TUNE_TCA_W >= HEATING_MIN_POWER_FRACTION * HeaterConfig::TCA.max_power_w);
+const _: () = assert!(TUNE_PLA_W <= 0.5 * HeaterConfig::PLA.max_power_w);
+const _: () = assert!(TUNE_TCA_W <= 0.5 * HeaterConfig::TCA.max_power_w);
+
+/// The test's steps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TuneStep {
+    /// Heaters off; the baseline.
+    Settle,
+    /// TCA heated.
+    Tca,
+    /// Heaters off.
+    Cool,
+    /// PLA heated.
+    Pla,
+}
+
+impl TuneStep {
+    /// Wire name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            TuneStep::Settle => "settle",
+            TuneStep::Tca => "tca",
+            TuneStep::Cool => "cool",
+            TuneStep::Pla => "pla",
+        }
+    }
+
+    fn length_s(self) -> f32 {
+        match self {
+            TuneStep::Settle => TUNE_SETTLE_S,
+            TuneStep::Tca => TUNE_TCA_S,
+            TuneStep::Cool => TUNE_COOL_S,
+            TuneStep::Pla => TUNE_PLA_S,
+        }
+    }
+
+    fn powers(self) -> Powers {
+        match self {
+            TuneStep::Tca => Powers {
+                pla_w: 0.0,
+                tca_w: TUNE_TCA_W,
+            },
+            TuneStep::Pla => Powers {
+                pla_w: TUNE_PLA_W,
+                tca_w: 0.0,
+            },
+            _ => Powers::default(),
+        }
+    }
+}
+
+/// What was fitted, per quantity.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fitted {
+    /// A heater's own thermistor: rise per watt and time constant.
+    Own(Heater),
+    /// The TCA thermistor's rise per PLA watt.
+    PlaToTca,
+    /// The PLA thermistor's rise per TCA watt.
+    TcaToPla,
+}
+
+impl Fitted {
+    /// Wire name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Fitted::Own(h) => h.as_str(),
+            Fitted::PlaToTca => "pla_to_tca",
+            Fitted::TcaToPla => "tca_to_pla",
+        }
+    }
+}
+
+/// Why a fit was not used.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Rejection {
+    /// Neither method found a rising, slowing record.
+    NoFit,
+    /// The fit's value is outside its field's range (the field and the value).
+    OutOfBounds(FieldInfo, f32),
+}
+
+/// Why a tune ended without `done`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TuneFailure {
+    /// ABORT.
+    Aborted,
+    /// A safety trip (its alarm says which).
+    Tripped,
+    /// A fit failed on both methods.
+    Fit(Fitted, Rejection),
+    /// A heated step reached [`TUNE_MAX_RISE_K`] before [`TUNE_EARLY_CAP_SHARE`] of its
+    /// length: far faster than in water (still air?); the heater and its rise in kelvin.
+    TooFast(Heater, f32),
+}
+
+/// Progress of a tune, for `event: tune ...` lines.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TuneEvent {
+    /// A step began, `t_s` after TUNE.
+    Step {
+        /// The step.
+        step: TuneStep,
+        /// Since TUNE, s.
+        t_s: f32,
+        /// The heated heater's power, W (0 for settle and cool).
+        power_w: f32,
+    },
+    /// A value was fitted and passed its checks.
+    Fit {
+        /// What.
+        what: Fitted,
+        /// Steady rise per watt, K/W.
+        rise_k_per_w: f32,
+        /// Time constant, s.
+        tau_s: f32,
+        /// Method that gave it.
+        method: Method,
+    },
+    /// A fit was rejected and its old value kept (the coupling only; the others fail).
+    Kept {
+        /// What.
+        what: Fitted,
+        /// Why.
+        why: Rejection,
+    },
+    /// The tune finished; the fitted values are in use.
+    Done(Calibration),
+    /// The tune ended without a result; the calibration is as it was.
+    Failed(TuneFailure),
+}
+
+/// What a tune tick asks of the controller.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TuneTick {
+    /// Heat with these powers.
+    Run(Powers),
+    /// Finished: use this calibration.
+    Done(Calibration),
+    /// Failed: keep the old calibration.
+    Failed(TuneFailure),
+}
+
+/// A running tune.
+#[derive(Clone, Copy, Debug)]
+pub struct Tune {
+    start_ms: u64,
+    step: TuneStep,
+    step_ms: u64,
+    /// Baseline (PLA, TCA) and its sample count (the settle step's mean).
+    base_c: [f32; 2],
+    base_n: u32,
+    /// This second's sum (own, other sensor) and count.
+    acc: [f32; 2],
+    acc_n: u32,
+    acc_ms: u64,
+    /// The heated step's record: own sensor's rise, other sensor's rise.
+    rec: [[f32; TUNE_MAX_SAMPLES]; 2],
+    n: usize,
+    /// The TCA's fit and its rise as its step ended (for the tail subtracted from the
+    /// coupling record).
+    tca_fit: Option<StepFit>,
+    tca_end_rise_k: f32,
+    tca_off_ms: u64,
+    /// The calibration being built (the old one until each value passes).
+    cal: Calibration,
+}
+
+fn field(name: &str) -> FieldInfo {
+    let mut i = 0;
+    while i < FIELDS.len() {
+        if FIELDS[i].name.as_bytes() == name.as_bytes() {
+            return FIELDS[i];
+        }
+        i += 1;
+    }
+    FIELDS[0]
+}
+
+/// Checks a value against its field's range (sign included: every range is positive).
+fn bounded(info: FieldInfo, v: f32) -> Result<f32, Rejection> {
+    if v >= info.min && v <= info.max {
+        Ok(v)
+    } else {
+        Err(Rejection::OutOfBounds(info, v))
+    }
+}
+
+/// Fits a record of `power_w` into (rise per watt, tau) within the named fields' ranges: the
+/// asymptotic method first, least squares where it fails or is out of bounds.
+fn fit_checked(
+    y: &[f32],
+    power_w: f32,
+    rise_field: &str,
+    tau_field: Option<&str>,
+) -> Result<(f32, f32, Method), Rejection> {
+    let check = |f: StepFit| -> Result<(f32, f32, Method), Rejection> {
+        let r = bounded(field(rise_field), f.rise_k / power_w)?;
+        let t = match tau_field {
+            Some(name) => bounded(field(name), f.tau_s)?,
+            None => f.tau_s,
+        };
+        Ok((r, t, f.method))
+    };
+    let first = fit::asymptotic(y, TUNE_SAMPLE_S)
+        .ok_or(Rejection::NoFit)
+        .and_then(check);
+    match first {
+        Ok(v) => Ok(v),
+        Err(why) => match fit::least_squares(y, TUNE_SAMPLE_S, TAU_RANGE_S) {
+            Some(f) => check(f),
+            None => Err(why),
+        },
+    }
+}
+
+fn since_s(now_ms: u64, then_ms: u64) -> f32 {
+    now_ms.saturating_sub(then_ms) as f32 / 1000.0
+}
+
+impl Tune {
+    /// A tune starting at `now_ms` from the calibration `cal` (kept where a fit fails).
+    pub fn new(now_ms: u64, cal: Calibration, emit: &mut impl FnMut(TuneEvent)) -> Self {
+        let t = Tune {
+            start_ms: now_ms,
+            step: TuneStep::Settle,
+            step_ms: now_ms,
+            base_c: [0.0; 2],
+            base_n: 0,
+            acc: [0.0; 2],
+            acc_n: 0,
+            acc_ms: now_ms,
+            rec: [[0.0; TUNE_MAX_SAMPLES]; 2],
+            n: 0,
+            tca_fit: None,
+            tca_end_rise_k: 0.0,
+            tca_off_ms: now_ms,
+            cal,
+        };
+        emit(TuneEvent::Step {
+            step: TuneStep::Settle,
+            t_s: 0.0,
+            power_w: 0.0,
+        });
+        t
+    }
+
+    /// The step under way.
+    pub fn step_now(&self) -> TuneStep {
+        self.step
+    }
+
+    fn enter(&mut self, step: TuneStep, now_ms: u64, emit: &mut impl FnMut(TuneEvent)) {
+        self.step = step;
+        self.step_ms = now_ms;
+        self.n = 0;
+        self.acc = [0.0; 2];
+        self.acc_n = 0;
+        self.acc_ms = now_ms;
+        let p = step.powers();
+        emit(TuneEvent::Step {
+            step,
+            t_s: since_s(now_ms, self.start_ms),
+            power_w: p.pla_w + p.tca_w,
+        });
+    }
+
+    /// The TCA's own tail after its step, K above its baseline, `now_ms`.
+    fn tca_tail_k(&self, now_ms: u64) -> f32 {
+        match self.tca_fit {
+            Some(f) if f.tau_s > 0.0 => {
+                self.tca_end_rise_k * crate::mathf::exp(-since_s(now_ms, self.tca_off_ms) / f.tau_s)
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// One control tick with the supervisor's measurements `m`.
+    pub fn tick(
+        &mut self,
+        now_ms: u64,
+        m: &Measurements,
+        emit: &mut impl FnMut(TuneEvent),
+    ) -> TuneTick {
+        let (pla, tca) = (m.t_pla_c, m.t_tca_c);
+        match self.step {
+            TuneStep::Settle => {
+                self.base_c[0] += pla;
+                self.base_c[1] += tca;
+                self.base_n += 1;
+            }
+            TuneStep::Tca | TuneStep::Pla => {
+                let (own, other) = if self.step == TuneStep::Tca {
+                    (tca - self.base_c[1], pla - self.base_c[0])
+                } else {
+                    (
+                        pla - self.base_c[0],
+                        tca - self.base_c[1] - self.tca_tail_k(now_ms),
+                    )
+                };
+                self.acc[0] += own;
+                self.acc[1] += other;
+                self.acc_n += 1;
+                if since_s(now_ms, self.acc_ms) >= TUNE_SAMPLE_S && self.n < TUNE_MAX_SAMPLES {
+                    let k = self.acc_n.max(1) as f32;
+                    self.rec[0][self.n] = self.acc[0] / k;
+                    self.rec[1][self.n] = self.acc[1] / k;
+                    self.n += 1;
+                    self.acc = [0.0; 2];
+                    self.acc_n = 0;
+                    self.acc_ms = now_ms;
+                }
+            }
+            TuneStep::Cool => {}
+        }
+        let in_step_s = since_s(now_ms, self.step_ms);
+        let capped = match self.step {
+            TuneStep::Tca => tca - self.base_c[1] >= TUNE_MAX_RISE_K[1],
+            TuneStep::Pla => pla - self.base_c[0] >= TUNE_MAX_RISE_K[0],
+            _ => false,
+        };
+        if capped && in_step_s < TUNE_EARLY_CAP_SHARE * self.step.length_s() {
+            let (h, rise) = if self.step == TuneStep::Tca {
+                (Heater::Tca, tca - self.base_c[1])
+            } else {
+                (Heater::Pla, pla - self.base_c[0])
+            };
+            return self.fail(TuneFailure::TooFast(h, rise), emit);
+        }
+        if in_step_s + 1e-3 >= self.step.length_s() || capped || self.n >= TUNE_MAX_SAMPLES {
+            match self.step {
+                TuneStep::Settle => {
+                    let k = self.base_n.max(1) as f32;
+                    self.base_c = [self.base_c[0] / k, self.base_c[1] / k];
+                    self.enter(TuneStep::Tca, now_ms, emit);
+                }
+                TuneStep::Tca => {
+                    let y = &self.rec[0][..self.n];
+                    match fit_checked(y, TUNE_TCA_W, "tca_rise_k_per_w", Some("tca_tau_s")) {
+                        Ok((r, tau, method)) => {
+                            self.cal.tca_rise_k_per_w = r;
+                            self.cal.tca_tau_s = tau;
+                            self.tca_fit = Some(StepFit {
+                                rise_k: r * TUNE_TCA_W,
+                                tau_s: tau,
+                                method,
+                            });
+                            self.tca_end_rise_k = tca - self.base_c[1];
+                            self.tca_off_ms = now_ms;
+                            emit(TuneEvent::Fit {
+                                what: Fitted::Own(Heater::Tca),
+                                rise_k_per_w: r,
+                                tau_s: tau,
+                                method,
+                            });
+                        }
+                        Err(why) => {
+                            return self.fail(TuneFailure::Fit(Fitted::Own(Heater::Tca), why), emit)
+                        }
+                    }
+                    let c = &self.rec[1][..self.n];
+                    match fit_checked(c, TUNE_TCA_W, "tca_to_pla_k_per_w", None) {
+                        Ok((r, tau, method)) => {
+                            self.cal.tca_to_pla_k_per_w = r;
+                            emit(TuneEvent::Fit {
+                                what: Fitted::TcaToPla,
+                                rise_k_per_w: r,
+                                tau_s: tau,
+                                method,
+                            });
+                        }
+                        Err(why) => emit(TuneEvent::Kept {
+                            what: Fitted::TcaToPla,
+                            why,
+                        }),
+                    }
+                    self.enter(TuneStep::Cool, now_ms, emit);
+                }
+                TuneStep::Cool => self.enter(TuneStep::Pla, now_ms, emit),
+                TuneStep::Pla => return self.finish(emit),
+            }
+        }
+        TuneTick::Run(self.step.powers())
+    }
+
+    fn fail(&self, why: TuneFailure, emit: &mut impl FnMut(TuneEvent)) -> TuneTick {
+        emit(TuneEvent::Failed(why));
+        TuneTick::Failed(why)
+    }
+
+    fn finish(&mut self, emit: &mut impl FnMut(TuneEvent)) -> TuneTick {
+        let y = &self.rec[0][..self.n];
+        match fit_checked(y, TUNE_PLA_W, "pla_rise_k_per_w", Some("pla_tau_s")) {
+            Ok((r, tau, method)) => {
+                self.cal.pla_rise_k_per_w = r;
+                self.cal.pla_tau_s = tau;
+                emit(TuneEvent::Fit {
+                    what: Fitted::Own(Heater::Pla),
+                    rise_k_per_w: r,
+                    tau_s: tau,
+                    method,
+                });
+            }
+            Err(why) => return self.fail(TuneFailure::Fit(Fitted::Own(Heater::Pla), why), emit),
+        }
+        let c = &self.rec[1][..self.n];
+        match fit_checked(c, TUNE_PLA_W, "pla_to_tca_k_per_w", None) {
+            Ok((r, tau, method)) => {
+                self.cal.pla_to_tca_k_per_w = r;
+                emit(TuneEvent::Fit {
+                    what: Fitted::PlaToTca,
+                    rise_k_per_w: r,
+                    tau_s: tau,
+                    method,
+                });
+            }
+            Err(why) => emit(TuneEvent::Kept {
+                what: Fitted::PlaToTca,
+                why,
+            }),
+        }
+        emit(TuneEvent::Done(self.cal));
+        TuneTick::Done(self.cal)
+    }
+}

@@ -1,0 +1,300 @@
+//! TUNE and MEASURED on both plants, on the rig `tests/safety.rs` uses: a healthy link tunes
+//! within bounds with no alarm; each fault during TUNE (a heater that does not heat, a
+//! thermistor that opens, ABORT in every step) ends with both heaters off, a clear alarm or
+//! event and the old calibration kept; MEASURED refuses bad input; a few measured morphs bring
+//! a mismatched link's error down.
+mod common;
+use common::{Bench, Link};
+use morphlink::calibration::{Calibration, FIELDS};
+use morphlink::controller::Outputs;
+use morphlink::protocol::{classify, LineKind};
+use morphlink::tune::{TuneStep, TUNE_TOTAL_S};
+
+const ZERO: Outputs = Outputs {
+    pla_duty: 0.0,
+    tca_duty: 0.0,
+};
+
+macro_rules! on_both_links {
+    ($($name:ident),* $(,)?) => {$(
+        mod $name {
+            use super::Link;
+            #[test]
+            fn lumped() {
+                super::$name(Link::Lumped)
+            }
+            #[test]
+            fn hifi() {
+                super::$name(Link::Hifi)
+            }
+        }
+    )*};
+}
+
+on_both_links!(
+    a_healthy_link_tunes_within_bounds_and_raises_no_alarm,
+    abort_in_every_step_ends_the_tune_with_heaters_off,
+    a_heater_that_does_not_heat_trips_and_keeps_the_calibration,
+    a_thermistor_that_opens_trips_and_keeps_the_calibration,
+    tune_is_refused_while_busy_faulted_or_warm,
+    measured_refuses_bad_input_and_changes_nothing,
+);
+
+/// Runs TUNE to its end; returns the line that ended it.
+fn tune(b: &mut Bench) -> String {
+    assert_eq!(b.send("TUNE"), [format!("ok total_s={TUNE_TOTAL_S:.0}")]);
+    let from = b.lines.len();
+    assert!(
+        b.run_until(TUNE_TOTAL_S as f64 + 5.0, |b| !b.rig.ctrl.tuning()),
+        "tune did not end: {:?}",
+        &b.lines[from..]
+    );
+    b.lines[from..]
+        .iter()
+        .rev()
+        .find(|l| l.starts_with("event: tune done") || l.starts_with("event: tune failed"))
+        .cloned()
+        .unwrap_or_else(|| panic!("no end line: {:?}", &b.lines[from..]))
+}
+
+fn a_healthy_link_tunes_within_bounds_and_raises_no_alarm(link: Link) {
+    let mut b = Bench::on(link);
+    b.run_for(2.0);
+    let t0 = b.rig.now_ms();
+    let end = tune(&mut b);
+    let took_s = (b.rig.now_ms() - t0) as f64 / 1000.0;
+    println!("{link:?}: {end} ({took_s} s)");
+    for l in &b.lines {
+        if l.starts_with("event: tune") {
+            println!("  {l}");
+        }
+    }
+    assert!(end.starts_with("event: tune done"), "{end}");
+    assert!(took_s <= 180.0, "{took_s} s");
+    assert_eq!(b.alarms(), Vec::<String>::new());
+    let cal = b.rig.ctrl.calibration();
+    assert!(cal.valid(), "{cal:?}");
+    assert_ne!(cal, Calibration::DEFAULT);
+    for (i, f) in FIELDS.iter().enumerate() {
+        let v = cal.get(i).unwrap();
+        assert!(v >= f.min && v <= f.max, "{}={v}", f.name);
+    }
+    assert_eq!(b.rig.ctrl.outputs(), ZERO);
+    // A morph after the tune runs with the fitted values and finishes.
+    b.run_for(60.0);
+    b.morph(38.0, "auto");
+    assert_eq!(b.alarms(), Vec::<String>::new());
+}
+
+fn abort_in_every_step_ends_the_tune_with_heaters_off(link: Link) {
+    for step in [
+        TuneStep::Settle,
+        TuneStep::Tca,
+        TuneStep::Cool,
+        TuneStep::Pla,
+    ] {
+        let mut b = Bench::on(link);
+        b.run_for(2.0);
+        assert_eq!(b.send("TUNE"), [format!("ok total_s={TUNE_TOTAL_S:.0}")]);
+        assert!(b.run_until(180.0, |b| b.rig.ctrl.tune_step() == Some(step)));
+        // Into the step, so a heated one is heating.
+        b.run_for(3.0);
+        assert_eq!(b.rig.ctrl.tune_step(), Some(step));
+        assert_eq!(b.send("ABORT"), ["ok"]);
+        assert_eq!(b.rig.ctrl.outputs(), ZERO, "{step:?}");
+        assert_eq!(b.rig.applied(), ZERO, "{step:?}");
+        assert!(!b.rig.ctrl.tuning());
+        let (_, ev) = b.tick();
+        assert!(
+            b.lines
+                .iter()
+                .any(|l| l.starts_with("event: tune failed aborted")),
+            "{step:?}: {:?} {ev:?}",
+            b.lines
+        );
+        for _ in 0..50 {
+            assert_eq!(b.tick().0, ZERO, "{step:?}");
+        }
+        assert_eq!(b.rig.ctrl.calibration(), Calibration::DEFAULT);
+    }
+}
+
+fn fault_during_tune(link: Link, fault: &str, step: TuneStep, alarm: &str) {
+    let mut b = Bench::on(link);
+    b.run_for(2.0);
+    assert_eq!(b.send("TUNE"), [format!("ok total_s={TUNE_TOTAL_S:.0}")]);
+    assert!(b.run_until(180.0, |b| b.rig.ctrl.tune_step() == Some(step)));
+    let r = b.send(fault);
+    assert!(r[0].starts_with("ok"), "{r:?}");
+    let from = b.lines.len();
+    assert!(
+        b.run_until(60.0, |b| b.rig.ctrl.fault().is_some()),
+        "{fault} in {step:?} did not trip: {:?}",
+        &b.lines[from..]
+    );
+    assert_eq!(b.rig.ctrl.outputs(), ZERO);
+    assert!(!b.rig.ctrl.tuning());
+    let alarms = b.alarms();
+    assert!(alarms.iter().any(|a| a.starts_with(alarm)), "{alarms:?}");
+    assert!(
+        b.lines
+            .iter()
+            .any(|l| l.starts_with("event: tune failed safety trip")),
+        "{:?}",
+        b.lines
+    );
+    for _ in 0..20 {
+        assert_eq!(b.tick().0, ZERO);
+    }
+    assert_eq!(b.rig.ctrl.calibration(), Calibration::DEFAULT);
+}
+
+fn a_heater_that_does_not_heat_trips_and_keeps_the_calibration(link: Link) {
+    fault_during_tune(
+        link,
+        "SIM FAULT heater-open tca",
+        TuneStep::Tca,
+        "alarm: heater-not-heating",
+    );
+    fault_during_tune(
+        link,
+        "SIM FAULT heater-open pla",
+        TuneStep::Pla,
+        "alarm: heater-not-heating",
+    );
+}
+
+fn a_thermistor_that_opens_trips_and_keeps_the_calibration(link: Link) {
+    for step in [TuneStep::Tca, TuneStep::Pla] {
+        fault_during_tune(
+            link,
+            "SIM FAULT thermistor-open tca",
+            step,
+            "alarm: thermistor-open",
+        );
+    }
+}
+
+fn tune_is_refused_while_busy_faulted_or_warm(link: Link) {
+    let mut b = Bench::on(link);
+    b.run_for(2.0);
+    assert_eq!(b.send("MORPH 38"), ["ok"]);
+    b.run_for(1.0);
+    let r = b.send("TUNE");
+    assert!(r[0].starts_with("error: busy a morph is in phase"), "{r:?}");
+    assert!(b.run_until(300.0, |b| !b.rig.ctrl.busy()));
+    // Just after a morph the link is warm.
+    let r = b.send("TUNE");
+    assert!(r[0].starts_with("error: busy the "), "{r:?}");
+    assert!(!b.rig.ctrl.tuning());
+    // While tuning, MORPH, MEASURED and a second TUNE are refused.
+    let mut b = Bench::on(link);
+    b.run_for(2.0);
+    assert!(b.send("TUNE")[0].starts_with("ok"));
+    for cmd in ["TUNE", "MORPH 38", "MEASURED 38"] {
+        let r = b.send(cmd);
+        assert!(
+            r[0].starts_with("error: busy a tune is running"),
+            "{cmd}: {r:?}"
+        );
+    }
+    assert_eq!(b.send("ABORT"), ["ok"]);
+    // With a fault latched.
+    let mut b = Bench::on(link);
+    b.send("SIM FAULT thermistor-open pla");
+    b.run_for(2.0);
+    assert!(b.rig.ctrl.fault().is_some());
+    let r = b.send("TUNE");
+    assert!(r[0].starts_with("error: fault-latched"), "{r:?}");
+    assert!(!b.rig.ctrl.tuning());
+}
+
+fn measured_refuses_bad_input_and_changes_nothing(link: Link) {
+    let mut b = Bench::on(link);
+    b.run_for(2.0);
+    let r = b.send("MEASURED 38");
+    assert!(r[0].starts_with("error: no-finished-morph"), "{r:?}");
+    for bad in ["MEASURED", "MEASURED x", "MEASURED -3", "MEASURED 38 39"] {
+        let r = b.send(bad);
+        assert!(r[0].starts_with("error: bad-argument"), "{bad}: {r:?}");
+    }
+    b.morph(38.0, "auto");
+    for bad in ["MEASURED 5", "MEASURED 90"] {
+        let r = b.send(bad);
+        assert!(
+            r[0].starts_with("error: out-of-range measured radius"),
+            "{bad}: {r:?}"
+        );
+    }
+    assert_eq!(b.rig.ctrl.calibration(), Calibration::DEFAULT);
+    let r = b.send("MEASURED 38.3");
+    assert!(r[0].starts_with("ok map_offset_k="), "{r:?}");
+    assert_ne!(b.rig.ctrl.calibration(), Calibration::DEFAULT);
+    let once = b.rig.ctrl.calibration();
+    let r = b.send("MEASURED 38.3");
+    assert!(r[0].starts_with("error: already-measured"), "{r:?}");
+    assert_eq!(b.rig.ctrl.calibration(), once);
+    // An aborted morph has no radius to attach.
+    assert_eq!(b.send("MORPH 40"), ["ok"]);
+    b.run_for(3.0);
+    assert_eq!(b.send("ABORT"), ["ok"]);
+    let r = b.send("MEASURED 40");
+    assert!(r[0].starts_with("error: no-finished-morph"), "{r:?}");
+    assert_eq!(b.rig.ctrl.calibration(), once);
+    // A power strategy's report scales the table's power.
+    b.run_for(120.0);
+    b.morph(38.0, "gated");
+    let r = b.send("MEASURED 37.5");
+    assert!(r[0].starts_with("ok power_scale="), "{r:?}");
+    assert!(classify(&r[0]) == LineKind::Ok);
+}
+
+/// Morphs to `r` in auto, lets the link settle 60 s and returns the true final radius, mm.
+fn settled_radius(b: &mut Bench, r: f32) -> f64 {
+    b.morph(r, "auto");
+    b.run_for(60.0);
+    b.rig.radius_mm()
+}
+
+/// A link the model does not describe: the nominal hifi link (beads beside the heaters) and a
+/// lumped link in weaker convection with a stiffer body.
+fn mismatched(link: Link) -> Bench {
+    match link {
+        Link::Hifi => Bench::hifi(),
+        Link::Lumped => {
+            let mut p = sim_setup();
+            p.params.surroundings.h_w_m2k *= 0.8;
+            p.params.mechanics.bending_stiffness_nm2 *= 1.05;
+            Bench::with_plant(p)
+        }
+    }
+}
+
+fn sim_setup() -> morphlink_sim::LinkSetup {
+    morphlink_sim::LinkSetup::NOMINAL
+}
+
+fn measured_morphs_reduce_the_error_on_a_mismatched_link(link: Link) {
+    let target = 38.0f32;
+    let mut b = mismatched(link);
+    b.run_for(2.0);
+    let before = (settled_radius(&mut b, target) - target as f64).abs();
+    b.run_for(240.0);
+    let end = tune(&mut b);
+    assert!(end.starts_with("event: tune done"), "{end}");
+    // Three measured morphs across the range, each measured 0.2 mm off (a ruler's error).
+    for (r, err) in [(35.0f32, 0.2f64), (39.6, -0.2), (44.0, 0.2)] {
+        b.run_for(240.0);
+        let got = settled_radius(&mut b, r);
+        let reply = b.send(&format!("MEASURED {:.2}", got + err));
+        assert!(reply[0].starts_with("ok map_offset_k="), "{reply:?}");
+    }
+    b.run_for(240.0);
+    let after = (settled_radius(&mut b, target) - target as f64).abs();
+    println!("{link:?}: |error| at {target} mm before {before:.2} mm, after {after:.2} mm");
+    assert!(after < before, "before {before:.2} mm, after {after:.2} mm");
+    assert!(after < 0.02 * target as f64, "after {after:.2} mm");
+    assert_eq!(b.alarms(), Vec::<String>::new());
+}
+
+on_both_links!(measured_morphs_reduce_the_error_on_a_mismatched_link);

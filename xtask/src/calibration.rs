@@ -1,0 +1,545 @@
+//! `cargo xtask calibration`: what TUNE and MEASURED buy on a mismatch ensemble of each plant.
+//!
+//! Per drawn link: `auto` morphs to the targets with the compiled-in calibration ("before");
+//! then TUNE from rest, and after it three measured morphs, each at one of
+//! [`CALIBRATION_FRACTIONS`] of the range, the "user" measuring the plant's true radius
+//! [`SETTLE_AFTER_DONE_S`] after `done` with a uniform error of ± [`MEASURE_ERROR_MM`] and
+//! sending `MEASURED`. After TUNE and after each measured morph the targets are morphed again
+//! (each on a fresh copy of the link at rest, with the calibration reached so far). Writes
+//! `docs/calibration.csv`, the chart of the error reached against the number of measured
+//! morphs (`docs/calibration.svg`, `.png`) and prints the tables of `docs/calibration.md`.
+
+use morphlink::bench::Noise;
+use morphlink::calibration::Calibration;
+use morphlink::controller::TICK_MS;
+use morphlink::protocol::{Command, Mode};
+use morphlink::table;
+use morphlink_host::plot::{self, prelude::*};
+use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
+use morphlink_plant::{Lumped, Plant};
+use morphlink_sim::ensemble::{Mismatch, MAX_MORPH_S, SETTLE_AFTER_DONE_S};
+use morphlink_sim::Rig;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+/// Lumped links drawn by default (each: TUNE, 3 measured morphs, 25 evaluated morphs).
+pub const DEFAULT_DRAWS: u64 = 100;
+/// High-fidelity links drawn by default (the headline; about 3 s of CPU each).
+pub const DEFAULT_HIFI_DRAWS: u64 = 40;
+/// Seed of the ensemble: the strategy chart's, so the links are the same ones.
+pub const DEFAULT_SEED: u64 = 20_261_122;
+/// Target radii evaluated per link, spread over the range 0.2 mm inside its ends (as the
+/// strategy chart's).
+pub const DEFAULT_TARGETS: usize = 5;
+/// Where in the reachable range the three measured morphs aim (fractions from the tightest):
+/// spread, so the map's slope is fitted, and inside the ends.
+pub const CALIBRATION_FRACTIONS: [f32; 3] = [0.15, 0.5, 0.85];
+/// The user's measuring error, mm (uniform ±): a ruler or calliper on a curved link.
+pub const MEASURE_ERROR_MM: f64 = 0.3;
+/// The aims of the issue: p95 |error| after calibration, %, and median time, s.
+pub const AIM_ERROR_PCT: f64 = 2.0;
+/// See [`AIM_ERROR_PCT`].
+pub const AIM_TIME_S: f64 = 25.0;
+
+/// Options of the task.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Lumped links to draw.
+    #[arg(long, default_value_t = DEFAULT_DRAWS)]
+    pub draws: u64,
+    /// High-fidelity links to draw.
+    #[arg(long, default_value_t = DEFAULT_HIFI_DRAWS)]
+    pub hifi_draws: u64,
+    /// Target radii evaluated per link.
+    #[arg(long, default_value_t = DEFAULT_TARGETS)]
+    pub targets: usize,
+    /// Seed of the mismatch draws and of the measuring error.
+    #[arg(long, default_value_t = DEFAULT_SEED)]
+    pub seed: u64,
+    /// Worker threads.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Output directory, relative to the workspace root.
+    #[arg(long, default_value = "docs")]
+    pub out: String,
+    /// Skip TUNE: the measured morphs start from the compiled-in calibration (what MEASURED
+    /// alone does).
+    #[arg(long)]
+    pub no_tune: bool,
+}
+
+/// A drawn link, cloned for every morph.
+#[derive(Clone)]
+enum Link {
+    Lumped(Lumped),
+    Hifi(Box<Hifi>),
+}
+
+impl Link {
+    fn rig(&self, noise: Noise, cal: &Calibration) -> Rig<Box<dyn Plant>> {
+        let plant: Box<dyn Plant> = match self {
+            Link::Lumped(p) => Box::new(p.clone()),
+            Link::Hifi(p) => Box::new((**p).clone()),
+        };
+        let mut rig = Rig::with_plant(plant, noise);
+        rig.ctrl
+            .set_calibration(*cal)
+            .expect("a calibration the controller made is within its bounds");
+        rig
+    }
+}
+
+/// One evaluated morph.
+#[derive(Clone, Copy, Debug)]
+struct Eval {
+    /// Measured morphs folded in before it; `None` = before TUNE (compiled-in calibration).
+    measured: Option<usize>,
+    target_mm: f32,
+    /// MORPH to done, s (NaN unless done).
+    time_s: f64,
+    /// (final − target) / target, % (NaN unless done).
+    error_pct: f64,
+}
+
+/// What one link gave.
+struct LinkResult {
+    plant: &'static str,
+    draw: u64,
+    air: bool,
+    /// The end line of TUNE (`event: tune done ...` or `... failed ...`).
+    tune_line: String,
+    evals: Vec<Eval>,
+}
+
+/// Runs one MORPH on `rig` to its end and `SETTLE_AFTER_DONE_S` past it; `(time_s, final_mm)`,
+/// NaN unless done.
+fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> (f64, f64) {
+    let t0 = rig.now_ms();
+    rig.ctrl.handle(
+        t0,
+        Command::Morph {
+            radius_mm: target_mm,
+            mode: Mode::Auto,
+        },
+        &mut |_| {},
+    );
+    let end = t0 + (MAX_MORPH_S * 1000.0) as u64;
+    while rig.ctrl.busy() && rig.now_ms() < end {
+        rig.tick();
+        while rig.ctrl.pop_event().is_some() {}
+    }
+    if rig.ctrl.busy() || rig.ctrl.fault().is_some() {
+        return (f64::NAN, f64::NAN);
+    }
+    let t = (rig.now_ms() - t0) as f64 / 1000.0;
+    let settle = (SETTLE_AFTER_DONE_S * 1000.0) as u64 / TICK_MS;
+    for _ in 0..settle {
+        rig.tick();
+        while rig.ctrl.pop_event().is_some() {}
+    }
+    (t, rig.radius_mm())
+}
+
+fn evaluate(
+    link: &Link,
+    noise: Noise,
+    cal: &Calibration,
+    measured: Option<usize>,
+    targets: &[f32],
+) -> Vec<Eval> {
+    targets
+        .iter()
+        .map(|&t| {
+            let (time_s, final_mm) = morph(&mut link.rig(noise, cal), t);
+            Eval {
+                measured,
+                target_mm: t,
+                time_s,
+                error_pct: (final_mm - t as f64) / t as f64 * 100.0,
+            }
+        })
+        .collect()
+}
+
+/// TUNE on a copy of the link at rest: the calibration it ends with and its end line.
+fn tune(link: &Link, noise: Noise) -> (Calibration, String) {
+    let mut rig = link.rig(noise, &Calibration::DEFAULT);
+    rig.tick();
+    rig.handle_line("TUNE", &mut |_| {});
+    let mut end = String::from("(no end line)");
+    let stop = rig.now_ms() + 200_000;
+    while rig.ctrl.tuning() && rig.now_ms() < stop {
+        rig.tick();
+        rig.drain_events(&mut |l| {
+            if l.starts_with("event: tune done")
+                || l.starts_with("event: tune failed")
+                || l.starts_with("alarm:")
+            {
+                end = l.to_string();
+            }
+        });
+    }
+    (rig.ctrl.calibration(), end)
+}
+
+fn run_link(
+    link: &Link,
+    noise: Noise,
+    plant: &'static str,
+    draw: u64,
+    air: bool,
+    targets: &[f32],
+    seed: u64,
+    no_tune: bool,
+) -> LinkResult {
+    let mut evals = evaluate(link, noise, &Calibration::DEFAULT, None, targets);
+    let (mut cal, tune_line) = if no_tune {
+        (Calibration::DEFAULT, "(TUNE skipped)".to_string())
+    } else {
+        tune(link, noise)
+    };
+    evals.extend(evaluate(link, noise, &cal, Some(0), targets));
+    let (min, max) = table::range_mm();
+    let mut s = seed ^ draw.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (plant.len() as u64);
+    splitmix(&mut s);
+    for (k, f) in CALIBRATION_FRACTIONS.iter().enumerate() {
+        let target = min + (max - min) * f;
+        let mut rig = link.rig(noise, &cal);
+        let (_, final_mm) = morph(&mut rig, target);
+        if final_mm.is_finite() {
+            let reported = final_mm + uniform(&mut s, (-MEASURE_ERROR_MM, MEASURE_ERROR_MM));
+            let now = rig.now_ms();
+            rig.ctrl.handle(
+                now,
+                Command::Measured {
+                    radius_mm: reported as f32,
+                },
+                &mut |_| {},
+            );
+            cal = rig.ctrl.calibration();
+        }
+        evals.extend(evaluate(link, noise, &cal, Some(k + 1), targets));
+    }
+    LinkResult {
+        plant,
+        draw,
+        air,
+        tune_line,
+        evals,
+    }
+}
+
+/// SplitMix64: the next value of the measuring error's generator.
+fn splitmix(s: &mut u64) -> u64 {
+    *s = s.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    let mut z = *s;
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// Uniform in `[lo, hi)`.
+fn uniform(s: &mut u64, (lo, hi): (f64, f64)) -> f64 {
+    lo + (hi - lo) * (splitmix(s) >> 11) as f64 / (1u64 << 53) as f64
+}
+
+fn targets(n: usize) -> Vec<f32> {
+    let (min, max) = table::range_mm();
+    let n = n.max(1);
+    (0..n)
+        .map(|i| {
+            let f = if n == 1 {
+                0.5
+            } else {
+                i as f32 / (n - 1) as f32
+            };
+            (min + 0.2) + (max - min - 0.4) * f
+        })
+        .collect()
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let rank = ((p / 100.0) * sorted.len() as f64).ceil() as usize;
+    sorted[rank.clamp(1, sorted.len()) - 1]
+}
+
+/// (runs, failed, |error| p50, p95, time p50) over evaluations.
+fn stats<'a>(evals: impl Iterator<Item = &'a Eval>) -> (usize, usize, f64, f64, f64) {
+    let all: Vec<&Eval> = evals.collect();
+    let done: Vec<&&Eval> = all.iter().filter(|e| e.error_pct.is_finite()).collect();
+    let mut e: Vec<f64> = done.iter().map(|e| e.error_pct.abs()).collect();
+    let mut t: Vec<f64> = done.iter().map(|e| e.time_s).collect();
+    e.sort_by(f64::total_cmp);
+    t.sort_by(f64::total_cmp);
+    (
+        all.len(),
+        all.len() - done.len(),
+        percentile(&e, 50.0),
+        percentile(&e, 95.0),
+        percentile(&t, 50.0),
+    )
+}
+
+fn stage_name(m: Option<usize>) -> String {
+    match m {
+        None => "before TUNE".into(),
+        Some(0) => "after TUNE".into(),
+        Some(k) => format!("TUNE + {k} measured"),
+    }
+}
+
+const STAGES: [Option<usize>; 5] = [None, Some(0), Some(1), Some(2), Some(3)];
+
+/// The chart: p50 and p95 |error| against the measured morphs, per plant (water links).
+struct Chart {
+    /// (plant, [(stage index, p50, p95)])
+    series: Vec<(&'static str, Vec<(f64, f64, f64)>)>,
+}
+
+impl Figure for Chart {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        format: Format,
+    ) -> PlotResult {
+        let top = self
+            .series
+            .iter()
+            .flat_map(|(_, v)| v.iter().map(|p| p.2))
+            .filter(|v| v.is_finite())
+            .fold(AIM_ERROR_PCT, f64::max)
+            * 1.1;
+        let caption = format.has_text().then_some(
+            "auto's |radius error| on water links: before TUNE (x = -1), after TUNE (0), after n measured morphs",
+        );
+        let mut chart = Frame::new(16, 8, 40, 60)
+            .builder(root, caption)
+            .build_cartesian_2d(-1.2f64..3.2f64, 0f64..top)?;
+        mesh(
+            &mut chart,
+            "measured morphs (-1: before TUNE)",
+            "|error| (%)",
+            format.has_text(),
+        )
+        .draw()?;
+        line(
+            &mut chart,
+            [(-1.2, AIM_ERROR_PCT), (3.2, AIM_ERROR_PCT)],
+            BLACK.mix(0.5).stroke_width(1),
+            format.has_text().then_some("aim: p95 2 %"),
+        )?;
+        for (i, (plant, pts)) in self.series.iter().enumerate() {
+            let c = palette(i);
+            let l95 = format!("{plant} p95");
+            let l50 = format!("{plant} p50");
+            line(
+                &mut chart,
+                pts.iter().map(|p| (p.0, p.2)),
+                c.stroke_width(3),
+                format.has_text().then_some(l95.as_str()),
+            )?;
+            line(
+                &mut chart,
+                pts.iter().map(|p| (p.0, p.1)),
+                c.mix(0.6).stroke_width(1),
+                format.has_text().then_some(l50.as_str()),
+            )?;
+        }
+        if format.has_text() {
+            legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+        }
+        Ok(())
+    }
+}
+
+/// Runs the task.
+pub fn run(args: &Args, root: &Path) -> Result<(), String> {
+    let out = root.join(&args.out);
+    std::fs::create_dir_all(&out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
+    let targets = targets(args.targets);
+    let mut jobs: Vec<(&'static str, u64)> = Vec::new();
+    jobs.extend((0..args.hifi_draws).map(|d| ("hifi", d)));
+    jobs.extend((0..args.draws).map(|d| ("lumped", d)));
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<(usize, Result<LinkResult, String>)>> = Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for _ in 0..args.threads.max(1) {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&(plant, draw)) = jobs.get(i) else {
+                    break;
+                };
+                let noise = Mismatch::draw(args.seed, draw).plant().noise();
+                let r = if plant == "hifi" {
+                    HifiSpec::draw(morphlink::link::LINK, Grid::Reduced, args.seed, draw)
+                        .and_then(|spec| {
+                            let air = spec.medium == morphlink_plant::Medium::Air;
+                            Hifi::new(spec).map(|p| (p, air))
+                        })
+                        .map_err(|e| format!("hifi draw {draw}: {e}"))
+                        .map(|(p, air)| {
+                            run_link(
+                                &Link::Hifi(Box::new(p)),
+                                noise,
+                                plant,
+                                draw,
+                                air,
+                                &targets,
+                                args.seed,
+                                args.no_tune,
+                            )
+                        })
+                } else {
+                    let m = Mismatch::draw(args.seed, draw);
+                    Ok(run_link(
+                        &Link::Lumped(m.plant().lumped()),
+                        noise,
+                        plant,
+                        draw,
+                        m.air,
+                        &targets,
+                        args.seed,
+                        args.no_tune,
+                    ))
+                };
+                let done = {
+                    let mut g = results.lock().unwrap();
+                    g.push((i, r));
+                    g.len()
+                };
+                eprint!("\r{done}/{} links", jobs.len());
+            });
+        }
+    });
+    eprintln!();
+    let mut results = results.into_inner().unwrap();
+    results.sort_by_key(|(i, _)| *i);
+    let results: Vec<LinkResult> = results
+        .into_iter()
+        .map(|(_, r)| r)
+        .collect::<Result<_, _>>()?;
+    // CSV: one row per evaluated morph.
+    let mut csv = String::from("plant,draw,air,stage,measured,target_mm,time_s,error_pct,tune\n");
+    for r in &results {
+        for (k, e) in r.evals.iter().enumerate() {
+            // The link's TUNE line once, on its first row.
+            let tune_line = if k == 0 { r.tune_line.as_str() } else { "" };
+            let _ = writeln!(
+                csv,
+                "{},{},{},{},{},{:.2},{:.1},{:.3},\"{}\"",
+                r.plant,
+                r.draw,
+                r.air,
+                stage_name(e.measured),
+                e.measured.map_or(-1, |k| k as i64),
+                e.target_mm,
+                e.time_s,
+                e.error_pct,
+                tune_line.replace('"', "'")
+            );
+        }
+    }
+    let csv_path = out.join("calibration.csv");
+    std::fs::write(&csv_path, csv).map_err(|e| format!("{}: {e}", csv_path.display()))?;
+    let mut series = Vec::new();
+    for plant in ["hifi", "lumped"] {
+        let sel: Vec<&LinkResult> = results.iter().filter(|r| r.plant == plant).collect();
+        if sel.is_empty() {
+            continue;
+        }
+        let tuned = sel
+            .iter()
+            .filter(|r| r.tune_line.starts_with("event: tune done"))
+            .count();
+        println!(
+            "\n## Plant: {plant} ({} links, TUNE done on {tuned})\n",
+            sel.len()
+        );
+        println!(
+            "| stage | medium | runs | failed | time p50 | \\|error\\| p50 | \\|error\\| p95 |"
+        );
+        println!("| --- | --- | --- | --- | --- | --- | --- |");
+        let mut pts = Vec::new();
+        for (si, stage) in STAGES.iter().enumerate() {
+            for air in [false, true] {
+                let (n, failed, p50, p95, t50) = stats(
+                    sel.iter()
+                        .filter(|r| r.air == air)
+                        .flat_map(|r| r.evals.iter())
+                        .filter(|e| e.measured == *stage),
+                );
+                if n == 0 {
+                    continue;
+                }
+                println!(
+                    "| {} | {} | {n} | {failed} | {t50:.1} s | {p50:.2} % | {p95:.2} % |",
+                    stage_name(*stage),
+                    if air { "air" } else { "water" },
+                );
+                if !air {
+                    pts.push((si as f64 - 1.0, p50, p95));
+                }
+            }
+        }
+        println!("\n(aims: |error| p95 <= {AIM_ERROR_PCT} %, time p50 <= {AIM_TIME_S} s)");
+        println!("\nPer target, water links, after TUNE + 3 measured:\n");
+        println!("| target | time p50 | \\|error\\| p50 | \\|error\\| p95 | failed |");
+        println!("| --- | --- | --- | --- | --- |");
+        for &t in &targets {
+            let (_, failed, p50, p95, t50) = stats(
+                sel.iter()
+                    .filter(|r| !r.air)
+                    .flat_map(|r| r.evals.iter())
+                    .filter(|e| e.measured == Some(3) && e.target_mm == t),
+            );
+            println!("| {t:.2} mm | {t50:.1} s | {p50:.2} % | {p95:.2} % | {failed} |");
+        }
+        // Per link: the worst p95 after calibration (the aim is on every link).
+        let mut worst: Vec<(u64, f64)> = sel
+            .iter()
+            .filter(|r| !r.air)
+            .map(|r| {
+                let m = r
+                    .evals
+                    .iter()
+                    .filter(|e| e.measured == Some(3))
+                    .map(|e| {
+                        if e.error_pct.is_finite() {
+                            e.error_pct.abs()
+                        } else {
+                            f64::INFINITY
+                        }
+                    })
+                    .fold(0.0, f64::max);
+                (r.draw, m)
+            })
+            .collect();
+        worst.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let over = worst.iter().filter(|w| w.1 > AIM_ERROR_PCT).count();
+        println!(
+            "\nWater links whose worst |error| after TUNE + 3 measured exceeds {AIM_ERROR_PCT} %: {over} of {}; worst: {}",
+            worst.len(),
+            worst
+                .iter()
+                .take(5)
+                .map(|(d, e)| format!("draw {d} {e:.2} %"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        series.push((if plant == "hifi" { "hifi" } else { "lumped" }, pts));
+    }
+    let chart = Chart { series };
+    for name in ["calibration.svg", "calibration.png"] {
+        plot::write(&out.join(name), (900, 600), &chart).map_err(String::from)?;
+    }
+    println!(
+        "\nwrote {}, calibration.svg, calibration.png",
+        csv_path.display()
+    );
+    Ok(())
+}
