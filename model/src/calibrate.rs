@@ -12,8 +12,7 @@ use crate::params::LinkParams;
 use nalgebra::{Matrix3, Vector3};
 use std::path::Path;
 
-/// Young's modulus of EcoFlex 00-10 used for the stiffness prior, Pa (Pawlowski et al. 2019).
-pub const SILICONE_E_PA: f64 = 37.8e3;
+pub use crate::mechanics::SILICONE_E_PA;
 /// Weight of the stiffness prior, mm of radius residual per e-fold of `EI` away from it: small,
 /// so it only settles the direction the data cannot see.
 pub const PRIOR_WEIGHT_MM: f64 = 0.2;
@@ -77,15 +76,14 @@ pub struct Fit {
 
 /// Stiffness prior: silicone body plus the rubbery PLA rod, N m².
 pub fn prior_stiffness_nm2(p: &LinkParams) -> f64 {
-    let d = p.geometry.body_diameter_m;
-    let i_body = core::f64::consts::PI * d.powi(4) / 64.0;
-    SILICONE_E_PA * i_body
-        + p.pla_stiffness.e_rubbery_pa * crate::mechanics::pla_second_moment_m4(p)
+    crate::mechanics::cross_section_stiffness_nm2(&p.geometry, &p.pla_stiffness)
 }
 
 /// `p` with the fit's parameters `(ln EI, F0, c)` filled in.
 pub fn with_theta(p: &LinkParams, th: &Vector3<f64>) -> LinkParams {
     let mut q = *p;
+    // The fitted constants belong to the geometry they are fitted on.
+    q.fitted_on = p.geometry;
     q.mechanics.bending_stiffness_nm2 = th[0].exp();
     q.mechanics.preload_n = th[1];
     q.mechanics.force_coeff_n_per_k = th[2];
