@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 
 mod boards;
 mod emulate;
+mod flash;
 mod strategies;
 use morphlink_host::workspace::Workspace;
 use std::process::ExitCode;
@@ -29,6 +30,10 @@ enum Task {
     Strategies(strategies::Args),
     /// Build the emulated firmware and boot it under QEMU (b-l475e-iot01a).
     Emulate(emulate::Args),
+    /// Build a board's firmware (its feature) and flash it with probe-rs (its chip).
+    Flash(flash::Args),
+    /// Build a board's firmware, flash and run it, printing the defmt log (probe-rs run).
+    Run(flash::Args),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +46,8 @@ fn main() -> ExitCode {
         Task::Boards => boards::run(&ws),
         Task::Strategies(a) => strategies::run(&a, &ws.root),
         Task::Emulate(a) => emulate::run(&a, &ws),
+        Task::Flash(a) => flash::run(flash::Action::Flash, &a, &ws),
+        Task::Run(a) => flash::run(flash::Action::Run, &a, &ws),
     });
     match result {
         Ok(()) => ExitCode::SUCCESS,
