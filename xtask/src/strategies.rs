@@ -682,7 +682,7 @@ fn pareto_chart(
     );
     let notes = [
         format!(
-            "{clipped} runs with an error above {e_max:.0} % are drawn on the top edge as open triangles"
+            "{clipped} runs with an error above {e_max:.0} % are drawn as arrows pointing up from the top edge"
         ),
         not_drawn_note(rows),
     ];
@@ -719,14 +719,18 @@ fn pareto_chart(
                 .label(s.as_str())
                 .legend(move |(x, y)| Circle::new((x + 8, y), 4, c.filled()));
             chart.draw_series(pts(true).map(|p| Cross::new(p, 3, c.mix(0.6))))?;
-            // Runs off the top of the chart: an open triangle on the top edge, not a dot that
-            // reads as an error of exactly the clip.
+            // Runs off the top of the chart: an arrow pointing up from the top edge, not a dot
+            // that reads as an error of exactly the clip.
             let above = rows
                 .iter()
                 .filter(done)
                 .filter(|r| r.strategy == s && r.result.error_pct.abs() > e_max)
                 .map(|r| (r.result.time_s, e_max));
-            chart.draw_series(above.map(|p| TriangleMarker::new(p, 5, c.stroke_width(1))))?;
+            chart.draw_series(above.map(|p| {
+                EmptyElement::at(p)
+                    + PathElement::new(vec![(0, 10), (0, 1)], c.stroke_width(2))
+                    + PathElement::new(vec![(-4, 5), (0, 1), (4, 5)], c.stroke_width(2))
+            }))?;
         }
         for (s, st) in &summary.water {
             chart.draw_series(std::iter::once(TriangleMarker::new(
