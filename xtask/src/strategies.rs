@@ -680,13 +680,22 @@ fn pareto_chart(
     let title = format!(
         "{plant} plant: morph time vs final radius error (water: dots, air: crosses; triangles: p95 of water runs; black crosses: oracle)"
     );
-    let notes = [
-        format!(
-            "{clipped} runs with an error above {e_max:.0} % are drawn as arrows pointing up from the top edge"
-        ),
-        not_drawn_note(rows),
-    ];
-    Ok(plot::write_svg(path, (1000, 640), |root| {
+    let mut notes = vec![format!(
+        "{clipped} runs with an error above {e_max:.0} % are drawn as arrows pointing up from the top edge"
+    )];
+    notes.extend(
+        not_drawn_note(rows)
+            .split(" (")
+            .enumerate()
+            .map(|(i, part)| {
+                if i == 0 {
+                    part.to_string()
+                } else {
+                    format!("    ({part}")
+                }
+            }),
+    );
+    Ok(plot::write_svg(path, (1000, 660), |root| {
         let (root, foot) = root.split_vertically(600);
         for (i, n) in notes.iter().enumerate() {
             foot.draw_text(
@@ -808,7 +817,7 @@ fn not_drawn_note(rows: &[&Row]) -> String {
         "every run finished: none left out".to_string()
     } else {
         format!(
-            "not drawn: {total} runs that did not finish ({}); strategies.csv has them",
+            "not drawn: {total} runs that did not finish, listed in strategies.csv ({})",
             parts.join("; ")
         )
     }
