@@ -22,9 +22,15 @@ fn main() {
         .map(PathBuf::from)
         .unwrap_or_else(|_| PathBuf::from("link.toml"));
     println!("cargo:rerun-if-changed={}", link_path.display());
-    let text = fs::read_to_string(&link_path)
-        .unwrap_or_else(|e| panic!("cannot read {}: {e}", link_path.display()));
-    let p = file::from_toml(&text).unwrap_or_else(|e| panic!("{e}"));
+    // Every value range- and unit-checked as `morph-model` checks it; a bad one fails the build
+    // with the file, the key and the allowed range.
+    let (text, p) = file::load_for_build(&link_path).unwrap_or_else(|e| {
+        eprintln!("error: {e}");
+        std::process::exit(1)
+    });
+    if let Some(note) = file::unfitted_geometry_note(&p) {
+        println!("cargo:warning={}: {note}", link_path.display());
+    }
     let r = thermal::resistance_matrix(&p);
 
     let mut s = String::new();

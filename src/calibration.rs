@@ -279,8 +279,29 @@ impl Calibration {
 
     /// Field number `index`'s value (see [`FIELDS`]), or `None` past the last.
     pub fn get(&self, index: usize) -> Option<f32> {
-        let mut c = *self;
-        c.slot(index).map(|v| *v)
+        (index < FIELD_COUNT).then(|| self.value(index))
+    }
+
+    /// Field number `index`'s value, NaN past the last; `const`, so the settings registry can
+    /// take the compiled-in values as its defaults at compile time.
+    pub const fn value(&self, index: usize) -> f32 {
+        match index {
+            0 => self.pla_rise_k_per_w,
+            1 => self.tca_rise_k_per_w,
+            2 => self.pla_to_tca_k_per_w,
+            3 => self.tca_to_pla_k_per_w,
+            4 => self.pla_tau_s,
+            5 => self.tca_tau_s,
+            6 => self.map_count,
+            7 => self.map_sum_x_k,
+            8 => self.map_sum_y_k,
+            9 => self.map_sum_xx_k2,
+            10 => self.map_sum_xy_k2,
+            11 => self.power_count,
+            12 => self.power_sum_ratio,
+            13 => self.version,
+            _ => f32::NAN,
+        }
     }
 
     /// Sets field number `index` to `value` if it is within the field's range; otherwise

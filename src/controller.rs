@@ -174,8 +174,6 @@ pub struct Controller {
     save_request: Option<Blob>,
     /// A running `HEAT` pulse (only while idle: a morph or a fault ends it).
     pulse: Option<Pulse>,
-    /// This link's calibration (TUNE, MEASURED), read by the strategies at MORPH.
-    cal: Calibration,
     /// The tune under way, if any (the sequencer is idle meanwhile).
     tune: Option<Tune>,
     /// The last morph started, for MEASURED.
@@ -232,7 +230,6 @@ impl Controller {
             storage: false,
             save_request: None,
             pulse: None,
-            cal: Calibration::DEFAULT,
             tune: None,
             last: None,
         }
@@ -366,7 +363,7 @@ impl Controller {
                     p
                 }
                 TuneTick::Done(cal) => {
-                    self.cal = cal;
+                    self.settings.cal = cal;
                     Powers::default()
                 }
                 TuneTick::Failed(_) => Powers::default(),
@@ -531,7 +528,7 @@ impl Controller {
     }
 
     /// Whether heating must be refused now (a fault latched, a morph or TUNE running, no reading
-    /// if so, writes the refusal into `l`. MORPH and HEAT share it.
+    /// yet): if so, writes the refusal into `l`. MORPH and HEAT share it.
     fn refused(&self, l: &mut OutLine) -> bool {
         if let Some(f) = self.fault() {
             reply::fault_latched(l, f.code);
@@ -572,18 +569,19 @@ impl Controller {
             }
             Ok(table_w) => {
                 out(protocol::OK);
-                let power_w = (table_w * self.cal.power_scale()).min(HeaterConfig::TCA.max_power_w);
+                let power_w =
+                    (table_w * self.settings.cal.power_scale()).min(HeaterConfig::TCA.max_power_w);
                 let mut first: heapless::Vec<SeqEvent, 2> = heapless::Vec::new();
                 let m = self.sup.measurements();
                 self.last = Some(LastMorph {
                     mode: crate::strategy::AnyStrategy::resolve(mode),
                     power_w,
                     ambient_c: m.t_amb_c,
-                    map: self.cal.map(),
+                    map: self.settings.cal.map(),
                     done_mm: f32::NAN,
                     counted: false,
                 });
-                let cal = self.cal;
+                let cal = self.settings.cal;
                 self.seq
                     .start_from(now_ms, radius_mm, power_w, mode, &m, &cal, &mut |e| {
                         let _ = first.push(e);
@@ -789,7 +787,7 @@ fn row(spec: &Spec, value: f32) -> reply::SettingRow<'static> {
 impl Controller {
     /// This link's calibration.
     pub fn calibration(&self) -> Calibration {
-        self.cal
+        self.settings.cal
     }
 
     /// Replaces the calibration (a settings shell restoring a stored one): refused, changing
@@ -802,7 +800,7 @@ impl Controller {
                 return Err(CalibrationError::OutOfRange(f));
             }
         }
-        self.cal = cal;
+        self.settings.cal = cal;
         Ok(())
     }
 
@@ -850,7 +848,7 @@ impl Controller {
         tune_reply::tune_started(&mut l, crate::tune::TUNE_TOTAL_S);
         out(&l);
         let mut first: heapless::Vec<TuneEvent, 2> = heapless::Vec::new();
-        self.tune = Some(Tune::new(now_ms, self.cal, &mut |e| {
+        self.tune = Some(Tune::new(now_ms, self.settings.cal, &mut |e| {
             let _ = first.push(e);
         }));
         for e in first {
@@ -895,8 +893,10 @@ impl Controller {
                 let reported_rise = target::lock_temp_for_final_radius_c(last.done_mm, amb) - amb;
                 let x = (reported_rise - a) / b;
                 let y = target::lock_temp_for_final_radius_c(radius_mm, amb) - amb;
-                match self.cal.fold_map(x, y) {
-                    Ok((a, b)) => tune_reply::measured_map(&mut l, a, b, self.cal.map_count),
+                match self.settings.cal.fold_map(x, y) {
+                    Ok((a, b)) => {
+                        tune_reply::measured_map(&mut l, a, b, self.settings.cal.map_count)
+                    }
                     Err(()) => tune_reply::measured_implausible(&mut l),
                 }
             }
@@ -906,8 +906,10 @@ impl Controller {
                     tune_reply::measured_implausible(&mut l);
                     return out(&l);
                 }
-                match self.cal.fold_power(last.power_w / need) {
-                    Ok(scale) => tune_reply::measured_power(&mut l, scale, self.cal.power_count),
+                match self.settings.cal.fold_power(last.power_w / need) {
+                    Ok(scale) => {
+                        tune_reply::measured_power(&mut l, scale, self.settings.cal.power_count)
+                    }
                     Err(()) => tune_reply::measured_implausible(&mut l),
                 }
             }

@@ -529,3 +529,8 @@ fn main() {
     );
     std::process::exit(2);
 }
+
+// Every defmt log line carries the firmware's uptime from embassy-time, in milliseconds
+// (`probe-rs run` prints it in front of the message).
+#[cfg(target_os = "none")]
+defmt::timestamp!("{=u64:ms}", embassy_time::Instant::now().as_millis());

@@ -8,12 +8,11 @@
 //! reports how far the data moved it.
 
 use crate::mechanics::radius_mm;
-use crate::params::LinkParams;
+use crate::params::{Geometry, LinkParams};
 use nalgebra::{Matrix3, Vector3};
 use std::path::Path;
 
-/// Young's modulus of EcoFlex 00-10 used for the stiffness prior, Pa (Pawlowski et al. 2019).
-pub const SILICONE_E_PA: f64 = 37.8e3;
+pub use crate::mechanics::SILICONE_E_PA;
 /// Weight of the stiffness prior, mm of radius residual per e-fold of `EI` away from it: small,
 /// so it only settles the direction the data cannot see.
 pub const PRIOR_WEIGHT_MM: f64 = 0.2;
@@ -27,39 +26,157 @@ pub struct Point {
     pub radius_mm: f64,
 }
 
-/// Points of `source` (`measured` or `paper_model`) from a `p_tca_w,radius_mm,source` CSV.
-pub fn load_points(path: &Path, source: &str) -> Result<Vec<Point>, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    parse_points(&text, source)
+/// Prefix of the comment line that records the geometry a data file's radii were measured on:
+/// `# geometry: body_diameter_m = 0.008, length_m = 0.05, ...`, all eight `[geometry]` keys.
+pub const GEOMETRY_LINE: &str = "# geometry:";
+
+/// A measured-radii file: its points of one source and the geometry it records.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Data {
+    /// The rows of the chosen source, in file order.
+    pub points: Vec<Point>,
+    /// The geometry the radii were measured on (its `# geometry:` line), if the file says.
+    pub geometry: Option<Geometry>,
 }
 
-/// Parses the CSV text; `#` lines and the header are skipped.
+/// Points of `source` (`measured` or `paper_model`) from a `p_tca_w,radius_mm,source` CSV.
+pub fn load_points(path: &Path, source: &str) -> Result<Vec<Point>, String> {
+    Ok(load_data(path, source)?.points)
+}
+
+/// The whole data file at `path`: points of `source` and its recorded geometry; errors name
+/// the file.
+pub fn load_data(path: &Path, source: &str) -> Result<Data, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    parse_data(&text, source).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Parses the CSV text; `#` lines are comments, the header must name `p_tca_w`, `radius_mm`
+/// and `source`.
 pub fn parse_points(text: &str, source: &str) -> Result<Vec<Point>, String> {
-    let mut out = Vec::new();
+    Ok(parse_data(text, source)?.points)
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Row {
+    p_tca_w: f64,
+    radius_mm: f64,
+    source: String,
+}
+
+/// Parses a data file's text: its rows of `source` (each power and radius finite and
+/// positive) and its `# geometry:` line.
+pub fn parse_data(text: &str, source: &str) -> Result<Data, String> {
+    let mut geometry = None;
     for (n, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') || line.starts_with("p_tca_w") {
+        if let Some(rest) = line.trim().strip_prefix(GEOMETRY_LINE) {
+            if geometry.is_some() {
+                return Err(format!("line {}: a second {GEOMETRY_LINE} line", n + 1));
+            }
+            geometry = Some(parse_geometry(rest).map_err(|e| format!("line {}: {e}", n + 1))?);
+        }
+    }
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let mut points = Vec::new();
+    for row in reader.deserialize::<Row>() {
+        let row = row.map_err(|e| match e.position() {
+            Some(at) => format!("line {}: {e}", at.line()),
+            None => e.to_string(),
+        })?;
+        if row.source != source {
             continue;
         }
-        let f: Vec<&str> = line.split(',').collect();
-        if f.len() != 3 {
-            return Err(format!("line {}: expected p_tca_w,radius_mm,source", n + 1));
+        for (name, v) in [("p_tca_w", row.p_tca_w), ("radius_mm", row.radius_mm)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} must be a positive number, got {v}"));
+            }
         }
-        if f[2].trim() != source {
-            continue;
-        }
-        let num = |s: &str| {
-            s.trim()
-                .parse::<f64>()
-                .map_err(|e| format!("line {}: {e}", n + 1))
-        };
-        out.push(Point {
-            p_tca_w: num(f[0])?,
-            radius_mm: num(f[1])?,
+        points.push(Point {
+            p_tca_w: row.p_tca_w,
+            radius_mm: row.radius_mm,
         });
     }
-    Ok(out)
+    Ok(Data { points, geometry })
+}
+
+/// The eight `[geometry]` keys of a `# geometry:` line, `key = value` separated by commas.
+fn parse_geometry(text: &str) -> Result<Geometry, String> {
+    let mut vals: [Option<f64>; 8] = [None; 8];
+    const KEYS: [&str; 8] = [
+        "body_diameter_m",
+        "length_m",
+        "tca_outer_diameter_m",
+        "tca_inner_diameter_m",
+        "tca_fibre_diameter_m",
+        "tca_offset_m",
+        "pla_diameter_m",
+        "pla_offset_m",
+    ];
+    for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let (k, v) = item
+            .split_once('=')
+            .ok_or_else(|| format!("{GEOMETRY_LINE} expects key = value, got `{item}`"))?;
+        let (k, v) = (k.trim(), v.trim());
+        let i = KEYS
+            .iter()
+            .position(|x| *x == k)
+            .ok_or_else(|| format!("{GEOMETRY_LINE} has unknown key `{k}`; expected {KEYS:?}"))?;
+        let v: f64 = v
+            .parse()
+            .map_err(|e| format!("{GEOMETRY_LINE} {k} = `{v}`: {e}"))?;
+        vals[i] = Some(v);
+    }
+    let get = |i: usize| vals[i].ok_or_else(|| format!("{GEOMETRY_LINE} lacks {}", KEYS[i]));
+    Ok(Geometry {
+        body_diameter_m: get(0)?,
+        length_m: get(1)?,
+        tca_outer_diameter_m: get(2)?,
+        tca_inner_diameter_m: get(3)?,
+        tca_fibre_diameter_m: get(4)?,
+        tca_offset_m: get(5)?,
+        pla_diameter_m: get(6)?,
+        pla_offset_m: get(7)?,
+    })
+}
+
+/// The `# geometry:` line for `g`, to head a data file measured on it.
+pub fn geometry_line(g: &Geometry) -> String {
+    format!(
+        "{GEOMETRY_LINE} body_diameter_m = {}, length_m = {}, tca_outer_diameter_m = {}, \
+         tca_inner_diameter_m = {}, tca_fibre_diameter_m = {}, tca_offset_m = {}, \
+         pla_diameter_m = {}, pla_offset_m = {}",
+        g.body_diameter_m,
+        g.length_m,
+        g.tca_outer_diameter_m,
+        g.tca_inner_diameter_m,
+        g.tca_fibre_diameter_m,
+        g.tca_offset_m,
+        g.pla_diameter_m,
+        g.pla_offset_m
+    )
+}
+
+/// Refuses to fit `p` to radii measured on `measured_on` when that is another geometry: the fit
+/// would describe the link the radii came from, not this one. The sentence lists what differs.
+pub fn check_same_geometry(p: &LinkParams, measured_on: &Geometry) -> Result<(), String> {
+    if &p.geometry == measured_on {
+        return Ok(());
+    }
+    let diffs: Vec<String> = crate::file::geometry_differences(&p.geometry, measured_on)
+        .iter()
+        .map(|d| d.replace("(fitted on", "(data measured on"))
+        .collect();
+    Err(format!(
+        "the radii were measured on another geometry: {}. A fit to them would describe that \
+         link, not this one: measure the steady radius at three or more TCA powers on this link \
+         and fit those (docs/model.md, \"A new geometry\")",
+        diffs.join(", ")
+    ))
 }
 
 /// Result of a calibration.
@@ -77,15 +194,14 @@ pub struct Fit {
 
 /// Stiffness prior: silicone body plus the rubbery PLA rod, N m².
 pub fn prior_stiffness_nm2(p: &LinkParams) -> f64 {
-    let d = p.geometry.body_diameter_m;
-    let i_body = core::f64::consts::PI * d.powi(4) / 64.0;
-    SILICONE_E_PA * i_body
-        + p.pla_stiffness.e_rubbery_pa * crate::mechanics::pla_second_moment_m4(p)
+    crate::mechanics::cross_section_stiffness_nm2(&p.geometry, &p.pla_stiffness)
 }
 
 /// `p` with the fit's parameters `(ln EI, F0, c)` filled in.
 pub fn with_theta(p: &LinkParams, th: &Vector3<f64>) -> LinkParams {
     let mut q = *p;
+    // The fitted constants belong to the geometry they are fitted on.
+    q.fitted_on = p.geometry;
     q.mechanics.bending_stiffness_nm2 = th[0].exp();
     q.mechanics.preload_n = th[1];
     q.mechanics.force_coeff_n_per_k = th[2];
@@ -228,6 +344,47 @@ mod tests {
                 && close(a.force_coeff_n_per_k, b.force_coeff_n_per_k),
             "run `morph-model calibrate` and update params.rs: fitted {a:?}"
         );
+    }
+
+    #[test]
+    fn the_shipped_data_records_the_paper_geometry() {
+        let d = parse_data(CSV, "measured").unwrap();
+        assert_eq!(d.geometry, Some(crate::params::PAPER_GEOMETRY));
+        assert_eq!(parse_data(CSV, "paper_model").unwrap().points.len(), 15);
+        let line = geometry_line(&crate::params::PAPER_GEOMETRY);
+        assert_eq!(
+            parse_data(&format!("{line}\np_tca_w,radius_mm,source\n"), "measured")
+                .unwrap()
+                .geometry,
+            Some(crate::params::PAPER_GEOMETRY)
+        );
+    }
+
+    #[test]
+    fn data_from_another_geometry_is_refused() {
+        let mut wide = LinkParams::DEFAULT;
+        wide.geometry.body_diameter_m = 10e-3;
+        let d = parse_data(CSV, "measured").unwrap();
+        let e = check_same_geometry(&wide, &d.geometry.unwrap()).unwrap_err();
+        assert!(
+            e.contains("geometry.body_diameter_m = 0.01 (data measured on 0.008)"),
+            "{e}"
+        );
+        assert!(check_same_geometry(&LinkParams::DEFAULT, &d.geometry.unwrap()).is_ok());
+    }
+
+    #[test]
+    fn bad_rows_name_their_line() {
+        let bad = "p_tca_w,radius_mm,source\n0.1,45,measured\n0.8,abc,measured\n";
+        assert!(parse_data(bad, "measured").unwrap_err().contains("line 3"));
+        let neg = "p_tca_w,radius_mm,source\n-0.1,45,measured\n";
+        assert!(parse_data(neg, "measured").unwrap_err().contains("p_tca_w"));
+        let short = "p_tca_w,radius_mm\n0.1,45\n";
+        assert!(parse_data(short, "measured").is_err());
+        let geo = "# geometry: body_diameter_m = 0.008\np_tca_w,radius_mm,source\n";
+        assert!(parse_data(geo, "measured")
+            .unwrap_err()
+            .contains("lacks length_m"));
     }
 
     #[test]

@@ -28,5 +28,7 @@ pub mod file;
 pub mod fourbar;
 #[cfg(feature = "reference")]
 pub mod reference;
+#[cfg(feature = "std")]
+pub mod validate;
 
 pub use params::LinkParams;

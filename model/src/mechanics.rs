@@ -7,7 +7,7 @@
 //! `EI κ = r F(r L κ, T)`, linear in `κ`:
 //! `κ = r e(T) (F0 + c (T − T_ref)) / (EI + r² L k e(T))`.
 
-use crate::params::{LinkParams, Mechanics, PlaStiffness, T_REF_C};
+use crate::params::{Geometry, LinkParams, Mechanics, PlaStiffness, T_REF_C};
 use crate::thermal::resistance_matrix;
 use libm::{exp, log};
 
@@ -39,8 +39,37 @@ pub fn curvature_with_extra_per_m(
     let e = modulus_ratio(m, tca_temp_c);
     let drive = r * e * (m.preload_n + m.force_coeff_n_per_k * (tca_temp_c - T_REF_C));
     let stiffness =
-        m.bending_stiffness_nm2 + extra_stiffness_nm2 + r * r * l * m.tca_stiffness_n_per_m * e;
+        bending_stiffness_nm2(p) + extra_stiffness_nm2 + r * r * l * m.tca_stiffness_n_per_m * e;
     (drive + extra_stiffness_nm2 * extra_rest_per_m) / stiffness
+}
+
+/// Young's modulus of EcoFlex 00-10, Pa (Pawlowski et al. 2019): the body's share of the
+/// cross-section's stiffness estimate.
+pub const SILICONE_E_PA: f64 = 37.8e3;
+
+/// Stiffness estimate of a cross-section with the PLA soft, N m²: the silicone body's `E I`
+/// plus the rubbery PLA rod's own `E I`. The calibration's prior, and the yardstick that carries
+/// fitted stiffness from one geometry to another.
+pub fn cross_section_stiffness_nm2(g: &Geometry, s: &PlaStiffness) -> f64 {
+    let d = g.body_diameter_m;
+    let i_body = core::f64::consts::PI * d * d * d * d / 64.0;
+    let dp = g.pla_diameter_m;
+    let i_pla = core::f64::consts::PI * dp * dp * dp * dp / 64.0;
+    SILICONE_E_PA * i_body + s.e_rubbery_pa * i_pla
+}
+
+/// Soft-link bending stiffness of `p`'s geometry, N m²: the fitted
+/// `mechanics.bending_stiffness_nm2` (which belongs to `p.fitted_on`) times the ratio of the
+/// cross-section estimates of the two geometries. Equal to the fitted value when the geometry
+/// is the fitted one; for another geometry it keeps a stiffer body from being predicted to bend
+/// more, but it is an estimate until radii measured on that geometry are fitted.
+pub fn bending_stiffness_nm2(p: &LinkParams) -> f64 {
+    if p.geometry_is_fitted() {
+        return p.mechanics.bending_stiffness_nm2;
+    }
+    let s = &p.pla_stiffness;
+    p.mechanics.bending_stiffness_nm2 * cross_section_stiffness_nm2(&p.geometry, s)
+        / cross_section_stiffness_nm2(&p.fitted_on, s)
 }
 
 /// Equilibrium curvature with the PLA soft, 1/m, for a TCA at `tca_temp_c`.
@@ -119,6 +148,30 @@ mod tests {
         let r = p.geometry.tca_offset_m;
         let moment = r * tca_force_n(&p.mechanics, r * p.geometry.length_m * k, t);
         assert!((p.mechanics.bending_stiffness_nm2 * k - moment).abs() < 1e-12);
+    }
+
+    /// A 10 mm body is about 2.4 times as stiff as the paper's 8 mm one; with the fitted
+    /// stiffness left at the 8 mm value it was predicted to bend more (a smaller radius) at the
+    /// same power. Scaled with the cross-section it bends less.
+    #[test]
+    fn a_stiffer_body_bends_less() {
+        let paper = LinkParams::DEFAULT;
+        let mut wide = paper;
+        wide.geometry.body_diameter_m = 10e-3;
+        let ratio = bending_stiffness_nm2(&wide) / bending_stiffness_nm2(&paper);
+        assert!((2.2..2.5).contains(&ratio), "stiffness ratio {ratio}");
+        for p_w in [0.1, 0.8, 1.5] {
+            assert!(
+                radius_mm(&wide, p_w) > radius_mm(&paper, p_w),
+                "at {p_w} W: 10 mm {} mm vs 8 mm {} mm",
+                radius_mm(&wide, p_w),
+                radius_mm(&paper, p_w)
+            );
+        }
+        // The unscaled constants (the fitted geometry set to the new one) bend more.
+        let mut unscaled = wide;
+        unscaled.fitted_on = wide.geometry;
+        assert!(radius_mm(&unscaled, 0.8) < radius_mm(&paper, 0.8));
     }
 
     #[test]

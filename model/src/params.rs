@@ -6,6 +6,7 @@
 /// Thermal properties of one material.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "std", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "std", serde(deny_unknown_fields))]
 pub struct Material {
     /// Thermal conductivity, W/(m K).
     pub k_w_mk: f64,
@@ -26,6 +27,7 @@ impl Material {
 /// axis in the bending plane; the TCA is on the convex side (it is an extension actuator).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "std", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "std", serde(deny_unknown_fields))]
 pub struct Geometry {
     /// Silicone body diameter, m (paper: 8 mm).
     pub body_diameter_m: f64,
@@ -48,6 +50,7 @@ pub struct Geometry {
 /// The three materials of the cross-section (paper, Table I).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "std", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "std", serde(deny_unknown_fields))]
 pub struct Materials {
     /// Silver-coated nylon TCA.
     pub tca: Material,
@@ -60,6 +63,7 @@ pub struct Materials {
 /// The link's surroundings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "std", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "std", serde(deny_unknown_fields))]
 pub struct Surroundings {
     /// Convective heat-transfer coefficient at the rim, W/(m² K). Water: 101.3 (paper Eq. 10);
     /// still air: 20 ([`H_AIR_W_M2K`]).
@@ -81,6 +85,7 @@ pub const H_AIR_W_M2K: f64 = 20.0;
 /// with `e(T)` the nylon modulus ratio `E(T)/E(T_REF)`, `E(T) = nylon_e0_pa − nylon_e_slope_pa_per_c · T`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "std", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "std", serde(deny_unknown_fields))]
 pub struct Mechanics {
     /// Bending stiffness of the link with the PLA soft, N m² (fitted).
     pub bending_stiffness_nm2: f64,
@@ -104,6 +109,7 @@ pub const T_REF_C: f64 = 20.0;
 /// PLA stiffness versus temperature, used by the simulated link (freezing and spring-back).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "std", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "std", serde(deny_unknown_fields))]
 pub struct PlaStiffness {
     /// Glassy modulus, Pa (paper: 1.7 GPa).
     pub e_glassy_pa: f64,
@@ -121,6 +127,7 @@ pub struct PlaStiffness {
 /// Everything that defines one link and its morph conditions.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "std", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "std", serde(deny_unknown_fields))]
 pub struct LinkParams {
     /// Geometry.
     pub geometry: Geometry,
@@ -138,21 +145,37 @@ pub struct LinkParams {
     pub table_max_power_w: f64,
     /// Number of table entries from 0 W to `table_max_power_w`.
     pub table_entries: usize,
+    /// The geometry the fitted mechanical constants (`mechanics.bending_stiffness_nm2`,
+    /// `preload_n`, `force_coeff_n_per_k`) were measured and fitted on (`[fitted_on]` in
+    /// `link.toml`; the paper's link when absent). A `geometry` that differs from it has no
+    /// measured radii behind it: the model scales the fitted stiffness to the new cross-section
+    /// ([`crate::mechanics::bending_stiffness_nm2`]) and the tools say to measure and refit
+    /// (docs/model.md, "A new geometry").
+    #[cfg_attr(feature = "std", serde(default = "paper_geometry"))]
+    pub fitted_on: Geometry,
+}
+
+/// The seed paper's link geometry: the one the shipped fitted constants came from.
+pub const PAPER_GEOMETRY: Geometry = Geometry {
+    body_diameter_m: 8.0e-3,
+    length_m: 50.0e-3,
+    tca_outer_diameter_m: 1.4e-3,
+    tca_inner_diameter_m: 0.4e-3,
+    tca_fibre_diameter_m: 0.5e-3,
+    tca_offset_m: 2.0e-3,
+    pla_diameter_m: 1.75e-3,
+    pla_offset_m: 2.5e-3,
+};
+
+#[cfg(feature = "std")]
+fn paper_geometry() -> Geometry {
+    PAPER_GEOMETRY
 }
 
 impl LinkParams {
     /// The seed paper's link under water with the PLA held at 1.5 W, with fitted constants.
     pub const DEFAULT: LinkParams = LinkParams {
-        geometry: Geometry {
-            body_diameter_m: 8.0e-3,
-            length_m: 50.0e-3,
-            tca_outer_diameter_m: 1.4e-3,
-            tca_inner_diameter_m: 0.4e-3,
-            tca_fibre_diameter_m: 0.5e-3,
-            tca_offset_m: 2.0e-3,
-            pla_diameter_m: 1.75e-3,
-            pla_offset_m: 2.5e-3,
-        },
+        geometry: PAPER_GEOMETRY,
         materials: Materials {
             tca: Material {
                 k_w_mk: 4.6,
@@ -192,6 +215,7 @@ impl LinkParams {
         pla_hold_power_w: 1.5,
         table_max_power_w: 1.5,
         table_entries: 16,
+        fitted_on: PAPER_GEOMETRY,
     };
 }
 
@@ -201,6 +225,13 @@ pub const FITTED_BENDING_STIFFNESS_NM2: f64 = 1.5007e-5;
 pub const FITTED_PRELOAD_N: f64 = 0.173382;
 /// Fitted TCA force coefficient, N/K (`morph-model calibrate`).
 pub const FITTED_FORCE_COEFF_N_PER_K: f64 = 0.0027711;
+
+impl LinkParams {
+    /// Whether `geometry` is the one the fitted constants came from (`fitted_on`).
+    pub fn geometry_is_fitted(&self) -> bool {
+        self.geometry == self.fitted_on
+    }
+}
 
 impl Default for LinkParams {
     fn default() -> Self {

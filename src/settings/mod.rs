@@ -15,6 +15,7 @@ pub mod codec;
 pub mod ram_flash;
 pub mod store;
 
+use crate::calibration::{Calibration, FIELDS, FIELD_COUNT};
 use crate::protocol::Mode;
 use crate::sequencer::{PhaseTimeouts, BEND_TIMEOUT_S, LOCK_TIMEOUT_S, SOFTEN_TIMEOUT_S};
 use crate::strategy::closed::CLOSED_RIGID_COOL_C;
@@ -289,13 +290,51 @@ impl Group for MorphSettings {
 }
 
 /// How many groups [`Settings`] has.
-pub const GROUPS: usize = 1;
+pub const GROUPS: usize = 2;
+
+/// Decimals `CONFIG` shows for a calibration value (they are stored exactly, as `f32`).
+pub const CALIBRATION_DECIMALS: u8 = 3;
+
+/// The calibration's settings: one per [`FIELDS`] row (`TUNE` and `MEASURED` write them, `SAVE`
+/// keeps them), each defaulting to the compiled-in link's value.
+pub const CALIBRATION_SPECS: [Spec; FIELD_COUNT] = {
+    let mut specs = [Spec::number("", "", 0.0, (0.0, 0.0), 0, ""); FIELD_COUNT];
+    let mut i = 0;
+    while i < FIELD_COUNT {
+        let f = FIELDS[i];
+        specs[i] = Spec::number(
+            f.name,
+            f.unit,
+            Calibration::DEFAULT.value(i),
+            (f.min, f.max),
+            CALIBRATION_DECIMALS,
+            f.doc,
+        );
+        i += 1;
+    }
+    specs
+};
+
+impl Group for Calibration {
+    fn specs(&self) -> &'static [Spec] {
+        &CALIBRATION_SPECS
+    }
+    fn get(&self, i: usize) -> f32 {
+        self.value(i)
+    }
+    fn set(&mut self, i: usize, v: f32) {
+        // The registry has range-checked `v` against the same row; a refusal changes nothing.
+        let _ = Calibration::set(self, i, v);
+    }
+}
 
 /// Every setting the device has, in groups. [`Settings::DEFAULT`] is the compiled-in set.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Settings {
     /// What a morph runs with.
     pub morph: MorphSettings,
+    /// This link's calibration (`TUNE`, `MEASURED`).
+    pub cal: Calibration,
 }
 
 /// Where one setting sits in the registry: its group and its index in the group.
@@ -328,16 +367,17 @@ impl Settings {
     /// The compiled-in values.
     pub const DEFAULT: Settings = Settings {
         morph: MorphSettings::DEFAULT,
+        cal: Calibration::DEFAULT,
     };
 
     /// The groups, in registry (and storage) order.
     pub fn groups(&self) -> [&dyn Group; GROUPS] {
-        [&self.morph]
+        [&self.morph, &self.cal]
     }
 
     /// The groups, mutable, in the same order.
     pub fn groups_mut(&mut self) -> [&mut dyn Group; GROUPS] {
-        [&mut self.morph]
+        [&mut self.morph, &mut self.cal]
     }
 
     /// Every setting with its current value, in registry order.

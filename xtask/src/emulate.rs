@@ -23,6 +23,10 @@ const DEMO_TIMEOUT: Duration = Duration::from_secs(120);
 
 /// Runs the task.
 pub fn run(args: &Args, ws: &Workspace) -> Result<(), String> {
+    // A busy port is named before the image is built, not after QEMU fails on it.
+    if let Some(port) = args.port {
+        check_port_free(port)?;
+    }
     let qemu = find_qemu()?;
     // Its own directory inside cargo's target directory, as the emulator tests use.
     let image = build_image(&ws.root, &ws.target_dir.join("emulated"))?;
@@ -35,7 +39,22 @@ pub fn run(args: &Args, ws: &Workspace) -> Result<(), String> {
     }
 }
 
+/// Refuses a port another program already listens on, before QEMU is started: QEMU would fail to
+/// bind it and exit, which read like a firmware crash. (Checked by binding and releasing it; a
+/// program that takes it in between still makes QEMU fail, with QEMU's own message.)
+pub fn check_port_free(port: u16) -> Result<(), String> {
+    match std::net::TcpListener::bind(("127.0.0.1", port)) {
+        Ok(_) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::AddrInUse => Err(format!(
+            "127.0.0.1:{port} is busy: another program (another emulator?) listens on it; \
+             pick another --port or stop that program"
+        )),
+        Err(e) => Err(format!("cannot listen on 127.0.0.1:{port}: {e}")),
+    }
+}
+
 fn serve(qemu: &Path, image: &Path, port: u16) -> Result<(), String> {
+    check_port_free(port)?;
     eprintln!("booting {} under QEMU; USART1 on 127.0.0.1:{port} (QEMU starts when a client connects, e.g. `nc 127.0.0.1 {port}`)", image.display());
     let status = qemu_command(qemu, image, port)
         .status()
@@ -44,7 +63,8 @@ fn serve(qemu: &Path, image: &Path, port: u16) -> Result<(), String> {
         Ok(())
     } else {
         Err(format!(
-            "QEMU ended with {status} (the firmware panicked or faulted: see its message above)"
+            "QEMU ended with {status}: see its message above (QEMU's own error, or the \
+             firmware's panic or fault report)"
         ))
     }
 }
@@ -82,4 +102,22 @@ fn demo(qemu: &Path, image: &Path, radius_mm: f32) -> Result<(), String> {
         started.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_busy_port_is_named_as_busy() {
+        let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = held.local_addr().unwrap().port();
+        let e = check_port_free(port).unwrap_err();
+        assert!(
+            e.contains(&format!("127.0.0.1:{port} is busy")) && !e.contains("panicked"),
+            "{e}"
+        );
+        drop(held);
+        check_port_free(port).unwrap();
+    }
 }

@@ -10,6 +10,7 @@ mod boards;
 mod calibration;
 mod emulate;
 mod faults;
+mod flash;
 mod strategies;
 use morphlink_host::workspace::Workspace;
 use std::process::ExitCode;
@@ -35,6 +36,10 @@ enum Task {
     Faults(faults::Args),
     /// TUNE and MEASURED over a mismatch ensemble: docs/calibration.csv, .svg, .png.
     Calibration(calibration::Args),
+    /// Build a board's firmware (its feature) and flash it with probe-rs (its chip).
+    Flash(flash::Args),
+    /// Build a board's firmware, flash and run it, printing the defmt log (probe-rs run).
+    Run(flash::Args),
 }
 
 fn main() -> ExitCode {
@@ -49,6 +54,8 @@ fn main() -> ExitCode {
         Task::Emulate(a) => emulate::run(&a, &ws),
         Task::Faults(a) => faults::run(&a),
         Task::Calibration(a) => calibration::run(&a, &ws.root),
+        Task::Flash(a) => flash::run(flash::Action::Flash, &a, &ws),
+        Task::Run(a) => flash::run(flash::Action::Run, &a, &ws),
     });
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -677,13 +677,35 @@ fn pareto_chart(
         .filter(done)
         .filter(|r| r.result.error_pct.abs() > e_max)
         .count();
-    let not_done = rows.len() - rows.iter().filter(done).count();
     let title = format!(
-        "{plant} plant: morph time vs final radius error (water: dots, air: crosses; triangles: p95 of water runs; black crosses: oracle); {clipped} runs above {e_max:.0} % drawn at it, {not_done} runs that did not finish not drawn"
+        "{plant} plant: morph time vs final radius error (water: dots, air: crosses; triangles: p95 of water runs; black crosses: oracle)"
     );
-    Ok(plot::write_svg(path, (1000, 600), |root| {
+    let mut notes = vec![format!(
+        "{clipped} runs with an error above {e_max:.0} % are drawn as arrows pointing up from the top edge"
+    )];
+    notes.extend(
+        not_drawn_note(rows)
+            .split(" (")
+            .enumerate()
+            .map(|(i, part)| {
+                if i == 0 {
+                    part.to_string()
+                } else {
+                    format!("    ({part}")
+                }
+            }),
+    );
+    Ok(plot::write_svg(path, (1000, 660), |root| {
+        let (root, foot) = root.split_vertically(600);
+        for (i, n) in notes.iter().enumerate() {
+            foot.draw_text(
+                n,
+                &("sans-serif", 13).into_font().color(&BLACK),
+                (60, 4 + 18 * i as i32),
+            )?;
+        }
         let mut chart = Frame::new(14, 12, 45, 60)
-            .builder(root, Some(&title))
+            .builder(&root, Some(&title))
             .build_cartesian_2d((5f64..1000f64).log_scale(), 0f64..e_max)?;
         mesh(
             &mut chart,
@@ -698,13 +720,26 @@ fn pareto_chart(
                 rows.iter()
                     .filter(done)
                     .filter(move |r| r.strategy == s && r.link.air == air)
-                    .map(|r| (r.result.time_s, r.result.error_pct.abs().min(e_max)))
+                    .filter(move |r| r.result.error_pct.abs() <= e_max)
+                    .map(|r| (r.result.time_s, r.result.error_pct.abs()))
             };
             chart
                 .draw_series(pts(false).map(|p| Circle::new(p, 2, c.mix(0.45).filled())))?
                 .label(s.as_str())
                 .legend(move |(x, y)| Circle::new((x + 8, y), 4, c.filled()));
             chart.draw_series(pts(true).map(|p| Cross::new(p, 3, c.mix(0.6))))?;
+            // Runs off the top of the chart: an arrow pointing up from the top edge, not a dot
+            // that reads as an error of exactly the clip.
+            let above = rows
+                .iter()
+                .filter(done)
+                .filter(|r| r.strategy == s && r.result.error_pct.abs() > e_max)
+                .map(|r| (r.result.time_s, e_max));
+            chart.draw_series(above.map(|p| {
+                EmptyElement::at(p)
+                    + PathElement::new(vec![(0, 10), (0, 1)], c.stroke_width(2))
+                    + PathElement::new(vec![(-4, 5), (0, 1), (4, 5)], c.stroke_width(2))
+            }))?;
         }
         for (s, st) in &summary.water {
             chart.draw_series(std::iter::once(TriangleMarker::new(
@@ -752,6 +787,40 @@ fn pareto_chart(
         )?;
         legend(&mut chart, SeriesLabelPosition::UpperRight)
     })?)
+}
+
+/// The runs a chart of finished morphs leaves out, by strategy and outcome: `not drawn: N runs
+/// that did not finish (boost: 2 tca-overheat, 1 stuck; ...)`, or that none are left out.
+fn not_drawn_note(rows: &[&Row]) -> String {
+    let mut parts = Vec::new();
+    let mut total = 0;
+    for s in STRATEGIES {
+        let mut counts: Vec<(&str, usize)> = Vec::new();
+        for r in rows.iter().filter(|r| r.strategy == s) {
+            let what = match r.result.outcome {
+                Outcome::Done => continue,
+                Outcome::Fault(f) => f.as_str(),
+                Outcome::Stuck => "stuck",
+            };
+            total += 1;
+            match counts.iter_mut().find(|(w, _)| *w == what) {
+                Some((_, n)) => *n += 1,
+                None => counts.push((what, 1)),
+            }
+        }
+        if !counts.is_empty() {
+            let c: Vec<String> = counts.iter().map(|(w, n)| format!("{n} {w}")).collect();
+            parts.push(format!("{}: {}", s.as_str(), c.join(", ")));
+        }
+    }
+    if total == 0 {
+        "every run finished: none left out".to_string()
+    } else {
+        format!(
+            "not drawn: {total} runs that did not finish, listed in strategies.csv ({})",
+            parts.join("; ")
+        )
+    }
 }
 
 fn timeline_chart(path: &Path, plant: &str, link: &Link) -> Result<(), String> {

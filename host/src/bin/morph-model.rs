@@ -6,6 +6,7 @@
 use clap::{ArgGroup, Parser, Subcommand};
 use morphlink_host::charts;
 use morphlink_host::plot::prelude::*;
+use morphlink_host::workspace::Workspace;
 use morphlink_model::fourbar::{self, FourBar, FourBarGeometry, Inverse, Property};
 use morphlink_model::reference::levels::{self, Level, REFERENCE_RINGS};
 use morphlink_model::{calibrate, file, table, LinkParams};
@@ -19,7 +20,8 @@ use std::process::ExitCode;
     about = "Lumped model of the morphing link"
 )]
 struct Cli {
-    /// Parameters file; the paper's link under water when omitted.
+    /// Parameters file; the repository's `link.toml` (at the workspace root, found with
+    /// `cargo metadata` from any directory of the checkout) when omitted.
     #[arg(long, global = true)]
     link: Option<PathBuf>,
     #[command(subcommand)]
@@ -28,11 +30,18 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// Fit bending stiffness, TCA preload and force coefficient to measured radii.
+    /// Fit bending stiffness, TCA preload and force coefficient to radii measured on this
+    /// link's geometry (docs/model.md, "A new geometry").
     Calibrate {
-        /// CSV with p_tca_w,radius_mm,source rows; rows with source "measured" are fitted.
-        #[arg(long, default_value = "data/fig9_calibration.csv")]
-        data: PathBuf,
+        /// CSV with p_tca_w,radius_mm,source rows (rows with source "measured" are fitted) and a
+        /// `# geometry:` line naming the geometry they were measured on; the workspace's
+        /// `data/fig9_calibration.csv` (the paper's link) when omitted.
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// A parameters file whose `[geometry]` the radii were measured on, for a data file
+        /// without a `# geometry:` line (or to check it against).
+        #[arg(long)]
+        measured_on: Option<PathBuf>,
         /// Write the parameters with the fitted constants to this file.
         #[arg(long)]
         write: Option<PathBuf>,
@@ -45,9 +54,10 @@ enum Cmd {
     Thermal,
     /// Run the accuracy/cost study of every model level; write the charts and study.csv.
     Charts {
-        /// CSV with measured and paper_model rows.
-        #[arg(long, default_value = "data/fig9_calibration.csv")]
-        data: PathBuf,
+        /// CSV with measured and paper_model rows; the workspace's `data/fig9_calibration.csv`
+        /// when omitted.
+        #[arg(long)]
+        data: Option<PathBuf>,
         /// Directory for the SVG charts and study.csv.
         #[arg(long, default_value = "docs/charts")]
         out: PathBuf,
@@ -60,9 +70,9 @@ enum Cmd {
         /// Allowed radius error against the reference, mm.
         #[arg(long)]
         tolerance_mm: f64,
-        /// CSV with measured rows.
-        #[arg(long, default_value = "data/fig9_calibration.csv")]
-        data: PathBuf,
+        /// CSV with measured rows; the workspace's `data/fig9_calibration.csv` when omitted.
+        #[arg(long)]
+        data: Option<PathBuf>,
         /// Wall time spent timing each level, s.
         #[arg(long, default_value_t = 0.2)]
         budget_s: f64,
@@ -89,11 +99,35 @@ enum Cmd {
     },
 }
 
+/// The parameters file of the workspace the tool is run in: `link.toml` at its root.
+fn workspace_root() -> Result<PathBuf, String> {
+    Workspace::current()
+        .map(|w| w.root)
+        .map_err(|e| format!("no --link given and {e}; pass --link FILE"))
+}
+
+/// `--data`, or the paper's measured radii in the workspace's `data/`.
+fn data_or_default(data: Option<PathBuf>) -> Result<PathBuf, String> {
+    match data {
+        Some(d) => Ok(d),
+        None => Ok(workspace_root()?.join(DEFAULT_DATA)),
+    }
+}
+
+/// The paper's measured radii, relative to the workspace root.
+const DEFAULT_DATA: &str = "data/fig9_calibration.csv";
+
 fn run(cli: Cli) -> Result<(), String> {
-    let p = match &cli.link {
-        Some(path) => file::load(path)?,
-        None => LinkParams::DEFAULT,
+    let link = match cli.link {
+        Some(path) => path,
+        None => workspace_root()?.join("link.toml"),
     };
+    let p = file::load(&link)?;
+    // A geometry with no measured radii behind it: say so before anything is predicted for it
+    // (calibrate says more: it refuses data from another geometry).
+    if let Some(note) = file::unfitted_geometry_note(&p) {
+        eprintln!("morph-model: {}: {note}", link.display());
+    }
     match cli.cmd {
         Cmd::Fourbar {
             radius_mm,
@@ -102,10 +136,7 @@ fn run(cli: Cli) -> Result<(), String> {
             chart,
             want,
         } => {
-            let g = match &cli.link {
-                Some(path) => file::load_with_fourbar(path)?.1,
-                None => FourBarGeometry::DEFAULT,
-            };
+            let g = file::load_with_fourbar(&link)?.1;
             if json && (chart.is_some() || want.is_some()) {
                 return Err("--json goes with --radius-mm or --straight".into());
             }
@@ -134,8 +165,36 @@ fn run(cli: Cli) -> Result<(), String> {
                 }
             }
         }
-        Cmd::Calibrate { data, write } => {
-            let pts = calibrate::load_points(&data, "measured")?;
+        Cmd::Calibrate {
+            data,
+            measured_on,
+            write,
+        } => {
+            let data = data_or_default(data)?;
+            let d = calibrate::load_data(&data, "measured")?;
+            let from_link = measured_on.map(|f| file::load(&f).map(|q| (f, q.geometry)));
+            let measured = match (d.geometry, from_link.transpose()?) {
+                (Some(g), Some((f, h))) if g != h => {
+                    return Err(format!(
+                        "{} records another geometry than --measured-on {}: {}",
+                        data.display(),
+                        f.display(),
+                        file::geometry_differences(&h, &g).join(", ")
+                    ))
+                }
+                (Some(g), _) | (None, Some((_, g))) => g,
+                (None, None) => {
+                    return Err(format!(
+                        "{} does not say which geometry its radii were measured on: add a line \
+                         `{}` or pass --measured-on LINK.toml",
+                        data.display(),
+                        calibrate::geometry_line(&p.geometry)
+                    ))
+                }
+            };
+            calibrate::check_same_geometry(&p, &measured)
+                .map_err(|e| format!("{}: {e}", data.display()))?;
+            let pts = d.points;
             let fit = calibrate::calibrate(&p, &pts)?;
             let m = fit.params.mechanics;
             println!(
@@ -185,7 +244,7 @@ fn run(cli: Cli) -> Result<(), String> {
             out,
             budget_s,
         } => {
-            let fig9 = charts::load_fig9(&data)?;
+            let fig9 = charts::load_fig9(&data_or_default(data)?)?;
             let summary = charts::run(&p, &fig9, &out, budget_s)?;
             println!("{summary}");
             println!("wrote charts and study.csv to {}", out.display());
@@ -198,7 +257,7 @@ fn run(cli: Cli) -> Result<(), String> {
             if tolerance_mm.is_nan() || tolerance_mm <= 0.0 {
                 return Err(format!("tolerance must be positive, got {tolerance_mm}"));
             }
-            let fig9 = charts::load_fig9(&data)?;
+            let fig9 = charts::load_fig9(&data_or_default(data)?)?;
             let scored = charts::score_all(&p, &fig9, budget_s)?;
             let mut candidates: Vec<&levels::Scored> = scored
                 .iter()

@@ -166,6 +166,7 @@ pub fn phase_timeout_s(mode: &str, phase: &str) -> Option<f64> {
         radius_mm: 40.0,
         tca_power_w: 0.5,
         m: &m,
+        cal: &morphlink::calibration::Calibration::DEFAULT,
     };
     let own = AnyStrategy::new(mode, &start).get().timeout_s(phase);
     use morphlink::sequencer::{

@@ -140,6 +140,7 @@ enum Cmd {
     Config {
         #[command(subcommand)]
         cmd: Option<config::ConfigCmd>,
+    },
     /// Fit the thermal model to this link (TUNE, under 3 minutes of heating); Ctrl-C aborts.
     Tune,
     /// Guided calibration: morph to a few radii, send each measured radius (MEASURED).

@@ -16,9 +16,9 @@ pub const CALIBRATE_FRACTIONS: [f64; 3] = [0.15, 0.5, 0.85];
 /// How much longer than the tune's announced length morphctl waits for its end before it
 /// calls the link lost and sends ABORT: a factor.
 pub const TUNE_WAIT_FACTOR: f64 = 1.5;
-/// The line that stores the calibration once the device has settings storage (`SAVE`), sent
-/// after the last MEASURED; `None` while the firmware has none.
-pub const SAVE_LINE: Option<&str> = None;
+/// The line that stores the calibration with the settings (`SAVE`), sent after the last
+/// MEASURED that counted; a device without settings storage answers `error: unsupported`.
+pub const SAVE_LINE: Option<&str> = Some("SAVE");
 
 /// Runs TUNE and follows its events to `event: tune done` (exit 0), `event: tune failed` or an
 /// alarm (exit 1, heaters already off); anything else ends in ABORT.
