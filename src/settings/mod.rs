@@ -295,12 +295,20 @@ pub const GROUPS: usize = 2;
 /// Decimals `CONFIG` shows for a calibration value (they are stored exactly, as `f32`).
 pub const CALIBRATION_DECIMALS: u8 = 3;
 
-/// The calibration's settings: one per [`FIELDS`] row (`TUNE` and `MEASURED` write them, `SAVE`
-/// keeps them), each defaulting to the compiled-in link's value.
-pub const CALIBRATION_SPECS: [Spec; FIELD_COUNT] = {
-    let mut specs = [Spec::number("", "", 0.0, (0.0, 0.0), 0, ""); FIELD_COUNT];
+/// Calibration fields that are settings: all but the last, its layout `version`, which the
+/// stored form's own [`codec::FORMAT_VERSION`] covers (a setting with one allowed value is none).
+pub const CALIBRATION_SETTINGS: usize = FIELD_COUNT - 1;
+const _: () = assert!(
+    matches!(FIELDS[CALIBRATION_SETTINGS].name.as_bytes(), b"version"),
+    "the calibration's last field is its layout version"
+);
+
+/// The calibration's settings: one per [`FIELDS`] row but the version (`TUNE` and `MEASURED`
+/// write them, `SAVE` keeps them), each defaulting to the compiled-in link's value.
+pub const CALIBRATION_SPECS: [Spec; CALIBRATION_SETTINGS] = {
+    let mut specs = [Spec::number("", "", 0.0, (0.0, 0.0), 0, ""); CALIBRATION_SETTINGS];
     let mut i = 0;
-    while i < FIELD_COUNT {
+    while i < CALIBRATION_SETTINGS {
         let f = FIELDS[i];
         specs[i] = Spec::number(
             f.name,

@@ -146,15 +146,18 @@ impl<S: NorFlash> SettingsStore<S> {
         let mut map = MapStorage::<u8, _, _>::new(&mut counting, config, Cache::new_uncached());
         match map.store_item(&mut buf.0, &SETTINGS_KEY, &bytes).await {
             Ok(()) => {}
-            // An area the map cannot make sense of (never formatted, or written by something
-            // else) holds no settings worth keeping: start it afresh, once.
-            Err(sequential_storage::Error::Corrupted { .. }) => {
+            // An area the map cannot make sense of (never formatted, written by something
+            // else), or one a power cut left with a half-programmed word the map then tries to
+            // program again (the flash refuses a second write): the settings it held were read
+            // at boot and are what the user is replacing, so start the area afresh, once. A cut
+            // between the erase and the write boots with `reason=absent`: defaults, never
+            // garbage (`power_lost_at_any_byte_...` below).
+            Err(_) => {
                 map.erase_all().await.map_err(|_| StoreError::Flash)?;
                 map.store_item(&mut buf.0, &SETTINGS_KEY, &bytes)
                     .await
                     .map_err(|_| StoreError::Flash)?;
             }
-            Err(_) => return Err(StoreError::Flash),
         }
         drop(map);
         Ok(SaveReport {
@@ -210,7 +213,7 @@ mod tests {
         assert_eq!(block_on_ready(st.load()), Err(LoadError::Absent));
         let s = with("lock_timeout_s", "300");
         let r = block_on_ready(st.save(&codec::encode(&s))).unwrap();
-        assert_eq!(r.bytes, 34);
+        assert_eq!(r.bytes, 86);
         assert_eq!(block_on_ready(st.load()), Ok(s));
         // A second SAVE replaces the first.
         let s2 = with("bend_timeout_s", "200");
@@ -249,7 +252,7 @@ mod tests {
             "wear: {erases} page erases in {saves} SAVEs ({per_save:.3} per SAVE); \
              {us:.1} us per SAVE and load on the RAM flash"
         );
-        // Each 2 KiB page holds dozens of 34-byte items: well under one erase per SAVE.
+        // Each 2 KiB page holds dozens of 86-byte items: well under one erase per SAVE.
         assert!(per_save < 0.1, "{per_save}");
     }
 
@@ -293,6 +296,17 @@ mod tests {
 
     #[test]
     fn wear_on_the_f401s_two_128_kib_sectors() {
+        // A 256 KiB flash image moved by value: more than a test thread's stack holds in a
+        // debug build, so the test runs on a thread with room for it.
+        std::thread::Builder::new()
+            .stack_size(32 << 20)
+            .spawn(wear_on_the_f401s_sectors)
+            .unwrap()
+            .join()
+            .unwrap();
+    }
+
+    fn wear_on_the_f401s_sectors() {
         // The F401RE's settings area: two 128 KiB sectors; how many SAVEs fill one.
         type F4 = RamFlash<{ 256 * 1024 }, { 128 * 1024 }, 4>;
         let flash: std::boxed::Box<F4> = std::boxed::Box::default();
@@ -311,6 +325,7 @@ mod tests {
         );
         let n = first_erase.expect("4000 SAVEs fill a 128 KiB sector");
         std::println!("F401 geometry: the first sector erase comes at SAVE {n}");
-        assert!(n > 2000, "{n}");
+        // 128 KiB over a ~100-byte item (the 86-byte blob and its header): over a thousand.
+        assert!(n > 1000, "{n}");
     }
 }
