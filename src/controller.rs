@@ -528,7 +528,7 @@ impl Controller {
     }
 
     /// Whether heating must be refused now (a fault latched, a morph or TUNE running, no reading
-    /// yet): if so, writes the refusal into `l`. MORPH and HEAT share it.
+    /// yet): if so, writes the refusal into `l`. MORPH, HEAT and TUNE share it.
     fn refused(&self, l: &mut OutLine) -> bool {
         if let Some(f) = self.fault() {
             reply::fault_latched(l, f.code);
@@ -816,25 +816,15 @@ impl Controller {
 
     fn start_tune(&mut self, now_ms: u64, out: &mut impl FnMut(&str)) {
         let mut l = OutLine::new();
-        if let Some(f) = self.fault() {
-            reply::fault_latched(&mut l, f.code);
-            return out(&l);
-        }
-        if self.seq.busy() {
-            reply::busy_morphing(&mut l, self.seq.phase());
-            return out(&l);
-        }
-        if self.tune.is_some() {
-            tune_reply::busy_tuning(&mut l);
+        if self.refused(&mut l) {
             return out(&l);
         }
         if self.pulse.is_some() {
             return out(&protocol::format_error(&reply::ERR_BUSY_HEATING));
         }
+        // TUNE judges every sensor's rise over ambient: all three must read.
         let m = self.sup.measurements();
-        if self.frame.is_none()
-            || !(m.t_pla_c.is_finite() && m.t_tca_c.is_finite() && m.t_amb_c.is_finite())
-        {
+        if !(m.t_tca_c.is_finite() && m.t_amb_c.is_finite()) {
             reply::busy_no_reading(&mut l);
             return out(&l);
         }
