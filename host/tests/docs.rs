@@ -38,7 +38,6 @@ struct Cmd {
 /// One marked block.
 #[derive(Debug)]
 struct Block {
-    file: PathBuf,
     /// 1-based line of the marker.
     line: usize,
     cmds: Vec<Cmd>,
@@ -103,7 +102,6 @@ fn blocks_in(file: &Path) -> Result<Vec<Block>, String> {
             end += 1;
         }
         out.push(Block {
-            file: file.to_path_buf(),
             line,
             cmds,
             tol,
