@@ -156,7 +156,7 @@ fn settings_cannot_change_or_be_saved_while_a_morph_runs() {
         assert_eq!(r.len(), 1, "{r:?}");
         assert!(
             r[0].starts_with(
-                "error: busy settings stay as they are while a morph runs (phase soften)"
+                "error: busy settings stay as they are while a morph, TUNE or HEAT runs (phase soften)"
             ),
             "{line}: {}",
             r[0]
@@ -171,6 +171,33 @@ fn settings_cannot_change_or_be_saved_while_a_morph_runs() {
         b.send("CONFIG SET lock_timeout_s 300"),
         ["ok lock_timeout_s=300.0 saved=no"]
     );
+}
+
+#[test]
+fn settings_cannot_change_or_be_saved_while_a_tune_or_a_heat_pulse_runs() {
+    // A flash erase may stall the CPU past a control tick: SAVE only with the heaters off.
+    for start in ["TUNE", "HEAT pla 0.5 20"] {
+        let mut b = with_flash(Some(SimFlash::new()));
+        b.run_for(2.0);
+        let r = b.send(start);
+        assert!(r[0].starts_with("ok"), "{start}: {r:?}");
+        b.run_for(1.0);
+        assert!(b.rig.ctrl.busy(), "{start}");
+        for line in ["CONFIG SET lock_timeout_s 300", "CONFIG RESET", "SAVE"] {
+            let r = b.send(line);
+            assert!(
+                r[0].starts_with(
+                    "error: busy settings stay as they are while a morph, TUNE or HEAT runs"
+                ),
+                "{start}, {line}: {r:?}"
+            );
+        }
+        assert_eq!(b.rig.saves(), 0, "{start}");
+        assert_eq!(*b.rig.ctrl.settings(), Settings::DEFAULT, "{start}");
+        assert_eq!(b.send("ABORT"), ["ok"]);
+        assert!(!b.rig.ctrl.busy(), "{start}");
+        assert!(b.send("SAVE")[0].starts_with("ok saved"), "{start}");
+    }
 }
 
 #[test]

@@ -1003,13 +1003,14 @@ pub fn config_out_of_range(l: &mut OutLine, r: &SettingRow, v: f32) {
 }
 
 /// `CONFIG SET`, `CONFIG RESET` or `SAVE` while a morph runs:
-/// `error: busy settings stay as they are while a morph runs (phase <p>); ABORT or wait for done`.
+/// `error: busy settings stay as they are while a morph, TUNE or HEAT runs (phase <p>); ABORT or
+/// wait for done`.
 pub fn config_busy(l: &mut OutLine, phase: Phase) {
     error(
         l,
         ErrorCode::Busy,
         format_args!(
-            "settings stay as they are while a morph runs (phase {}); ABORT or wait for done",
+            "settings stay as they are while a morph, TUNE or HEAT runs (phase {}); ABORT or wait for done",
             phase.as_str()
         ),
     );
