@@ -15,6 +15,7 @@ use morphlink::controller::TICK_MS;
 use morphlink::protocol::{Command, Mode};
 use morphlink::table;
 use morphlink_host::plot::{self, prelude::*};
+use morphlink_model::draw::{splitmix, uniform};
 use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
 use morphlink_plant::{Lumped, Plant};
 use morphlink_sim::ensemble::{Mismatch, MAX_MORPH_S, SETTLE_AFTER_DONE_S};
@@ -23,6 +24,8 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
+
+use crate::strategies::targets;
 
 /// Lumped links drawn by default (each: TUNE, 3 measured morphs, 25 evaluated morphs).
 pub const DEFAULT_DRAWS: u64 = 100;
@@ -229,35 +232,6 @@ fn run_link(
         tune_line,
         evals,
     }
-}
-
-/// SplitMix64: the next value of the measuring error's generator.
-fn splitmix(s: &mut u64) -> u64 {
-    *s = s.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    let mut z = *s;
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
-/// Uniform in `[lo, hi)`.
-fn uniform(s: &mut u64, (lo, hi): (f64, f64)) -> f64 {
-    lo + (hi - lo) * (splitmix(s) >> 11) as f64 / (1u64 << 53) as f64
-}
-
-fn targets(n: usize) -> Vec<f32> {
-    let (min, max) = table::range_mm();
-    let n = n.max(1);
-    (0..n)
-        .map(|i| {
-            let f = if n == 1 {
-                0.5
-            } else {
-                i as f32 / (n - 1) as f32
-            };
-            (min + 0.2) + (max - min - 0.4) * f
-        })
-        .collect()
 }
 
 fn percentile(sorted: &[f64], p: f64) -> f64 {

@@ -135,7 +135,7 @@ struct OracleRow {
 }
 
 /// Targets spread over the reachable range, ends 0.2 mm inside.
-fn targets(n: usize) -> Vec<f32> {
+pub(crate) fn targets(n: usize) -> Vec<f32> {
     let (min, max) = table::range_mm();
     let n = n.max(1);
     (0..n)

@@ -8,6 +8,7 @@
 //! that polls the link and the keyboard.
 
 use crate::link::{field, Link, LinkError, REPLY_TIMEOUT_S};
+use crate::sim_time_and_radius;
 use crate::telemetry::Sample;
 use morphlink::heater::HeaterConfig;
 use morphlink::protocol::client::{classify, LineKind};
@@ -531,19 +532,6 @@ pub fn run(
             Err(e) => return LiveEnd::Broken(e),
         }
     }
-}
-
-/// Link time and true radius from `SIM STATE` on a simulator; None on a board.
-fn sim_time_and_radius(
-    link: &mut Link,
-    on_event: &mut dyn FnMut(&str),
-) -> Result<Option<(f64, f64)>, LinkError> {
-    if !link.simulated {
-        return Ok(None);
-    }
-    let (_, st) = link.command("SIM STATE", REPLY_TIMEOUT_S, on_event)?;
-    let num = |key: &str| field(&st, key)?.parse::<f64>().ok();
-    Ok(num("time_s").zip(num("radius_mm")))
 }
 
 #[cfg(test)]

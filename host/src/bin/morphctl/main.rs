@@ -412,7 +412,7 @@ struct MorphOpts {
     timeout_s: f64,
 }
 
-/// Link time from `SIM STATE` on the simulator, s; None on a board.
+/// Link time (s) and true radius (mm) from `SIM STATE` on the simulator; None on a board.
 /// A link that fails is an error; a reply without the numbers is None.
 fn sim_time_and_radius(
     link: &mut Link,
