@@ -8,6 +8,7 @@
 //! `healthy_morphs_raise_no_false_alarm_on_either_link`); a check there uses only the modes whose
 //! healthy morph gets through the check without that alarm (`bench_in`, `healthy`): an alarm
 //! there could not be told from the false one.
+#[macro_use]
 mod common;
 use common::{Bench, Link};
 use morphlink::controller::Outputs;
@@ -29,23 +30,6 @@ const PHASES: [Phase; 5] = [
 
 /// Every MORPH mode.
 const MODES: [&str; 5] = ["auto", "paper", "gated", "boost", "closed"];
-
-/// One test per plant for each check `name(link)`: `name::lumped` and `name::hifi`.
-macro_rules! on_both_links {
-    ($($name:ident),* $(,)?) => {$(
-        mod $name {
-            use super::Link;
-            #[test]
-            fn lumped() {
-                super::$name(Link::Lumped)
-            }
-            #[test]
-            fn hifi() {
-                super::$name(Link::Hifi)
-            }
-        }
-    )*};
-}
 
 /// KNOWN DEFECT (of the strategy, not of the supervisor), measured: the healthy morphs on the
 /// nominal hifi link, to the targets these tests use, that end in an alarm: (mode, target mm,

@@ -3,6 +3,7 @@
 //! thermistor that opens, ABORT in every step) ends with both heaters off, a clear alarm or
 //! event and the old calibration kept; MEASURED refuses bad input; a few measured morphs bring
 //! a mismatched link's error down.
+#[macro_use]
 mod common;
 use common::{Bench, Link};
 use morphlink::calibration::{Calibration, FIELDS};
@@ -14,22 +15,6 @@ const ZERO: Outputs = Outputs {
     pla_duty: 0.0,
     tca_duty: 0.0,
 };
-
-macro_rules! on_both_links {
-    ($($name:ident),* $(,)?) => {$(
-        mod $name {
-            use super::Link;
-            #[test]
-            fn lumped() {
-                super::$name(Link::Lumped)
-            }
-            #[test]
-            fn hifi() {
-                super::$name(Link::Hifi)
-            }
-        }
-    )*};
-}
 
 on_both_links!(
     a_healthy_link_tunes_within_bounds_and_raises_no_alarm,

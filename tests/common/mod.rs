@@ -3,6 +3,25 @@
 //! from different physics; docs/plant.md).
 #![allow(dead_code)]
 
+/// One test per plant for each check `name(link)`: `name::lumped` and `name::hifi` (import
+/// with `#[macro_use] mod common;`).
+#[allow(unused_macros)]
+macro_rules! on_both_links {
+    ($($name:ident),* $(,)?) => {$(
+        mod $name {
+            use super::Link;
+            #[test]
+            fn lumped() {
+                super::$name(Link::Lumped)
+            }
+            #[test]
+            fn hifi() {
+                super::$name(Link::Hifi)
+            }
+        }
+    )*};
+}
+
 use std::sync::OnceLock;
 
 use morphlink::bench::Noise;
