@@ -5,11 +5,11 @@
 //! Two embassy tasks share one [`morphlink::controller::Controller`]:
 //! - `control`, every [`TICK_MS`] (10 Hz): ADC burst (16 samples per input) → `Controller::step`
 //!   → PWM duties; feeds the watchdog; records its timing for `STATS`.
-//! - `serial`: bytes from the board's serial port → `LineAssembler` →
-//!   `Controller::handle_line` → replies; also writes queued events and alarms. Input is never
-//!   left waiting behind output: replies queue in a bounded output buffer and are dropped (and
-//!   counted, then reported in one `error: busy` line) when it is full; lost input marks its
-//!   line as an overrun; an ABORT line is acted on as soon as its bytes are read.
+//! - `serial`: bytes from the board's serial port → `SerialInput` (line assembly, the
+//!   ABORT-first scan) → `Controller::handle_line` → replies into an `Outbox`, with queued
+//!   events and alarms → the port. The rules (input never waits behind output; replies the
+//!   line cannot carry are dropped and counted; lost input makes its line an overrun; an ABORT
+//!   acts as soon as its bytes are read) are the core's, in `morphlink::protocol::serial`.
 //!
 //! Both are written once against the board traits of `morphlink-boards`; the board (pins,
 //! clocks, memory) is the one its `board-*` feature selects.
@@ -44,10 +44,8 @@ mod firmware {
     use embassy_time::{Duration, Instant, Ticker, Timer};
     use embedded_io_async::Write;
     use morphlink::controller::{Config, Controller, Inputs, MAX_REPLY_BYTES, OVERSAMPLE, TICK_MS};
-    use morphlink::protocol::{
-        format_error, parse_line, reply, Assembled, Command, LineAssembler, OutLine, Overrun,
-        SimCommand, ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
-    };
+    use morphlink::protocol::serial::{is_abort, Outbox, SerialInput};
+    use morphlink::protocol::{format_error, reply, Command, OutLine, ProtoError, SimCommand};
     use morphlink::settings::codec::LoadError;
     use morphlink::settings::store::SettingsStore;
     use morphlink::stats::{write_boot_line, LoopTiming};
@@ -239,130 +237,36 @@ mod firmware {
 
     /// Output waiting for the serial port, bytes: two of the longest replies (HELP).
     const OUT_BYTES: usize = 2 * REPLY_BYTES;
-    /// Room kept free of replies for event and alarm lines and the dropped-replies notice:
-    /// two maximal lines with their endings.
-    const OUT_RESERVE: usize = 2 * LINE_ROOM;
-    /// Room for one line and its ending: [`OutLine`]'s capacity and a newline.
-    const LINE_ROOM: usize = 192 + 1;
-    /// Most bytes handed to the serial port in one go before the serial task yields (a board
-    /// may take fewer: the emulated port takes four, each a slow QEMU round trip).
-    const TX_CHUNK: usize = 64;
-
-    /// Replies, events and alarms waiting for the serial port, and the replies dropped
-    /// because there was no room (their commands were run).
-    struct Output {
-        q: heapless::Deque<u8, OUT_BYTES>,
-        dropped: u32,
-    }
-
-    impl Output {
-        fn room(&self) -> usize {
-            OUT_BYTES - self.q.len()
-        }
-
-        /// Queues all of `s` if at least `keep` bytes stay free after it; else nothing.
-        fn offer(&mut self, s: &str, keep: usize) -> bool {
-            if s.len() + keep > self.room() {
-                return false;
-            }
-            for b in s.bytes() {
-                let _ = self.q.push_back(b);
-            }
-            true
-        }
-
-        /// The oldest queued bytes, at most [`TX_CHUNK`].
-        fn chunk(&self) -> &[u8] {
-            let (a, _) = self.q.as_slices();
-            &a[..a.len().min(TX_CHUNK)]
-        }
-
-        fn sent(&mut self, n: usize) {
-            for _ in 0..n {
-                self.q.pop_front();
-            }
-        }
-
-        /// Queues the dropped-replies notice and any event and alarm lines that fit.
-        fn refill(&mut self) {
-            let line_room = LINE_ROOM;
-            // Once the congestion is over (all queued output sent): one notice per flood.
-            if self.dropped > 0 && self.q.is_empty() {
-                let mut l = OutLine::new();
-                reply::replies_dropped(&mut l, self.dropped);
-                let _ = l.push('\n');
-                if self.offer(&l, 0) {
-                    self.dropped = 0;
-                }
-            }
-            while self.room() >= line_room {
-                let Some(mut line) = with_controller(|c| c.pop_event_line()) else {
-                    break;
-                };
-                let _ = line.push('\n');
-                self.offer(&line, 0);
-            }
-        }
-    }
 
     /// Answers one finished line into `reply`; says whether it was an ABORT.
     fn answer(
         c: &mut Controller,
         now_ms: u64,
-        line: Result<Assembled<'_>, Overrun>,
+        line: Result<&str, &ProtoError>,
         reply: &mut heapless::String<REPLY_BYTES>,
     ) -> bool {
         let mut out = |l: &str| push_line(reply, l);
         match line {
-            Ok(Assembled::Line(l)) => {
-                let abort = matches!(parse_line(l), Ok(Some(Command::Abort)));
+            Ok(l) => {
                 if let Some(sim) = c.handle_line(now_ms, l, &mut out) {
                     sim_command(c, now_ms, sim, &mut out);
                 }
-                return abort;
+                is_abort(l)
             }
-            Ok(Assembled::TooLong) => out(&format_error(&ERR_LINE_TOO_LONG)),
-            Ok(Assembled::Invalid) => out(&format_error(&ERR_INVALID_LINE)),
-            Err(Overrun) => out(&format_error(&reply::ERR_OVERRUN)),
-        }
-        false
-    }
-
-    /// ABORT first: if `bytes` (just received) hold a whole line that is ABORT, the controller
-    /// aborts now, before the lines ahead of it are answered; the line itself is answered in
-    /// its turn (a second ABORT changes nothing). A line counts if it starts in `bytes` after
-    /// a line end, or at their start when `at_line_start`, and ends in them.
-    fn abort_first(bytes: &[u8], at_line_start: bool) {
-        let mut start = if at_line_start { Some(0) } else { None };
-        for (i, &b) in bytes.iter().enumerate() {
-            if b != b'\r' && b != b'\n' {
-                continue;
+            Err(e) => {
+                out(&format_error(e));
+                false
             }
-            if let Some(s) = start {
-                let seg = &bytes[s..i];
-                if seg.len() <= 16 {
-                    if let Ok(text) = core::str::from_utf8(seg) {
-                        if let Ok(Some(Command::Abort)) = parse_line(text) {
-                            let now_ms = Instant::now().as_millis();
-                            with_controller(|c| c.handle(now_ms, Command::Abort, &mut |_| {}));
-                            APPLY_NOW.signal(());
-                            return;
-                        }
-                    }
-                }
-            }
-            start = Some(i + 1);
         }
     }
 
-    /// The serial line: commands in, replies, events and alarms out.
+    /// The serial line: commands in, replies, events and alarms out; the decisions are the
+    /// core's (`morphlink::protocol::serial`), this loop only moves bytes.
     ///
     /// Input is never left waiting behind output: each pass answers at most one line, writes
-    /// at most [`TX_CHUNK`] bytes and yields, and waits on the port only for whichever of
-    /// input, room to write or events comes first. A reply that finds [`Output`] full is
-    /// dropped and counted (its command was run); the count goes out as one `error: busy`
-    /// line once all queued output is out, and until then later replies are dropped too. Lost
-    /// input makes its line an overrun error.
+    /// at most one [`Outbox::chunk`] and yields, and waits on the port only for whichever of
+    /// input, room to write or events comes first. A whole ABORT line is acted on as soon as
+    /// its bytes are read, before the lines ahead of it are answered.
     async fn serial_loop(
         mut tx: impl Write,
         mut rx: impl SerialReceive,
@@ -370,33 +274,23 @@ mod firmware {
         mut store: Store,
     ) {
         let mut reply: heapless::String<REPLY_BYTES> = heapless::String::new();
-        let mut out = Output {
-            q: heapless::Deque::new(),
-            dropped: 0,
-        };
-        let mut boot_line = boot;
-        let _ = boot_line.push('\n');
-        out.offer(&boot_line, 0);
-        let mut assembler = LineAssembler::new();
-        let mut inbuf = [0u8; SERIAL_RX_BYTES];
-        let (mut pos, mut len, mut lost) = (0usize, 0usize, false);
+        let mut out: Outbox<OUT_BYTES> = Outbox::new();
+        out.push_line(&boot);
+        let mut input: SerialInput<SERIAL_RX_BYTES> = SerialInput::new();
+        let events = || with_controller(|c| c.pop_event_line());
         loop {
-            out.refill();
-            if pos < len || lost {
-                // One line's worth of the received bytes.
-                while pos < len {
-                    let byte = inbuf[pos];
-                    pos += 1;
-                    let Some(line) = assembler.push_checked(byte) else {
-                        continue;
-                    };
+            out.refill(events);
+            if !input.is_drained() {
+                let answered = input.next_line(|line| {
                     reply.clear();
                     let now_ms = Instant::now().as_millis();
-                    let (abort, changed) = with_controller(|c| {
+                    with_controller(|c| {
                         let before = c.outputs();
                         let abort = answer(c, now_ms, line, &mut reply);
                         (abort, c.outputs() != before)
-                    });
+                    })
+                });
+                if let Some((abort, changed)) = answered {
                     if changed || abort {
                         APPLY_NOW.signal(());
                     }
@@ -412,27 +306,12 @@ mod firmware {
                             });
                         }
                     }
-                    // Once one reply is dropped, the following ones are too until the notice
-                    // is out, so the notice counts the replies right before it (an ABORT's
-                    // reply still goes out, in the room kept free).
-                    let queued = if abort {
-                        out.offer(&reply, 0)
-                    } else {
-                        out.dropped == 0 && out.offer(&reply, OUT_RESERVE)
-                    };
-                    if !queued && !reply.is_empty() {
-                        out.dropped += 1;
-                    }
+                    out.push_reply(&reply, abort);
                     // A MORPH's first event follows its `ok`.
-                    out.refill();
-                    break;
-                }
-                if pos == len && lost {
-                    assembler.overrun();
-                    lost = false;
+                    out.refill(events);
                 }
                 // Offer output without waiting for room, then let the control task run.
-                if !out.q.is_empty() {
+                if !out.is_empty() {
                     if let Either::First(r) = select(tx.write(out.chunk()), yield_now()).await {
                         sent(&mut out, r);
                     }
@@ -441,13 +320,19 @@ mod firmware {
                 continue;
             }
             // Everything received is answered: wait for input, room to write, or events.
-            let got: Option<Received> = if out.q.is_empty() {
-                match select(rx.receive(&mut inbuf), EVENTS.wait()).await {
+            let got: Option<Received> = if out.is_empty() {
+                match select(rx.receive(input.buffer()), EVENTS.wait()).await {
                     Either::First(r) => Some(r),
                     Either::Second(()) => None,
                 }
             } else {
-                match select3(rx.receive(&mut inbuf), tx.write(out.chunk()), EVENTS.wait()).await {
+                match select3(
+                    rx.receive(input.buffer()),
+                    tx.write(out.chunk()),
+                    EVENTS.wait(),
+                )
+                .await
+                {
                     Either3::First(r) => Some(r),
                     Either3::Second(r) => {
                         sent(&mut out, r);
@@ -458,22 +343,24 @@ mod firmware {
                 }
             };
             if let Some(r) = got {
-                pos = 0;
-                len = r.len.min(inbuf.len());
-                lost = r.lost_after;
-                abort_first(&inbuf[..len], assembler.at_line_start());
+                if input.received(r.len, r.lost_after) {
+                    // ABORT first: the heaters stop now; the line is answered in its turn (a
+                    // second ABORT changes nothing).
+                    let now_ms = Instant::now().as_millis();
+                    with_controller(|c| c.handle(now_ms, Command::Abort, &mut |_| {}));
+                    APPLY_NOW.signal(());
+                }
             }
         }
     }
 
     /// Drops what a write took from `out` (a failed write drops the chunk, logged).
-    fn sent<E>(out: &mut Output, r: Result<usize, E>) {
+    fn sent<E, const N: usize>(out: &mut Outbox<N>, r: Result<usize, E>) {
         match r {
             Ok(n) => out.sent(n),
             Err(_) => {
                 defmt::warn!("serial send error");
-                let n = out.chunk().len();
-                out.sent(n);
+                out.send_failed();
             }
         }
     }

@@ -1,6 +1,7 @@
 //! Protocol v1: the one home of the wire text. Bounded line assembly and the vocabulary here,
-//! command parsing in [`command`], every reply, event and alarm line in [`reply`], and the
-//! client side's line classifier in [`client`]. No other module writes wire text (checked by
+//! command parsing in [`command`], every reply, event and alarm line in [`reply`], the serial
+//! path's input and output queues and ABORT-first scan in [`serial`], and the client side's
+//! line classifier in [`client`]. No other module writes wire text (checked by
 //! `tests/wire_text.rs`).
 //!
 //! ASCII lines ending in `\n`, `\r` or `\r\n`, at most [`MAX_LINE`] characters,
@@ -11,6 +12,7 @@
 pub mod client;
 pub mod command;
 pub mod reply;
+pub mod serial;
 pub mod tune_reply;
 
 pub use client::{classify, is_final_reply, LineKind};
@@ -454,8 +456,11 @@ pub const ERR_INVALID_LINE: ProtoError = ProtoError {
     text: "The line is not valid text; commands are plain ASCII.",
 };
 
-/// One reply or event line, without its line ending. 192 bytes hold the longest `data:` line.
-pub type OutLine = heapless::String<192>;
+/// Capacity of an [`OutLine`], bytes: the longest `data:` line fits.
+pub const OUT_LINE_BYTES: usize = 192;
+
+/// One reply or event line, without its line ending, at most [`OUT_LINE_BYTES`].
+pub type OutLine = heapless::String<OUT_LINE_BYTES>;
 
 /// Formats `error: <code> <text>` (truncated at [`OutLine`]'s capacity, which no built-in text
 /// reaches).

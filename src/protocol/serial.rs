@@ -1,0 +1,563 @@
+//! The serial path's decisions, for any byte stream: received bytes into lines
+//! ([`SerialInput`], with the ABORT-first scan [`AbortScan`]) and replies, events and alarms
+//! out ([`Outbox`], the bounded queue that drops and counts replies rather than input). The
+//! firmware's serial task only moves bytes between these and the board's port
+//! (docs/firmware.md, "The serial path under a flood"); the host tests drive them directly.
+
+use super::reply::{replies_dropped, ERR_OVERRUN};
+use super::{
+    parse_line, Assembled, Command, LineAssembler, OutLine, Overrun, ProtoError, ERR_INVALID_LINE,
+    ERR_LINE_TOO_LONG, OUT_LINE_BYTES,
+};
+use heapless::Deque;
+
+/// Room for one queued line and its `\n`, bytes: [`OutLine`]'s capacity and one.
+pub const LINE_ROOM: usize = OUT_LINE_BYTES + 1;
+
+/// Room an [`Outbox`] keeps free of replies, bytes: two maximal lines with their endings, for
+/// event and alarm lines, the dropped-replies notice and an ABORT's reply, so none of them
+/// waits behind a flood of replies.
+pub const OUT_RESERVE: usize = 2 * LINE_ROOM;
+
+/// Most bytes [`Outbox::chunk`] offers the port in one write, so the serial task yields to the
+/// control task between writes (a port may take fewer: the emulated one takes one byte).
+pub const TX_CHUNK: usize = 64;
+const _: () = assert!(TX_CHUNK > 0 && TX_CHUNK <= LINE_ROOM);
+
+/// Longest line the ABORT-first scan considers, bytes: `ABORT` with room for surrounding
+/// blanks; a longer ABORT line is still run, in its turn.
+pub const ABORT_SCAN_BYTES: usize = 16;
+const _: () = assert!(ABORT_SCAN_BYTES >= "ABORT".len());
+
+/// True if `line` (without its ending) is the ABORT command.
+pub fn is_abort(line: &str) -> bool {
+    matches!(parse_line(line), Ok(Some(Command::Abort)))
+}
+
+/// The ABORT-first scan: fed every received read as it arrives, it says whether an `ABORT`
+/// line ended in it, so the shell can stop the heaters before answering the lines read ahead
+/// of it. It follows line boundaries itself (`\r`, `\n`, `\r\n`), so an ABORT split across
+/// two reads is found in the second; after lost input it ignores the line in progress, as
+/// [`LineAssembler`] makes that line an overrun.
+#[derive(Clone, Debug)]
+pub struct AbortScan {
+    line: [u8; ABORT_SCAN_BYTES],
+    len: u8,
+    /// The line in progress cannot be an ABORT (too long, or it lost bytes).
+    skip: bool,
+}
+
+impl Default for AbortScan {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl AbortScan {
+    /// A scan at a line start.
+    pub const fn new() -> Self {
+        Self {
+            line: [0; ABORT_SCAN_BYTES],
+            len: 0,
+            skip: false,
+        }
+    }
+
+    /// Scans one read: true if a whole ABORT line (started here or in an earlier read) ends in
+    /// `bytes`. `lost_after`: input was lost right after them.
+    pub fn scan(&mut self, bytes: &[u8], lost_after: bool) -> bool {
+        let mut found = false;
+        for &b in bytes {
+            if b == b'\r' || b == b'\n' {
+                let len = usize::from(self.len);
+                found |= !self.skip && core::str::from_utf8(&self.line[..len]).is_ok_and(is_abort);
+                self.len = 0;
+                self.skip = false;
+            } else if !self.skip {
+                match self.line.get_mut(usize::from(self.len)) {
+                    Some(slot) => {
+                        *slot = b;
+                        self.len += 1;
+                    }
+                    None => self.skip = true,
+                }
+            }
+        }
+        if lost_after {
+            self.len = 0;
+            self.skip = true;
+        }
+        found
+    }
+}
+
+/// Received bytes on their way to lines: one read's buffer of `N` bytes, the
+/// [`LineAssembler`] and the [`AbortScan`]. The shell receives into [`SerialInput::buffer`]
+/// only when [`SerialInput::is_drained`], reports it with [`SerialInput::received`], then
+/// takes lines one at a time with [`SerialInput::next_line`], doing other work between them.
+pub struct SerialInput<const N: usize> {
+    buf: [u8; N],
+    pos: usize,
+    len: usize,
+    lost: bool,
+    lines: LineAssembler,
+    scan: AbortScan,
+}
+
+impl<const N: usize> Default for SerialInput<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> SerialInput<N> {
+    /// Nothing received, at a line start.
+    pub const fn new() -> Self {
+        Self {
+            buf: [0; N],
+            pos: 0,
+            len: 0,
+            lost: false,
+            lines: LineAssembler::new(),
+            scan: AbortScan::new(),
+        }
+    }
+
+    /// True once every received byte has been through the assembler (and a loss after them
+    /// marked): time to receive again.
+    pub fn is_drained(&self) -> bool {
+        self.pos >= self.len && !self.lost
+    }
+
+    /// Where the next read goes (only while [`SerialInput::is_drained`]: the bytes not yet
+    /// assembled would be overwritten).
+    pub fn buffer(&mut self) -> &mut [u8] {
+        &mut self.buf
+    }
+
+    /// Reports a read of `len` bytes into [`SerialInput::buffer`], `lost_after` if input was
+    /// lost right after them. True if an ABORT line ended in them: the shell acts on it now;
+    /// the line is still answered in its turn.
+    pub fn received(&mut self, len: usize, lost_after: bool) -> bool {
+        self.pos = 0;
+        self.len = len.min(N);
+        self.lost = lost_after;
+        self.scan.scan(&self.buf[..self.len], lost_after)
+    }
+
+    /// Assembles up to the end of the next line and hands `f` what to do with it: the line to
+    /// run (without its ending, maybe blank) or the error that answers it (too long, not text,
+    /// or it lost bytes: never run). `None` when the received bytes end without a line end.
+    pub fn next_line<R>(
+        &mut self,
+        f: impl FnOnce(Result<&str, &'static ProtoError>) -> R,
+    ) -> Option<R> {
+        let mut answer = None;
+        while self.pos < self.len {
+            let byte = self.buf[self.pos];
+            self.pos += 1;
+            if let Some(line) = self.lines.push_checked(byte) {
+                answer = Some(f(match line {
+                    Ok(Assembled::Line(l)) => Ok(l),
+                    Ok(Assembled::TooLong) => Err(&ERR_LINE_TOO_LONG),
+                    Ok(Assembled::Invalid) => Err(&ERR_INVALID_LINE),
+                    Err(Overrun) => Err(&ERR_OVERRUN),
+                }));
+                break;
+            }
+        }
+        if self.pos >= self.len && self.lost {
+            self.lines.overrun();
+            self.lost = false;
+        }
+        answer
+    }
+}
+
+/// Replies, events and alarms waiting for the serial port, in an `N`-byte queue, and the
+/// replies dropped for want of room (their commands were run).
+///
+/// A reply goes in whole only if [`OUT_RESERVE`] bytes stay free after it; once one is
+/// dropped, every later one is too until the queue has emptied, and then one
+/// `error: busy <n> replies dropped` notice goes out, so the notice counts the replies right
+/// before it. Input never waits for this queue: a flood costs replies, never commands.
+pub struct Outbox<const N: usize> {
+    q: Deque<u8, N>,
+    dropped: u32,
+}
+
+impl<const N: usize> Default for Outbox<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> Outbox<N> {
+    /// An empty queue. `N` must hold a maximal line beyond [`OUT_RESERVE`].
+    pub const fn new() -> Self {
+        const { assert!(N >= OUT_RESERVE + LINE_ROOM) };
+        Self {
+            q: Deque::new(),
+            dropped: 0,
+        }
+    }
+
+    /// True when nothing waits for the port.
+    pub fn is_empty(&self) -> bool {
+        self.q.is_empty()
+    }
+
+    /// Replies dropped since the last notice went out.
+    pub fn dropped(&self) -> u32 {
+        self.dropped
+    }
+
+    fn room(&self) -> usize {
+        N - self.q.len()
+    }
+
+    /// Queues all of `s` if at least `keep` bytes stay free after it; else nothing.
+    fn offer(&mut self, s: &str, keep: usize) -> bool {
+        if s.len() + keep > self.room() {
+            return false;
+        }
+        for b in s.bytes() {
+            let _ = self.q.push_back(b);
+        }
+        true
+    }
+
+    /// Queues one unsolicited line (the boot line, an event) and its `\n` if it fits; says so.
+    pub fn push_line(&mut self, line: &str) -> bool {
+        let fits = self.offer(line, 1);
+        if fits {
+            let _ = self.q.push_back(b'\n');
+        }
+        fits
+    }
+
+    /// Queues the whole reply to one command (its lines with their endings) or counts it as
+    /// dropped. An ABORT's reply may use the reserved room, so it is never dropped behind a
+    /// flood.
+    pub fn push_reply(&mut self, reply: &str, abort: bool) {
+        let queued = if abort {
+            self.offer(reply, 0)
+        } else {
+            self.dropped == 0 && self.offer(reply, OUT_RESERVE)
+        };
+        if !queued && !reply.is_empty() {
+            self.dropped += 1;
+        }
+    }
+
+    /// Queues the dropped-replies notice once everything before it is out, then as many event
+    /// and alarm lines from `next_event` as there is room for.
+    pub fn refill(&mut self, mut next_event: impl FnMut() -> Option<OutLine>) {
+        if self.dropped > 0 && self.q.is_empty() {
+            let mut l = OutLine::new();
+            replies_dropped(&mut l, self.dropped);
+            if self.push_line(&l) {
+                self.dropped = 0;
+            }
+        }
+        while self.room() >= LINE_ROOM {
+            let Some(line) = next_event() else {
+                break;
+            };
+            self.push_line(&line);
+        }
+    }
+
+    /// The oldest queued bytes, at most [`TX_CHUNK`] (empty when nothing is queued).
+    pub fn chunk(&self) -> &[u8] {
+        let (a, _) = self.q.as_slices();
+        &a[..a.len().min(TX_CHUNK)]
+    }
+
+    /// Removes the `n` oldest bytes: the port took them.
+    pub fn sent(&mut self, n: usize) {
+        for _ in 0..n {
+            self.q.pop_front();
+        }
+    }
+
+    /// Removes the bytes of the current [`Outbox::chunk`]: the port failed to send them.
+    pub fn send_failed(&mut self) {
+        self.sent(self.chunk().len());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use std::{string::String, vec::Vec};
+
+    /// Everything in `out`, sent as the port would take it.
+    fn drain<const N: usize>(out: &mut Outbox<N>) -> String {
+        let mut sent = Vec::new();
+        while !out.is_empty() {
+            let c = out.chunk();
+            assert!(!c.is_empty() && c.len() <= TX_CHUNK);
+            sent.extend_from_slice(c);
+            let n = c.len();
+            out.sent(n);
+        }
+        String::from_utf8(sent).unwrap()
+    }
+
+    const SMALL: usize = OUT_RESERVE + 2 * LINE_ROOM;
+
+    #[test]
+    fn a_full_queue_drops_and_counts_replies_and_sends_one_notice_per_flood() {
+        let mut out: Outbox<SMALL> = Outbox::new();
+        let reply = "ok phase=idle t_pla_c=22.0 t_tca_c=22.0 with some more words\n";
+        let fits = (SMALL - OUT_RESERVE) / reply.len();
+        for _ in 0..fits + 5 {
+            out.push_reply(reply, false);
+        }
+        assert_eq!(out.dropped(), 5);
+        // The notice waits until everything queued before it is out.
+        out.refill(|| None);
+        assert_eq!(out.dropped(), 5);
+        // Room again, but the flood is not over until the queue is empty: still dropped.
+        out.sent(reply.len());
+        out.push_reply(reply, false);
+        assert_eq!(out.dropped(), 6);
+        let rest = drain(&mut out);
+        assert_eq!(rest.matches("ok phase=").count(), fits - 1);
+        out.refill(|| None);
+        let notice = drain(&mut out);
+        assert!(
+            notice.starts_with("error: busy 6 replies dropped"),
+            "{notice}"
+        );
+        assert_eq!(notice.matches('\n').count(), 1);
+        assert_eq!(out.dropped(), 0);
+        // A second flood is counted afresh; an empty reply (a blank line) is never counted.
+        out.push_reply("", false);
+        out.push_reply(reply, false);
+        assert_eq!(out.dropped(), 0);
+        assert_eq!(drain(&mut out), reply);
+    }
+
+    #[test]
+    fn an_abort_reply_and_events_use_the_reserve_behind_a_flood() {
+        let mut out: Outbox<SMALL> = Outbox::new();
+        let reply = "x".repeat(LINE_ROOM - 1) + "\n";
+        while out.dropped() == 0 {
+            out.push_reply(&reply, false);
+        }
+        out.push_reply("ok\n", true);
+        assert_eq!(out.dropped(), 1, "the ABORT's ok is queued");
+        let mut events = ["event: phase bend", "alarm: x"].into_iter().map(|e| {
+            let mut l = OutLine::new();
+            l.push_str(e).unwrap();
+            l
+        });
+        out.refill(|| events.next());
+        let sent = drain(&mut out);
+        assert!(
+            sent.ends_with("ok\nevent: phase bend\nalarm: x\n"),
+            "{sent}"
+        );
+    }
+
+    #[test]
+    fn a_failed_send_drops_one_chunk() {
+        let mut out: Outbox<SMALL> = Outbox::new();
+        let long = "y".repeat(TX_CHUNK + 10);
+        assert!(out.push_line(&long));
+        out.send_failed();
+        assert_eq!(drain(&mut out).len(), 11);
+        assert!(
+            !out.push_line(&"z".repeat(SMALL)),
+            "a line that cannot fit is refused"
+        );
+        assert!(out.is_empty());
+    }
+
+    /// Feeds `reads` (bytes, lost after them) and collects, per read, whether the scan found
+    /// an ABORT and the lines (`Err` for an error reply's code) assembled from it.
+    fn feed(reads: &[(&[u8], bool)]) -> Vec<(bool, Vec<Result<String, &'static str>>)> {
+        let mut input: SerialInput<128> = SerialInput::new();
+        let mut got = Vec::new();
+        for &(bytes, lost) in reads {
+            assert!(input.is_drained());
+            input.buffer()[..bytes.len()].copy_from_slice(bytes);
+            let abort = input.received(bytes.len(), lost);
+            let mut lines = Vec::new();
+            while !input.is_drained() {
+                if let Some(l) =
+                    input.next_line(|l| l.map(String::from).map_err(|e| e.code.as_str()))
+                {
+                    lines.push(l);
+                }
+            }
+            got.push((abort, lines));
+        }
+        got
+    }
+
+    #[test]
+    fn an_abort_in_the_middle_of_a_read_is_found_before_the_lines_ahead_are_answered() {
+        let got = feed(&[(b"STATUS\nSTATUS\nabort \nSTATUS\nSTA", false)]);
+        assert!(got[0].0);
+        assert_eq!(got[0].1.len(), 4, "ABORT is still answered in its turn");
+        assert_eq!(got[0].1[2], Ok(String::from("abort ")));
+        // Not a whole ABORT line: no early abort.
+        for bytes in [
+            &b"STATUS\nABORTX\n"[..],
+            b"ABORT 1\n",
+            b"XABORT\n",
+            b"ABORT",
+        ] {
+            assert!(!feed(&[(bytes, false)])[0].0, "{bytes:?}");
+        }
+    }
+
+    #[test]
+    fn an_abort_split_across_two_reads_is_found_in_the_second() {
+        let got = feed(&[(b"STATUS\nAB", false), (b"ORT\nSTATUS\n", false)]);
+        assert!(!got[0].0 && got[1].0);
+        assert_eq!(
+            got[1].1,
+            [Ok(String::from("ABORT")), Ok(String::from("STATUS"))]
+        );
+        // Split before its line end, and a CRLF split between CR and LF.
+        assert!(feed(&[(b"ABORT", false), (b"\n", false)])[1].0);
+        let got = feed(&[(b"ABORT\r", false), (b"\nSTATUS\n", false)]);
+        assert!(got[0].0 && !got[1].0);
+        assert_eq!(got[1].1, [Ok(String::from("STATUS"))]);
+    }
+
+    #[test]
+    fn cr_lf_and_crlf_each_end_an_abort_line() {
+        for ending in ["\n", "\r", "\r\n"] {
+            let stream = std::format!("STATUS{ending}ABORT{ending}STATS{ending}");
+            let got = feed(&[(stream.as_bytes(), false)]);
+            assert!(got[0].0, "{ending:?}");
+            assert_eq!(
+                got[0].1,
+                [
+                    Ok(String::from("STATUS")),
+                    Ok(String::from("ABORT")),
+                    Ok(String::from("STATS"))
+                ],
+                "{ending:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn after_lost_input_no_line_is_formed_from_two_and_no_abort_is_guessed() {
+        // "STAT" then input lost (the rest of STATUS and the start of "ABORT" gone): the
+        // remains "ORT" end as an overrun, never as a command or an early abort.
+        let got = feed(&[(b"STAT", true), (b"ORT\nSTATUS\n", false)]);
+        assert!(!got[0].0 && !got[1].0);
+        assert_eq!(got[1].1, [Err("overrun"), Ok(String::from("STATUS"))]);
+        // Lost right after a line end: the next line may be a lost line's tail, so an error.
+        let got = feed(&[(b"STATUS\n", true), (b"ABORT\nABORT\n", false)]);
+        assert!(got[1].0, "the second, whole ABORT line is found");
+        assert_eq!(got[0].1, [Ok(String::from("STATUS"))]);
+        assert_eq!(got[1].1, [Err("overrun"), Ok(String::from("ABORT"))]);
+        // Too long and invalid text answer with their errors.
+        let long = [b'x'; 80];
+        let got = feed(&[(&long, false), (b"\n\xff\n", false)]);
+        assert_eq!(got[1].1, [Err("line-too-long"), Err("bad-argument")]);
+    }
+
+    /// Lines of a stream: commands, an ABORT in any case and spacing, blanks, junk, long lines.
+    fn line() -> impl Strategy<Value = String> {
+        prop_oneof![
+            4 => Just(String::from("STATUS")),
+            2 => Just(String::from("ABORT")),
+            1 => Just(String::from(" abort ")),
+            1 => Just(String::from("AB")),
+            1 => Just(String::from("ORT")),
+            1 => Just(String::new()),
+            1 => "[A-Z ]{0,20}",
+            1 => "x{60,90}",
+        ]
+    }
+
+    proptest! {
+        /// Whatever the split into reads and wherever input is lost: the lines run are
+        /// exactly the sent lines that arrived whole after a line end that arrived (never
+        /// pieces of two; any other line is answered with an error), and the scan finds an
+        /// ABORT exactly in the read where such an ABORT line ends.
+        #[test]
+        fn lines_survive_any_split_and_loss_whole_or_as_errors(
+            lines in prop::collection::vec(line(), 1..30),
+            endings in prop::collection::vec(prop::sample::select(vec!["\n", "\r", "\r\n"]), 30),
+            cuts in prop::collection::vec((1usize..100, any::<bool>(), 1usize..12), 1..40),
+        ) {
+            let mut stream = Vec::new();
+            let mut spans = Vec::new(); // (first byte, first ending byte) of each line
+            for (i, (l, e)) in lines.iter().zip(&endings).enumerate() {
+                // A CR ending and an empty LF line after it would be one CRLF: end it with LF.
+                if l.is_empty() && i > 0 && endings[i - 1] == "\r" && stream.last() == Some(&b'\r') {
+                    *stream.last_mut().unwrap() = b'\n';
+                }
+                spans.push((stream.len(), stream.len() + l.len()));
+                stream.extend_from_slice(l.as_bytes());
+                stream.extend_from_slice(e.as_bytes());
+            }
+            // Reads of `take` bytes; after a read marked lost, `skip` bytes never arrive.
+            let mut reads = Vec::new(); // (from, to, lost)
+            let mut at = 0;
+            for &(take, lost, skip) in &cuts {
+                if at >= stream.len() {
+                    break;
+                }
+                let to = (at + take).min(stream.len());
+                let lost = lost && to < stream.len();
+                reads.push((at, to, lost));
+                at = if lost { (to + skip).min(stream.len()) } else { to };
+            }
+            if at < stream.len() {
+                reads.push((at, stream.len(), false));
+            }
+            let mut arrived = vec![false; stream.len()];
+            let mut gaps = Vec::new(); // input lost right before these offsets
+            for &(from, to, lost) in &reads {
+                arrived[from..to].iter_mut().for_each(|a| *a = true);
+                if lost {
+                    gaps.push(to);
+                }
+            }
+            let clean = |&(s, e): &(usize, usize)| {
+                (s == 0 || arrived[s - 1]) && !gaps.iter().any(|g| (s..=e).contains(g))
+            };
+            let mut input: SerialInput<64> = SerialInput::new();
+            let mut run: Vec<String> = Vec::new();
+            for &(from, to, lost) in &reads {
+                for c_from in (from..to).step_by(64) {
+                    let c_to = (c_from + 64).min(to);
+                    let chunk = &stream[c_from..c_to];
+                    input.buffer()[..chunk.len()].copy_from_slice(chunk);
+                    let abort = input.received(chunk.len(), lost && c_to == to);
+                    let expect = lines.iter().zip(&spans).any(|(l, span)| {
+                        (c_from..c_to).contains(&span.1)
+                            && clean(span)
+                            && l.len() <= ABORT_SCAN_BYTES
+                            && l.trim().eq_ignore_ascii_case("abort")
+                    });
+                    prop_assert_eq!(abort, expect, "read {:?}", String::from_utf8_lossy(chunk));
+                    while !input.is_drained() {
+                        if let Some(Ok(l)) = input.next_line(|l| l.map(String::from)) {
+                            run.push(l);
+                        }
+                    }
+                }
+            }
+            let want: Vec<String> = lines
+                .iter()
+                .zip(&spans)
+                .filter(|(l, span)| l.len() <= crate::protocol::MAX_LINE && clean(span))
+                .map(|(l, _)| l.clone())
+                .collect();
+            prop_assert_eq!(run, want);
+        }
+    }
+}
