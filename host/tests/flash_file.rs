@@ -1,36 +1,21 @@
 //! `morph-sim --flash-file PATH`: saved settings survive a restart, as on a board.
 
-use std::io::Write;
+mod common;
+
+use common::{run_with_input, text};
 use std::path::Path;
-use std::process::{Command, Stdio};
 
 /// Runs morph-sim on `input` with `--flash-file path`; its stdout lines.
 fn run(path: &Path, input: &str) -> Vec<String> {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_morph-sim"))
-        .args(["--speed", "max", "--flash-file"])
-        .arg(path)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(input.as_bytes())
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(str::to_string)
-        .collect()
+    let args = [
+        Path::new("--speed"),
+        Path::new("max"),
+        Path::new("--flash-file"),
+        path,
+    ];
+    let out = run_with_input(env!("CARGO_BIN_EXE_morph-sim"), args, input.as_bytes());
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    text(&out.stdout).lines().map(str::to_string).collect()
 }
 
 #[test]

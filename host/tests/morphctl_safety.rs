@@ -6,8 +6,10 @@
 //! that plays a broken device; morphctl starts either through `--sim --sim-program`.
 #![cfg(unix)]
 
+mod common;
+
+use common::script;
 use std::io::{BufRead, BufReader};
-use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::mpsc;
@@ -18,18 +20,7 @@ const MORPH_SIM: &str = env!("CARGO_BIN_EXE_morph-sim");
 
 /// A fresh directory for one test.
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("morphctl-safety-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-/// Writes an executable `sh` script.
-fn script(dir: &Path, name: &str, body: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, format!("#!/bin/sh\n{body}\n")).unwrap();
-    std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o755)).unwrap();
-    p
+    common::scratch("morphctl-safety", name)
 }
 
 /// morph-sim with every line to it in `to_device.log` and from it in `from_device.log`.
@@ -104,6 +95,27 @@ fn heaters_off(status: &str) -> bool {
         && (status.contains("phase=idle ") || status.contains("phase=fault "))
 }
 
+/// What the recording device answered: `power_key` above 0 W in some STATUS while `what` ran,
+/// both heaters off in the last one.
+fn assert_heated_then_off(dir: &Path, power_key: &str, what: &str) {
+    let from = eventually(&dir.join("from_device.log"), |t| {
+        t.lines()
+            .rfind(|l| l.starts_with("ok phase="))
+            .is_some_and(heaters_off)
+    });
+    let statuses: Vec<&str> = from
+        .lines()
+        .filter(|l| l.starts_with("ok phase="))
+        .collect();
+    assert!(
+        statuses
+            .iter()
+            .any(|s| !s.contains(&format!(" {power_key}=0.000 "))),
+        "the {what} was heating before the signal:\n{from}"
+    );
+    assert!(heaters_off(statuses.last().unwrap()), "{from}");
+}
+
 /// Starts a morph on the recording simulator, waits until it is bending and logged a few
 /// rows, then sends `sig`; returns the exit status, stderr and the scratch directory.
 fn interrupt_a_morph(name: &str, sig: i32, extra: &[&str]) -> (ExitStatus, String, PathBuf) {
@@ -153,20 +165,7 @@ fn sigint_during_a_morph_sends_abort_and_the_device_reports_the_heaters_off() {
     let abort = sent.iter().position(|l| *l == "ABORT").expect("ABORT sent");
     assert!(sent[abort + 1..].contains(&"STATUS"), "{to}");
     // What the device answered: heaters on before, off in the last STATUS.
-    let from = eventually(&dir.join("from_device.log"), |t| {
-        t.lines()
-            .rfind(|l| l.starts_with("ok phase="))
-            .is_some_and(heaters_off)
-    });
-    let statuses: Vec<&str> = from
-        .lines()
-        .filter(|l| l.starts_with("ok phase="))
-        .collect();
-    assert!(
-        statuses.iter().any(|s| !s.contains(" p_pla_w=0.000 ")),
-        "the morph was heating before the signal:\n{from}"
-    );
-    assert!(heaters_off(statuses.last().unwrap()), "{from}");
+    assert_heated_then_off(&dir, "p_pla_w", "morph");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -355,19 +354,6 @@ fn sigint_during_a_tune_sends_abort_and_the_device_reports_the_heaters_off() {
     assert!(err.contains("sent ABORT"), "{err}");
     let to = eventually(&dir.join("to_device.log"), |t| t.contains("ABORT\nSTATUS"));
     assert!(to.contains("TUNE\n"), "{to}");
-    let from = eventually(&dir.join("from_device.log"), |t| {
-        t.lines()
-            .rfind(|l| l.starts_with("ok phase="))
-            .is_some_and(heaters_off)
-    });
-    let statuses: Vec<&str> = from
-        .lines()
-        .filter(|l| l.starts_with("ok phase="))
-        .collect();
-    assert!(
-        statuses.iter().any(|s| !s.contains(" p_tca_w=0.000 ")),
-        "the tune was heating before the signal:\n{from}"
-    );
-    assert!(heaters_off(statuses.last().unwrap()), "{from}");
+    assert_heated_then_off(&dir, "p_tca_w", "tune");
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -2,7 +2,9 @@
 //! on one simulator, the live view's exit path, bring-up on the simulator.
 #![cfg(unix)]
 
-use std::os::unix::fs::PermissionsExt;
+mod common;
+
+use common::script;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -10,18 +12,7 @@ const MORPHCTL: &str = env!("CARGO_BIN_EXE_morphctl");
 
 /// A fresh directory for one test.
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("morphctl-tools-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-/// Writes an executable `sh` script.
-fn script(dir: &Path, name: &str, body: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, format!("#!/bin/sh\n{body}\n")).unwrap();
-    std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o755)).unwrap();
-    p
+    common::scratch("morphctl-tools", name)
 }
 
 /// Runs morphctl to its end.

@@ -1,30 +1,19 @@
 //! `morph-sim` driving a plant in another process over plant protocol 1: `morph-plant` end to
 //! end (the same run as the in-process plant, bit for bit), and every way a plant can fail.
 
-use std::io::Write;
-use std::process::{Command, Output, Stdio};
+mod common;
+
+use common::{run_with_input, text};
+use std::process::Output;
 
 const MORPH_SIM: &str = env!("CARGO_BIN_EXE_morph-sim");
 const MORPH_PLANT: &str = env!("CARGO_BIN_EXE_morph-plant");
 
 /// Runs `morph-sim --speed max <args>` with `input` on stdin.
+/// (A plant that fails at once may end morph-sim before it reads its input: no error.)
 fn morph_sim(args: &[&str], input: &str) -> Output {
-    let mut child = Command::new(MORPH_SIM)
-        .arg("--speed")
-        .arg("max")
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    // A plant that fails at once may end morph-sim before it reads: ignore a broken pipe.
-    let _ = child.stdin.take().unwrap().write_all(input.as_bytes());
-    child.wait_with_output().unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
+    let args = ["--speed", "max"].iter().chain(args);
+    run_with_input(MORPH_SIM, args, input.as_bytes())
 }
 
 /// The value of `key=` in a reply line.
@@ -255,18 +244,11 @@ fn the_hifi_plant_runs_in_process_and_over_the_protocol_alike() {
 
 #[test]
 fn morph_plant_speaks_the_protocol_on_stdin_and_stdout() {
-    let mut child = Command::new(MORPH_PLANT)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(b"hello protocol=1 tick_s=0.1\nstep dt_s=1 pla_duty=1 tca_duty=0\nset medium=air\nfly\n")
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = run_with_input(
+        MORPH_PLANT,
+        [""; 0],
+        b"hello protocol=1 tick_s=0.1\nstep dt_s=1 pla_duty=1 tca_duty=0\nset medium=air\nfly\n",
+    );
     assert!(out.status.success());
     let out = text(&out.stdout);
     let lines: Vec<&str> = out.lines().collect();

@@ -1,28 +1,20 @@
 //! `SIM WAIT` in `morph-sim`: simulated time that passes at once, at any `--speed`.
 
-use std::io::Write;
-use std::process::{Command, Stdio};
+mod common;
+
+use common::{run_with_input, text};
 use std::time::{Duration, Instant};
 
 #[test]
 fn sim_wait_skips_time_in_real_time_mode_too() {
     let start = Instant::now();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_morph-sim"))
-        .args(["--speed", "2"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(b"MORPH 38\nSIM WAIT 20\nSIM STATE\nSIM WAIT -5\n")
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = run_with_input(
+        env!("CARGO_BIN_EXE_morph-sim"),
+        ["--speed", "2"],
+        b"MORPH 38\nSIM WAIT 20\nSIM STATE\nSIM WAIT -5\n",
+    );
     let elapsed = start.elapsed();
-    let text = String::from_utf8(out.stdout).unwrap();
+    let text = text(&out.stdout);
     assert!(out.status.success(), "{text}");
     // The morph ends at about 23 s: 20 s pass at once, the last 3 s or so at half real time
     // (paced as if the wait took none: 12 s would mean the waited time was paced too).
