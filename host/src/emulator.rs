@@ -103,8 +103,22 @@ pub fn free_port() -> Result<u16, String> {
     l.local_addr().map(|a| a.port()).map_err(|e| e.to_string())
 }
 
-/// The QEMU command line that boots `image` with USART1 as a TCP server on `port`.
-pub fn qemu_command(qemu: &Path, image: &Path, port: u16) -> Command {
+/// How QEMU's virtual clock, and with it the firmware's (SysTick), runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Clock {
+    /// Follows the host's clock: the firmware runs 20x real time when QEMU has a core to
+    /// itself, and QEMU's host-side stalls count as firmware time. For clients that pace
+    /// themselves by the wall clock (`cargo xtask emulate --port`, `morphctl --tcp-speed 20`).
+    Host,
+    /// Follows the emulated instructions while the CPU runs, real time while it sleeps
+    /// (`-icount`, [`ICOUNT_SHIFT`]): the firmware's timing is its own, whatever the host does.
+    /// For the tests and the demo morph.
+    Instructions,
+}
+
+/// The QEMU command line that boots `image` with USART1 as a TCP server on `port`, its clock
+/// run as `clock` says.
+pub fn qemu_command(qemu: &Path, image: &Path, port: u16, clock: Clock) -> Command {
     let mut c = Command::new(qemu);
     c.args(["-M", MACHINE, "-nographic", "-monitor", "none"])
         .args(["-semihosting-config", "enable=on,target=native"])
@@ -112,8 +126,33 @@ pub fn qemu_command(qemu: &Path, image: &Path, port: u16) -> Command {
         .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on"))
         .arg("-kernel")
         .arg(image);
+    if clock == Clock::Instructions {
+        match std::env::var("MORPHLINK_QEMU_ICOUNT") {
+            Ok(v) if v == "off" => {}
+            Ok(v) => {
+                c.args(["-icount", &v]);
+            }
+            Err(_) => {
+                c.arg("-icount")
+                    .arg(format!("shift={ICOUNT_SHIFT},sleep=on"));
+            }
+        }
+    }
     c
 }
+
+/// QEMU's `-icount` shift under [`Clock::Instructions`]: every emulated instruction advances
+/// the virtual clock by 2^`ICOUNT_SHIFT` ns, so the firmware's time follows the instructions it
+/// runs and not QEMU's host-side work, such as the per-byte TCP round trips of the serial port,
+/// which otherwise stall the CPU while its clock runs on (docs/emulation.md, "Floods"). With
+/// `sleep=on` an idle CPU's clock follows real time, so the image keeps its 20x speed-up while
+/// idle. 4 gives 3 125 instructions per firmware millisecond (one SysTick period is 50 µs of
+/// virtual time), some 25 times fewer than the real 80 MHz chip: the firmware's timing is
+/// judged on a slower CPU than it will run on. Measured with a 3 000-line STATUS flood: 2 took
+/// 39 s of wall time (4: 11 s); 5 and 6 are too slow a CPU (3 and 105 late ticks).
+/// `MORPHLINK_QEMU_ICOUNT` replaces the whole option (`off`: no `-icount`).
+pub const ICOUNT_SHIFT: u32 = 4;
+const _: () = assert!(ICOUNT_SHIFT >= 2 && ICOUNT_SHIFT <= 4);
 
 /// A running emulated board: QEMU plus the protocol connection to its USART1.
 pub struct Emulator {
@@ -133,7 +172,7 @@ impl Emulator {
     pub fn boot(qemu: &Path, image: &Path) -> Result<Emulator, String> {
         let port = free_port()?;
         let started = Instant::now();
-        let mut child = qemu_command(qemu, image, port)
+        let mut child = qemu_command(qemu, image, port, Clock::Instructions)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())

@@ -32,9 +32,10 @@ pub const NAME: &str = "b-l475e-iot01a-emulated";
 pub const CPU_HZ: u32 = 4_000_000;
 /// The simulated ADC returns the 16× oversampled sums directly, as the G4's hardware does.
 pub const HW_OVERSAMPLE: u32 = 16;
-/// Firmware time runs this many times faster than wall-clock time: a 100 ms control tick takes
-/// 5 ms of wall time, so a whole morph finishes in seconds. QEMU keeps up easily: one tick is a
-/// few thousand emulated instructions.
+/// Firmware time runs this many times faster than QEMU's virtual time: a 100 ms control tick
+/// takes 5 ms of it, so a whole morph finishes in seconds. Virtual time is wall-clock time, or,
+/// under QEMU's `-icount` (as the tests run it), the emulated instructions' time while the CPU
+/// runs and wall-clock time while it sleeps (docs/emulation.md, "Speed-up and the clock").
 pub const SPEEDUP: u32 = 20;
 /// Watchdog timeout, firmware ms: as the hardware IWDG's 500 ms.
 pub const WATCHDOG_MS: u64 = 500;

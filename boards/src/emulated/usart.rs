@@ -84,8 +84,9 @@ impl embedded_io_async::Error for Error {
 }
 
 /// Most bytes one [`Tx`] write sends. Every byte written to TDR is a round trip through QEMU's
-/// TCP serial backend, measured at 50–70 µs of wall time (1–1.4 ms of firmware time at 20×),
-/// so the serial task yields to the control task after every byte.
+/// TCP serial backend, measured at 50–70 µs of wall time (without QEMU's `-icount`, 1–1.4 ms of
+/// firmware time at 20×; with it, as the tests run QEMU, none), so the serial task yields to the
+/// control task after every byte.
 pub const TX_PER_WRITE: usize = 1;
 
 /// Most bytes one [`Rx`] read takes from the ring: all of it. (Smaller reads, tried at 1 and
