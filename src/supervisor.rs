@@ -24,7 +24,7 @@ pub enum FaultCode {
     OverTemperature,
     /// A heater was commanded but its temperature did not rise.
     HeaterNotHeating,
-    /// A heater's sensor kept rising with both heaters commanded off (a stuck MOSFET).
+    /// A heater's sensor kept rising with its heater commanded off or low (a stuck MOSFET).
     HeatingWhileOff,
     /// No fresh sensor frame arrived in time.
     StaleSensor,
@@ -106,9 +106,9 @@ impl Fault {
                 "PLA_LIMITS, TCA_LIMITS, AMB_LIMITS"
             }
             (FaultCode::HeaterNotHeating, _) => {
-                "HEATING_MIN_GAIN_K, HEATING_MAX_FALL_K, HOLD_MAX_FALL_K"
+                "HEATING_MIN_GAIN_K, HOLD_MAX_FALL_K, HELD_MAX_FALL_K"
             }
-            (FaultCode::HeatingWhileOff, _) => "OFF_GRACE_S, OFF_MAX_RISE_K",
+            (FaultCode::HeatingWhileOff, _) => "OFF_GRACE_S, OFF_MAX_RISE_K, LOW_GRACE_S",
             (FaultCode::StaleSensor, _) => "STALE_AFTER_MS",
             (FaultCode::SupplyOutOfRange, _) => "SUPPLY_MIN_V, SUPPLY_MAX_V",
             (FaultCode::PhaseTimeout, Subject::Phase(phase)) => match phase {
@@ -119,7 +119,7 @@ impl Fault {
             },
             (FaultCode::PhaseTimeout, _) => "SOFTEN_TIMEOUT_S",
             (FaultCode::SensorFrozen, _) => {
-                "FROZEN_POWER_STEP_FRACTION, FROZEN_MIN_MOVE_K, FROZEN_WINDOW_S"
+                "FROZEN_POWER_STEP_FRACTION, FROZEN_WINDOW_S, MUST_COOL_MARGIN_K"
             }
             (FaultCode::SensorImplausible, _) => {
                 "PLAUS_LOW_GAIN, PLAUS_HIGH_GAIN, PLAUS_MARGIN_K, PLAUS_TIME_S"
@@ -225,6 +225,25 @@ pub const OFF_GRACE_S: f32 = 15.0;
 /// (3.3 W) gains it within a few seconds, long before the 130 °C limit.
 pub const OFF_MAX_RISE_K: f32 = 3.0;
 
+/// Heating-while-off, one heater low: how long a heater must have been commanded below
+/// [`HEATING_MIN_POWER_FRACTION`] of its cap, with the other heater on, before its sensor is
+/// watched, s (with both off, [`OFF_GRACE_S`] applies). After a power drop the hifi PLA bead,
+/// 10 s behind its rod, keeps rising for about 3 s while it catches up; 8 s covers it and
+/// leaves a stuck heater caught within 10 s of the controller turning its power down.
+pub const LOW_GRACE_S: f32 = 8.0;
+/// Heating-while-off, one heater low: a heater's sensor is watched only while it reads more
+/// than this above the widest rise the commanded powers can explain ([`PLAUS_HIGH_GAIN`] times
+/// the model's steady rise for them: its own low power and the other heater's share, reached
+/// in still air), K. There its own heater being low means it must cool; a sensor that instead rises
+/// [`OFF_MAX_RISE_K`] above its lowest reading trips `heating-while-off` (a stuck MOSFET that
+/// the controller is trying to turn down). The same margin arms `sensor-frozen` for the PLA with
+/// its heater low while it reads above the TCA (warmed by the TCA alone, the rod must cool).
+/// 3 K is 60 times the sensor noise.
+pub const MUST_COOL_MARGIN_K: f32 = 3.0;
+const _: () =
+    assert!(LOW_GRACE_S > 0.0 && LOW_GRACE_S < HEATING_WINDOW_S && LOW_GRACE_S < OFF_GRACE_S);
+const _: () = assert!(MUST_COOL_MARGIN_K > 0.0 && MUST_COOL_MARGIN_K <= OFF_MAX_RISE_K);
+
 /// One sensor frame as the supervisor sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frame {
@@ -272,6 +291,25 @@ struct OffWatch {
     heating: bool,
 }
 
+/// One heater's heating-while-off watch while only it is low: since when it has been low, and
+/// its sensor's lowest rise above ambient since the grace ended.
+#[derive(Clone, Copy, Debug, Default)]
+struct LowWatch {
+    low_since_ms: Option<u64>,
+    min_rise_k: Option<f32>,
+}
+
+/// The TCA's held watch against the PLA sensor (see `Supervisor::check_held`): the recent peak
+/// of its coupling-corrected rise with the response-lagged own model rise at that peak, K, the
+/// response-lagged own model rise now, K, and the PLA rise it is corrected by.
+#[derive(Clone, Copy, Debug, Default)]
+struct HeldWatch {
+    peak_k: Option<(f32, f32)>,
+    response_k: Option<f32>,
+    /// The PLA sensor's rise as credited to the TCA's bead, K.
+    pla_k: Option<f32>,
+}
+
 /// The supervisor's state: consecutive-sample counters, last good temperatures and the
 /// heater watches.
 #[derive(Clone, Copy, Debug)]
@@ -285,6 +323,8 @@ pub struct Supervisor {
     frozen: [FrozenWatch; 2],
     plaus: [Expectation; 2],
     hold: [HoldWatch; 2],
+    low: [LowWatch; 2],
+    held: HeldWatch,
     amb_slow_c: Option<f32>,
     last_ms: Option<u64>,
 }
@@ -308,6 +348,8 @@ impl Supervisor {
             frozen: [FrozenWatch::default(); 2],
             plaus: [Expectation::default(); 2],
             hold: [HoldWatch::default(); 2],
+            low: [LowWatch::default(); 2],
+            held: HeldWatch::default(),
             amb_slow_c: None,
             last_ms: None,
         }
@@ -408,6 +450,12 @@ impl Supervisor {
             found(f);
         }
         if let Err(f) = self.check_hold(dt_s, commanded) {
+            found(f);
+        }
+        if let Err(f) = self.check_held(dt_s, commanded) {
+            found(f);
+        }
+        if let Err(f) = self.check_low(now_ms, commanded) {
             found(f);
         }
         self.measurements()
@@ -596,6 +644,8 @@ impl Supervisor {
         self.frozen = [FrozenWatch::default(); 2];
         self.plaus = [Expectation::default(); 2];
         self.hold = [HoldWatch::default(); 2];
+        self.low = [LowWatch::default(); 2];
+        self.held = HeldWatch::default();
         self.amb_slow_c = None;
         self.last_ms = None;
     }
@@ -650,10 +700,108 @@ impl Supervisor {
         Ok(())
     }
 
+    /// Heater-not-heating while held, against the other sensor (the TCA; see
+    /// [`HELD_MAX_FALL_K`]): while the TCA is judged (at least [`HEATING_MIN_POWER_FRACTION`]
+    /// of its cap) and its sensor reads below the model's steady rise for its own power (lagged
+    /// by [`HELD_RESPONSE_TAU_S`]), so a live heater must keep it up, its rise less the PLA's
+    /// model share ([`held_share`]) must not fall more than [`HELD_MAX_FALL_K`] below its recent
+    /// peak (relaxing with [`HOLD_PEAK_TAU_S`]) beyond the fall of the lagged own model rise
+    /// since that peak. A dead TCA's bead sinks toward what the cooling PLA rod gives it; a live
+    /// one at the power the controller holds stays up, whatever the PLA does.
+    fn check_held(&mut self, dt_s: f32, cmd: Powers) -> Result<(), Fault> {
+        let heater = Heater::Tca;
+        let own_w = cmd.of(heater);
+        let w = &mut self.held;
+        let model_k = R_TT_K_PER_W * own_w;
+        let response_k = w.response_k.get_or_insert(model_k);
+        *response_k += (model_k - *response_k) * (dt_s / HELD_RESPONSE_TAU_S).min(1.0);
+        let response_k = *response_k;
+        let [pla_c, tca_c, amb_c] = self.live_c;
+        // The PLA's heat reaches the TCA's bead through the silicone, late: its rise and its
+        // fall are credited as they arrive (`HOLD_CROSS_TAU_S`).
+        let pla_rise_k = pla_c - amb_c;
+        let pla_k = match w.pla_k {
+            Some(k) if pla_rise_k.is_finite() => {
+                k + (pla_rise_k - k) * (dt_s / HOLD_CROSS_TAU_S).min(1.0)
+            }
+            _ => pla_rise_k,
+        };
+        w.pla_k = pla_k.is_finite().then_some(pla_k);
+        let q_k = (tca_c - amb_c) - held_share() * pla_k;
+        let judged = own_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater);
+        if !judged || !q_k.is_finite() || q_k >= response_k {
+            w.peak_k = None;
+            return Ok(());
+        }
+        // A bath that warms moves the ambient bead before the heated ones (`check_plausible`).
+        let amb_spread_k = self.amb_slow_c.map_or(0.0, |slow| (amb_c - slow).abs());
+        let k = (dt_s / HOLD_PEAK_TAU_S).min(1.0);
+        let (peak_k, at_peak_k) = w.peak_k.get_or_insert((q_k, response_k));
+        let relaxed_k = *peak_k + (q_k - *peak_k) * k;
+        if q_k >= relaxed_k {
+            (*peak_k, *at_peak_k) = (q_k, response_k);
+        } else {
+            *peak_k = relaxed_k;
+            *at_peak_k += (response_k - *at_peak_k) * k;
+        }
+        let fall_k = *peak_k - q_k - (*at_peak_k - response_k).max(0.0) - amb_spread_k;
+        if fall_k > HELD_MAX_FALL_K {
+            return Err(Fault {
+                code: FaultCode::HeaterNotHeating,
+                subject: Subject::Heater(heater),
+                value: -fall_k,
+            });
+        }
+        Ok(())
+    }
+
+    /// Heating-while-off with one heater low: once a heater has been commanded below
+    /// [`HEATING_MIN_POWER_FRACTION`] of its cap for [`LOW_GRACE_S`] while the other heater is
+    /// on (with both off [`Supervisor::check_off`] watches), while its sensor must cool ([`must_cool`]), a rise of [`OFF_MAX_RISE_K`] above its
+    /// lowest reading since (relative to ambient) trips: the heater is on although the
+    /// controller turns it down (a stuck MOSFET during a morph).
+    fn check_low(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
+        let amb_c = self.live_c[Sensor::Amb.index()];
+        for heater in Heater::ALL {
+            let rise_k = self.live_c[heater.sensor().index()] - amb_c;
+            let w = &mut self.low[heater.index()];
+            let other_on = match heater {
+                Heater::Pla => cmd.tca_w > 0.0,
+                Heater::Tca => cmd.pla_w > 0.0,
+            };
+            let low = !(cmd.of(heater) >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater));
+            // With both off, `check_off` watches it (with its longer grace).
+            if !low || !other_on || !rise_k.is_finite() {
+                *w = LowWatch::default();
+                continue;
+            }
+            let since = *w.low_since_ms.get_or_insert(now_ms);
+            if (now_ms.saturating_sub(since) as f32) / 1000.0 < LOW_GRACE_S
+                || !must_cool(heater, cmd, rise_k)
+            {
+                w.min_rise_k = None;
+                continue;
+            }
+            let min_k = w.min_rise_k.map_or(rise_k, |k| k.min(rise_k));
+            w.min_rise_k = Some(min_k);
+            if rise_k - min_k > OFF_MAX_RISE_K {
+                return Err(Fault {
+                    code: FaultCode::HeatingWhileOff,
+                    subject: Subject::Heater(heater),
+                    value: rise_k - min_k,
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// Sensor-frozen: once a heater's commanded power has moved [`FROZEN_POWER_STEP_FRACTION`]
-    /// of its cap away from where its sensor last moved, the sensor must move
-    /// [`FROZEN_MIN_MOVE_K`] (either way) within [`FROZEN_WINDOW_S`].
+    /// of its cap away from where its sensor last moved, or (the PLA) while its heater is low
+    /// and its sensor reads more than [`MUST_COOL_MARGIN_K`] above the TCA's (plus the
+    /// still-air reach of its own low power; the rod must then cool, as it does in lock), the
+    /// sensor must move [`FROZEN_MIN_MOVE_K`] (either way) within [`FROZEN_WINDOW_S`].
     fn check_frozen(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
+        let [_, tca_c, amb_c] = self.live_c;
         for heater in Heater::ALL {
             let temp_c = self.live_c[heater.sensor().index()];
             let w = &mut self.frozen[heater.index()];
@@ -671,7 +819,13 @@ impl Supervisor {
                 continue;
             }
             let step_w = FROZEN_POWER_STEP_FRACTION * heater_cap_w(heater);
-            if w.since_ms.is_none() && (own_w - ref_w).abs() >= step_w {
+            // The PLA in lock: with its heater low the rod is warmed only by the TCA beside it,
+            // so it cannot stay above the TCA's reading (plus its own power's still-air reach).
+            let low = !(own_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater));
+            let held_up_k = (tca_c - amb_c).max(0.0) + PLAUS_HIGH_GAIN * R_PP_K_PER_W * own_w;
+            let cooling =
+                heater == Heater::Pla && low && temp_c - amb_c > held_up_k + MUST_COOL_MARGIN_K;
+            if w.since_ms.is_none() && ((own_w - ref_w).abs() >= step_w || cooling) {
                 w.since_ms = Some(now_ms);
             }
             if let Some(since) = w.since_ms {
@@ -741,6 +895,27 @@ impl Supervisor {
         }
         Ok(())
     }
+}
+
+/// Whether `heater`'s sensor, reading `rise_k` above ambient, must cool with its own heater low:
+/// it reads more than [`MUST_COOL_MARGIN_K`] above [`PLAUS_HIGH_GAIN`] times the model's steady
+/// rise for the commanded powers (its own low power's and the other heater's share,
+/// `R_TP_K_PER_W` times that power): the still-air reach of that heat, so it cannot be rising
+/// in any medium.
+fn must_cool(heater: Heater, cmd: Powers, rise_k: f32) -> bool {
+    let (r_own, other_w) = match heater {
+        Heater::Pla => (R_PP_K_PER_W, cmd.tca_w),
+        Heater::Tca => (R_TT_K_PER_W, cmd.pla_w),
+    };
+    let steady_k = r_own * cmd.of(heater).max(0.0) + R_TP_K_PER_W * other_w.max(0.0);
+    rise_k > PLAUS_HIGH_GAIN * steady_k + MUST_COOL_MARGIN_K
+}
+
+/// The share of the PLA sensor's rise the model's TCA node sees from the PLA heater
+/// (`R_TP_K_PER_W / R_PP_K_PER_W`, about 0.26): what a dead TCA's bead keeps of the PLA rod's
+/// heat in [`Supervisor::check_held`].
+fn held_share() -> f32 {
+    R_TP_K_PER_W / R_PP_K_PER_W
 }
 
 /// The power cap of `heater`, W.
@@ -828,6 +1003,21 @@ pub const HOLD_POWER_TAU_S: f32 = 60.0;
 const _: () = assert!(HOLD_MAX_FALL_K > 0.0 && HOLD_MAX_FALL_K < HEATING_MAX_FALL_K);
 const _: () = assert!(HOLD_PEAK_TAU_S > 0.0 && HOLD_POWER_TAU_S >= HOLD_PEAK_TAU_S);
 const _: () = assert!(HOLD_CROSS_TAU_S > 0.0);
+
+/// Heater-not-heating while held, TCA against the PLA sensor (`Supervisor::check_held`): the
+/// largest fall of the TCA's rise less the PLA's model share of its rise, below its recent
+/// peak, while the TCA's reading is below the model's steady rise for its power, K. A TCA that
+/// dies in bend or lock under a closed-loop hold (which turns it up as the reading falls) loses
+/// 3–8 K of it within the lock on both nominal links; the largest healthy fall measured there is
+/// 1.2 K (the hifi paper lock's last seconds, its 50 s of cooling). `HOLD_MAX_FALL_K` misses
+/// it because the PLA's power drop at lock explains any TCA fall for tens of seconds.
+pub const HELD_MAX_FALL_K: f32 = 2.0;
+/// Heater-not-heating while held, TCA: the lag of the own model rise that explains a fall
+/// after a power drop, s (the TCA bead's response to its heater; a shorter lag only explains
+/// more, sooner).
+pub const HELD_RESPONSE_TAU_S: f32 = 2.0;
+const _: () = assert!(HELD_MAX_FALL_K > 0.0 && HELD_MAX_FALL_K < HOLD_MAX_FALL_K);
+const _: () = assert!(HELD_RESPONSE_TAU_S > 0.0 && HELD_RESPONSE_TAU_S < HOLD_PEAK_TAU_S);
 
 /// One heater's held watch: its sensor's recent peak while judged, °C, and its own and the
 /// other heater's recent commanded power, W.
