@@ -868,9 +868,9 @@ fn a_tca_dying_in_bend_or_lock_trips_before_done(link: Link) {
             }
         }
     }
-    // Measured on both nominal links: 1.9–13.7 s after dying in lock (the slowest: hifi
-    // paper's 50 s lock and gated's 15 s one, both still running when it trips).
-    assert!(worst_lock_s <= 15.0, "{link:?}: {worst_lock_s} s");
+    // Measured on both nominal links: 1.6–6.4 s after dying in lock (3.8–9.4 s in a
+    // closed-loop bend; paper's and gated's fixed-power bends, 26–30 s, by the gain window).
+    assert!(worst_lock_s <= 10.0, "{link:?}: {worst_lock_s} s");
     checked(link, "a_tca_dying_in_bend_or_lock_trips_before_done", cases);
 }
 
@@ -908,7 +908,7 @@ fn a_stuck_pla_heater_trips_once_the_controller_turns_it_down(link: Link) {
             assert_names(&a, "OFF_GRACE_S");
             let low_s = (b.rig.now_ms() - low_since_ms.unwrap()) as f64 / 1000.0;
             println!("{link:?} {mode}: PLA stuck in {phase:?}: {low_s:.1} s after turned down");
-            // `LOW_GRACE_S` (8 s) plus the 3 K rise at 1.5–2 K/s: measured 8.3–10.2 s.
+            // `LOW_GRACE_S` (8 s) plus the 3 K rise at 1.5–2 K/s: measured 8.9–10.3 s.
             assert!(low_s <= 11.0, "{mode} {phase:?}: {low_s} s");
             assert_latched(&mut b, "heating-while-off");
         }
