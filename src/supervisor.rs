@@ -2,9 +2,11 @@
 //!
 //! Checks, each with a named default scaled to this link (a few grams of silicone whose heaters
 //! respond within seconds, not a 3D-printer hot end):
-//! thermistor open/short (ADC range, consecutive samples), per-sensor min/max temperature,
-//! heater-not-heating, stale sensor frames and supply voltage. A trip is returned as a
-//! [`Fault`]; the controller turns both heaters off in the same tick and latches it.
+//! thermistor open/short (ADC range, a leaky count), per-sensor min/max temperature,
+//! heater-not-heating (a gain window, a held fall, and the TCA held against the PLA sensor),
+//! heating while off or turned down, a frozen or implausible sensor, stale sensor frames and
+//! supply voltage. A trip is returned as a [`Fault`]; the controller turns both heaters off in
+//! the same tick and latches it.
 
 use crate::heater::HeaterConfig;
 use crate::link::{R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W};
@@ -1286,5 +1288,126 @@ mod tests {
             }
         }
         assert!(tripped_s.is_some());
+    }
+
+    /// Runs `sup` on readings `temps(t_s) = (pla_c, tca_c)` at `cmd(t_s)` for `secs`; returns
+    /// the first fault and when, s.
+    fn first_fault(
+        sup: &mut Supervisor,
+        cmd: impl Fn(f32) -> Powers,
+        phase: Phase,
+        secs: u64,
+        temps: impl Fn(f32) -> (f32, f32),
+    ) -> Option<(Fault, f32)> {
+        (0..secs * 10).find_map(|tick| {
+            let ms = tick * 100;
+            let t_s = ms as f32 / 1000.0;
+            let (pla_c, tca_c) = temps(t_s);
+            sup.check(ms, &frame(ms, pla_c, tca_c), cmd(t_s), phase)
+                .err()
+                .map(|f| (f, ms as f32 / 1000.0))
+        })
+    }
+
+    #[test]
+    fn a_held_tca_that_keeps_its_rise_passes_and_one_that_sinks_with_the_pla_trips() {
+        // Lock: PLA off and cooling from 70 °C, TCA held at 1.4 W (model rise 48 K) reading
+        // 55 °C: alive it stays (or creeps up), dead it sinks at 0.5 K/s.
+        let cmd = Powers {
+            pla_w: 0.0,
+            tca_w: 1.4,
+        };
+        let pla = |t: f32| 22.0 + 48.0 * libm::expf(-t / 15.0);
+        let mut alive = Supervisor::new();
+        assert!(first_fault(
+            &mut alive,
+            |_| cmd,
+            Phase::Lock,
+            30,
+            |t| (pla(t), 55.0 + 0.1 * t)
+        )
+        .is_none());
+        let mut dead = Supervisor::new();
+        let (f, at_s) = first_fault(
+            &mut dead,
+            |_| cmd,
+            Phase::Lock,
+            30,
+            |t| (pla(t), 55.0 - 0.5 * t),
+        )
+        .expect("a sinking TCA never tripped");
+        assert_eq!(
+            (f.code, f.subject),
+            (FaultCode::HeaterNotHeating, Subject::Heater(Heater::Tca))
+        );
+        assert!(at_s < 10.0, "{at_s}");
+    }
+
+    #[test]
+    fn a_pla_rising_while_turned_down_trips_after_the_grace_and_a_cooling_one_never_does() {
+        // Bend: 20 s at 4 W, then the PLA turned down to 0.05 W with the TCA at 1 W, the PLA
+        // reading 48 K above ambient, above what 4x the commanded powers explain (37 K).
+        let cmd = |t: f32| Powers {
+            pla_w: if t < 20.0 { 4.0 } else { 0.05 },
+            tca_w: 1.0,
+        };
+        let heated = |t: f32| 22.0 + 48.0 * (t / 20.0).min(1.0);
+        // The TCA warms as a live heater at 1 W does (to 0.8 of its model rise), plus a share
+        // of the PLA's heat.
+        let tca = |t: f32| {
+            22.0 + 0.8 * R_TT_K_PER_W * (1.0 - libm::expf(-t / 5.0)) + 0.3 * (heated(t) - 22.0)
+        };
+        let mut cooling = Supervisor::new();
+        assert_eq!(
+            first_fault(&mut cooling, cmd, Phase::Bend, 60, |t| {
+                (heated(t) - 0.3 * (t - 20.0).max(0.0), tca(t))
+            })
+            .map(|(f, at_s)| (f.code, at_s)),
+            None
+        );
+        let mut stuck = Supervisor::new();
+        let (f, at_s) = first_fault(&mut stuck, cmd, Phase::Bend, 60, |t| {
+            (heated(t) + 0.5 * (t - 20.0).max(0.0), tca(t))
+        })
+        .expect("a stuck PLA heater never tripped");
+        assert_eq!(
+            (f.code, f.subject),
+            (FaultCode::HeatingWhileOff, Subject::Heater(Heater::Pla))
+        );
+        // Turned down at 20 s (seen a tick later): the grace, then 3 K at 0.5 K/s.
+        let after_s = at_s - 20.0;
+        assert!(
+            (LOW_GRACE_S..LOW_GRACE_S + 7.0).contains(&after_s),
+            "{after_s}"
+        );
+    }
+
+    #[test]
+    fn a_pla_reading_frozen_above_the_tca_with_its_heater_off_trips_sensor_frozen() {
+        let cmd = Powers {
+            pla_w: 0.0,
+            tca_w: 1.4,
+        };
+        // Live: the rod cools (and its reading with it); frozen: it stays at 70 °C.
+        let mut live = Supervisor::new();
+        assert!(first_fault(
+            &mut live,
+            |_| cmd,
+            Phase::Lock,
+            20,
+            |t| (70.0 - 0.5 * t, 55.0)
+        )
+        .is_none());
+        let mut frozen = Supervisor::new();
+        let (f, at_s) = first_fault(&mut frozen, |_| cmd, Phase::Lock, 20, |_| (70.0, 55.0))
+            .expect("a frozen PLA reading never tripped");
+        assert_eq!(
+            (f.code, f.subject),
+            (FaultCode::SensorFrozen, Subject::Sensor(Sensor::Pla))
+        );
+        assert!(
+            (FROZEN_WINDOW_S..FROZEN_WINDOW_S + 0.3).contains(&at_s),
+            "{at_s}"
+        );
     }
 }
