@@ -454,7 +454,7 @@ impl Supervisor {
         if let Err(f) = self.check_hold(dt_s, commanded) {
             found(f);
         }
-        if let Err(f) = self.check_held(dt_s, commanded) {
+        if let Err(f) = self.check_held(dt_s, commanded, phase) {
             found(f);
         }
         if let Err(f) = self.check_low(now_ms, commanded) {
@@ -703,14 +703,14 @@ impl Supervisor {
     }
 
     /// Heater-not-heating while held, against the other sensor (the TCA; see
-    /// [`HELD_MAX_FALL_K`]): while the TCA is judged (at least [`HEATING_MIN_POWER_FRACTION`]
-    /// of its cap) and its sensor reads below the model's steady rise for its own power (lagged
+    /// [`HELD_MAX_FALL_K`]): while the TCA is judged (in bend or lock, at least
+    /// [`HEATING_MIN_POWER_FRACTION`] of its cap) and its sensor reads below the model's steady rise for its own power (lagged
     /// by [`HELD_RESPONSE_TAU_S`]), so a live heater must keep it up, its rise less the PLA's
     /// model share ([`held_share`]) must not fall more than [`HELD_MAX_FALL_K`] below its recent
     /// peak (relaxing with [`HOLD_PEAK_TAU_S`]) beyond the fall of the lagged own model rise
     /// since that peak. A dead TCA's bead sinks toward what the cooling PLA rod gives it; a live
     /// one at the power the controller holds stays up, whatever the PLA does.
-    fn check_held(&mut self, dt_s: f32, cmd: Powers) -> Result<(), Fault> {
+    fn check_held(&mut self, dt_s: f32, cmd: Powers, phase: Phase) -> Result<(), Fault> {
         let heater = Heater::Tca;
         let own_w = cmd.of(heater);
         let w = &mut self.held;
@@ -730,7 +730,10 @@ impl Supervisor {
         };
         w.pla_k = pla_k.is_finite().then_some(pla_k);
         let q_k = (tca_c - amb_c) - held_share() * pla_k;
-        let judged = own_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater);
+        // Judged in the phases whose hold `done` reports from; a HEAT pulse or TUNE step (in
+        // idle) is left to the other checks, so bring-up can still name swapped wires.
+        let held = matches!(phase, Phase::Bend | Phase::Lock);
+        let judged = held && own_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater);
         if !judged || !q_k.is_finite() || q_k >= response_k {
             w.peak_k = None;
             return Ok(());
