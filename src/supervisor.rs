@@ -2,9 +2,11 @@
 //!
 //! Checks, each with a named default scaled to this link (a few grams of silicone whose heaters
 //! respond within seconds, not a 3D-printer hot end):
-//! thermistor open/short (ADC range, consecutive samples), per-sensor min/max temperature,
-//! heater-not-heating, stale sensor frames and supply voltage. A trip is returned as a
-//! [`Fault`]; the controller turns both heaters off in the same tick and latches it.
+//! thermistor open/short (ADC range, a leaky count), per-sensor min/max temperature,
+//! heater-not-heating (a gain window, a held fall, and the TCA held against the PLA sensor),
+//! heating while off or turned down, a frozen or implausible sensor, stale sensor frames and
+//! supply voltage. A trip is returned as a [`Fault`]; the controller turns both heaters off in
+//! the same tick and latches it.
 
 use crate::heater::HeaterConfig;
 use crate::link::{R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W};
@@ -24,7 +26,7 @@ pub enum FaultCode {
     OverTemperature,
     /// A heater was commanded but its temperature did not rise.
     HeaterNotHeating,
-    /// A heater's sensor kept rising with both heaters commanded off (a stuck MOSFET).
+    /// A heater's sensor kept rising with its heater commanded off or low (a stuck MOSFET).
     HeatingWhileOff,
     /// No fresh sensor frame arrived in time.
     StaleSensor,
@@ -106,9 +108,9 @@ impl Fault {
                 "PLA_LIMITS, TCA_LIMITS, AMB_LIMITS"
             }
             (FaultCode::HeaterNotHeating, _) => {
-                "HEATING_MIN_GAIN_K, HEATING_MAX_FALL_K, HOLD_MAX_FALL_K"
+                "HEATING_MIN_GAIN_K, HOLD_MAX_FALL_K, HELD_MAX_FALL_K"
             }
-            (FaultCode::HeatingWhileOff, _) => "OFF_GRACE_S, OFF_MAX_RISE_K",
+            (FaultCode::HeatingWhileOff, _) => "OFF_GRACE_S, OFF_MAX_RISE_K, LOW_GRACE_S",
             (FaultCode::StaleSensor, _) => "STALE_AFTER_MS",
             (FaultCode::SupplyOutOfRange, _) => "SUPPLY_MIN_V, SUPPLY_MAX_V",
             (FaultCode::PhaseTimeout, Subject::Phase(phase)) => match phase {
@@ -119,7 +121,7 @@ impl Fault {
             },
             (FaultCode::PhaseTimeout, _) => "SOFTEN_TIMEOUT_S",
             (FaultCode::SensorFrozen, _) => {
-                "FROZEN_POWER_STEP_FRACTION, FROZEN_MIN_MOVE_K, FROZEN_WINDOW_S"
+                "FROZEN_POWER_STEP_FRACTION, FROZEN_WINDOW_S, MUST_COOL_MARGIN_K"
             }
             (FaultCode::SensorImplausible, _) => {
                 "PLAUS_LOW_GAIN, PLAUS_HIGH_GAIN, PLAUS_MARGIN_K, PLAUS_TIME_S"
@@ -181,8 +183,8 @@ pub const HEATING_MIN_POWER_FRACTION: f32 = 0.2;
 /// heat by less (see `tests/safety.rs`).
 pub const HEATING_MIN_GAIN_K: f32 = 2.0;
 /// Heater-not-heating: the window for [`HEATING_MIN_GAIN_K`], s. A dead heater trips within
-/// this time of being switched on (or of its phase starting); 12 s is 1.2 times the PLA bead's
-/// 10 s lag and 3–4 TCA bead time constants.
+/// this time of being switched on (or of its phase starting); 10 s is the PLA bead's lag and
+/// 3–4 TCA bead time constants.
 pub const HEATING_WINDOW_S: f32 = 10.0;
 /// Heater-not-heating: the band's floor, K above ambient plus the model's steady rise the other
 /// heater alone would give this sensor (`R_TP_K_PER_W` times its power). Below it the heater has
@@ -224,6 +226,25 @@ pub const OFF_GRACE_S: f32 = 15.0;
 /// cooling link only falls; 3 K is 60 times the sensor noise, and a stuck PLA heater at 10 V
 /// (3.3 W) gains it within a few seconds, long before the 130 °C limit.
 pub const OFF_MAX_RISE_K: f32 = 3.0;
+
+/// Heating-while-off, one heater low: how long a heater must have been commanded below
+/// [`HEATING_MIN_POWER_FRACTION`] of its cap, with the other heater on, before its sensor is
+/// watched, s (with both off, [`OFF_GRACE_S`] applies). After a power drop the hifi PLA bead,
+/// 10 s behind its rod, keeps rising for about 3 s while it catches up; 8 s covers it and
+/// leaves a stuck heater caught within 10 s of the controller turning its power down.
+pub const LOW_GRACE_S: f32 = 8.0;
+/// Heating-while-off, one heater low: a heater's sensor is watched only while it reads more
+/// than this above the widest rise the commanded powers can explain ([`PLAUS_HIGH_GAIN`] times
+/// the model's steady rise for them: its own low power and the other heater's share, reached
+/// in still air), K. There its own heater being low means it must cool; a sensor that instead rises
+/// [`OFF_MAX_RISE_K`] above its lowest reading trips `heating-while-off` (a stuck MOSFET that
+/// the controller is trying to turn down). The same margin arms `sensor-frozen` for the PLA with
+/// its heater low while it reads above the TCA (warmed by the TCA alone, the rod must cool).
+/// 3 K is 60 times the sensor noise.
+pub const MUST_COOL_MARGIN_K: f32 = 3.0;
+const _: () =
+    assert!(LOW_GRACE_S > 0.0 && LOW_GRACE_S < HEATING_WINDOW_S && LOW_GRACE_S < OFF_GRACE_S);
+const _: () = assert!(MUST_COOL_MARGIN_K > 0.0 && MUST_COOL_MARGIN_K <= OFF_MAX_RISE_K);
 
 /// One sensor frame as the supervisor sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -272,6 +293,25 @@ struct OffWatch {
     heating: bool,
 }
 
+/// One heater's heating-while-off watch while only it is low: since when it has been low, and
+/// its sensor's lowest rise above ambient since the grace ended.
+#[derive(Clone, Copy, Debug, Default)]
+struct LowWatch {
+    low_since_ms: Option<u64>,
+    min_rise_k: Option<f32>,
+}
+
+/// The TCA's held watch against the PLA sensor (see `Supervisor::check_held`): the recent peak
+/// of its coupling-corrected rise with the response-lagged own model rise at that peak, K, the
+/// response-lagged own model rise now, K, and the PLA rise it is corrected by.
+#[derive(Clone, Copy, Debug, Default)]
+struct HeldWatch {
+    peak_k: Option<(f32, f32)>,
+    response_k: Option<f32>,
+    /// The PLA sensor's rise as credited to the TCA's bead, K.
+    pla_k: Option<f32>,
+}
+
 /// The supervisor's state: consecutive-sample counters, last good temperatures and the
 /// heater watches.
 #[derive(Clone, Copy, Debug)]
@@ -285,6 +325,8 @@ pub struct Supervisor {
     frozen: [FrozenWatch; 2],
     plaus: [Expectation; 2],
     hold: [HoldWatch; 2],
+    low: [LowWatch; 2],
+    held: HeldWatch,
     amb_slow_c: Option<f32>,
     last_ms: Option<u64>,
 }
@@ -308,6 +350,8 @@ impl Supervisor {
             frozen: [FrozenWatch::default(); 2],
             plaus: [Expectation::default(); 2],
             hold: [HoldWatch::default(); 2],
+            low: [LowWatch::default(); 2],
+            held: HeldWatch::default(),
             amb_slow_c: None,
             last_ms: None,
         }
@@ -408,6 +452,12 @@ impl Supervisor {
             found(f);
         }
         if let Err(f) = self.check_hold(dt_s, commanded) {
+            found(f);
+        }
+        if let Err(f) = self.check_held(dt_s, commanded, phase) {
+            found(f);
+        }
+        if let Err(f) = self.check_low(now_ms, commanded) {
             found(f);
         }
         self.measurements()
@@ -596,6 +646,8 @@ impl Supervisor {
         self.frozen = [FrozenWatch::default(); 2];
         self.plaus = [Expectation::default(); 2];
         self.hold = [HoldWatch::default(); 2];
+        self.low = [LowWatch::default(); 2];
+        self.held = HeldWatch::default();
         self.amb_slow_c = None;
         self.last_ms = None;
     }
@@ -650,10 +702,111 @@ impl Supervisor {
         Ok(())
     }
 
+    /// Heater-not-heating while held, against the other sensor (the TCA; see
+    /// [`HELD_MAX_FALL_K`]): while the TCA is judged (in bend or lock, at least
+    /// [`HEATING_MIN_POWER_FRACTION`] of its cap) and its sensor reads below the model's steady rise for its own power (lagged
+    /// by [`HELD_RESPONSE_TAU_S`]), so a live heater must keep it up, its rise less the PLA's
+    /// model share ([`held_share`]) must not fall more than [`HELD_MAX_FALL_K`] below its recent
+    /// peak (relaxing with [`HOLD_PEAK_TAU_S`]) beyond the fall of the lagged own model rise
+    /// since that peak. A dead TCA's bead sinks toward what the cooling PLA rod gives it; a live
+    /// one at the power the controller holds stays up, whatever the PLA does.
+    fn check_held(&mut self, dt_s: f32, cmd: Powers, phase: Phase) -> Result<(), Fault> {
+        let heater = Heater::Tca;
+        let own_w = cmd.of(heater);
+        let w = &mut self.held;
+        let model_k = R_TT_K_PER_W * own_w;
+        let response_k = w.response_k.get_or_insert(model_k);
+        *response_k += (model_k - *response_k) * (dt_s / HELD_RESPONSE_TAU_S).min(1.0);
+        let response_k = *response_k;
+        let [pla_c, tca_c, amb_c] = self.live_c;
+        // The PLA's heat reaches the TCA's bead through the silicone, late: its rise and its
+        // fall are credited as they arrive (`HOLD_CROSS_TAU_S`).
+        let pla_rise_k = pla_c - amb_c;
+        let pla_k = match w.pla_k {
+            Some(k) if pla_rise_k.is_finite() => {
+                k + (pla_rise_k - k) * (dt_s / HOLD_CROSS_TAU_S).min(1.0)
+            }
+            _ => pla_rise_k,
+        };
+        w.pla_k = pla_k.is_finite().then_some(pla_k);
+        let q_k = (tca_c - amb_c) - held_share() * pla_k;
+        // Judged in the phases whose hold `done` reports from; a HEAT pulse or TUNE step (in
+        // idle) is left to the other checks, so bring-up can still name swapped wires.
+        let held = matches!(phase, Phase::Bend | Phase::Lock);
+        let judged = held && own_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater);
+        if !judged || !q_k.is_finite() || q_k >= response_k {
+            w.peak_k = None;
+            return Ok(());
+        }
+        // A bath that warms moves the ambient bead before the heated ones (`check_plausible`).
+        let amb_spread_k = self.amb_slow_c.map_or(0.0, |slow| (amb_c - slow).abs());
+        let k = (dt_s / HOLD_PEAK_TAU_S).min(1.0);
+        let (peak_k, at_peak_k) = w.peak_k.get_or_insert((q_k, response_k));
+        let relaxed_k = *peak_k + (q_k - *peak_k) * k;
+        if q_k >= relaxed_k {
+            (*peak_k, *at_peak_k) = (q_k, response_k);
+        } else {
+            *peak_k = relaxed_k;
+            *at_peak_k += (response_k - *at_peak_k) * k;
+        }
+        let fall_k = *peak_k - q_k - (*at_peak_k - response_k).max(0.0) - amb_spread_k;
+        if fall_k > HELD_MAX_FALL_K {
+            return Err(Fault {
+                code: FaultCode::HeaterNotHeating,
+                subject: Subject::Heater(heater),
+                value: -fall_k,
+            });
+        }
+        Ok(())
+    }
+
+    /// Heating-while-off with one heater low: once a heater has been commanded below
+    /// [`HEATING_MIN_POWER_FRACTION`] of its cap for [`LOW_GRACE_S`] while the other heater is
+    /// on (with both off [`Supervisor::check_off`] watches), while its sensor must cool ([`must_cool`]), a rise of [`OFF_MAX_RISE_K`] above its
+    /// lowest reading since (relative to ambient) trips: the heater is on although the
+    /// controller turns it down (a stuck MOSFET during a morph).
+    fn check_low(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
+        let amb_c = self.live_c[Sensor::Amb.index()];
+        for heater in Heater::ALL {
+            let rise_k = self.live_c[heater.sensor().index()] - amb_c;
+            let w = &mut self.low[heater.index()];
+            let other_on = match heater {
+                Heater::Pla => cmd.tca_w > 0.0,
+                Heater::Tca => cmd.pla_w > 0.0,
+            };
+            let low = !(cmd.of(heater) >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater));
+            // With both off, `check_off` watches it (with its longer grace).
+            if !low || !other_on || !rise_k.is_finite() {
+                *w = LowWatch::default();
+                continue;
+            }
+            let since = *w.low_since_ms.get_or_insert(now_ms);
+            if (now_ms.saturating_sub(since) as f32) / 1000.0 < LOW_GRACE_S
+                || !must_cool(heater, cmd, rise_k)
+            {
+                w.min_rise_k = None;
+                continue;
+            }
+            let min_k = w.min_rise_k.map_or(rise_k, |k| k.min(rise_k));
+            w.min_rise_k = Some(min_k);
+            if rise_k - min_k > OFF_MAX_RISE_K {
+                return Err(Fault {
+                    code: FaultCode::HeatingWhileOff,
+                    subject: Subject::Heater(heater),
+                    value: rise_k - min_k,
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// Sensor-frozen: once a heater's commanded power has moved [`FROZEN_POWER_STEP_FRACTION`]
-    /// of its cap away from where its sensor last moved, the sensor must move
-    /// [`FROZEN_MIN_MOVE_K`] (either way) within [`FROZEN_WINDOW_S`].
+    /// of its cap away from where its sensor last moved, or (the PLA) while its heater is low
+    /// and its sensor reads more than [`MUST_COOL_MARGIN_K`] above the TCA's (plus the
+    /// still-air reach of its own low power; the rod must then cool, as it does in lock), the
+    /// sensor must move [`FROZEN_MIN_MOVE_K`] (either way) within [`FROZEN_WINDOW_S`].
     fn check_frozen(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
+        let [_, tca_c, amb_c] = self.live_c;
         for heater in Heater::ALL {
             let temp_c = self.live_c[heater.sensor().index()];
             let w = &mut self.frozen[heater.index()];
@@ -671,7 +824,13 @@ impl Supervisor {
                 continue;
             }
             let step_w = FROZEN_POWER_STEP_FRACTION * heater_cap_w(heater);
-            if w.since_ms.is_none() && (own_w - ref_w).abs() >= step_w {
+            // The PLA in lock: with its heater low the rod is warmed only by the TCA beside it,
+            // so it cannot stay above the TCA's reading (plus its own power's still-air reach).
+            let low = !(own_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater));
+            let held_up_k = (tca_c - amb_c).max(0.0) + PLAUS_HIGH_GAIN * R_PP_K_PER_W * own_w;
+            let cooling =
+                heater == Heater::Pla && low && temp_c - amb_c > held_up_k + MUST_COOL_MARGIN_K;
+            if w.since_ms.is_none() && ((own_w - ref_w).abs() >= step_w || cooling) {
                 w.since_ms = Some(now_ms);
             }
             if let Some(since) = w.since_ms {
@@ -743,6 +902,27 @@ impl Supervisor {
     }
 }
 
+/// Whether `heater`'s sensor, reading `rise_k` above ambient, must cool with its own heater low:
+/// it reads more than [`MUST_COOL_MARGIN_K`] above [`PLAUS_HIGH_GAIN`] times the model's steady
+/// rise for the commanded powers (its own low power's and the other heater's share,
+/// `R_TP_K_PER_W` times that power): the still-air reach of that heat, so it cannot be rising
+/// in any medium.
+fn must_cool(heater: Heater, cmd: Powers, rise_k: f32) -> bool {
+    let (r_own, other_w) = match heater {
+        Heater::Pla => (R_PP_K_PER_W, cmd.tca_w),
+        Heater::Tca => (R_TT_K_PER_W, cmd.pla_w),
+    };
+    let steady_k = r_own * cmd.of(heater).max(0.0) + R_TP_K_PER_W * other_w.max(0.0);
+    rise_k > PLAUS_HIGH_GAIN * steady_k + MUST_COOL_MARGIN_K
+}
+
+/// The share of the PLA sensor's rise the model's TCA node sees from the PLA heater
+/// (`R_TP_K_PER_W / R_PP_K_PER_W`, about 0.26): what a dead TCA's bead keeps of the PLA rod's
+/// heat in [`Supervisor::check_held`].
+fn held_share() -> f32 {
+    R_TP_K_PER_W / R_PP_K_PER_W
+}
+
 /// The power cap of `heater`, W.
 fn heater_cap_w(heater: Heater) -> f32 {
     match heater {
@@ -799,8 +979,10 @@ pub const PLAUS_AMB_TAU_S: f32 = 60.0;
 /// in, or 3 K hotter than any heat it is given can explain, is wrong.
 pub const PLAUS_MARGIN_K: f32 = 3.0;
 /// Sensor-implausible: seconds outside the envelope before a trip, counted leaky (+dt outside,
-/// −dt inside), so one noisy excursion never trips.
-pub const PLAUS_TIME_S: f32 = 3.0;
+/// −dt inside), so one noisy excursion never trips. 2.5 s (25 readings) brings a PLA heater
+/// that is open in soften on the nominal hifi link in at 9.9 s (3 s: 10.4 s) with no alarm on
+/// either healthy ensemble.
+pub const PLAUS_TIME_S: f32 = 2.5;
 const _: () = assert!(PLAUS_LOW_GAIN > 0.0 && PLAUS_LOW_GAIN < 1.0 && PLAUS_HIGH_GAIN > 1.0);
 const _: () = assert!(PLAUS_TAU_FAST_S > 0.0 && PLAUS_TAU_SLOW_S > PLAUS_TAU_FAST_S);
 const _: () = assert!(PLAUS_AMB_TAU_S > 0.0 && PLAUS_CEILING_FALL_S >= PLAUS_TAU_SLOW_S);
@@ -828,6 +1010,22 @@ pub const HOLD_POWER_TAU_S: f32 = 60.0;
 const _: () = assert!(HOLD_MAX_FALL_K > 0.0 && HOLD_MAX_FALL_K < HEATING_MAX_FALL_K);
 const _: () = assert!(HOLD_PEAK_TAU_S > 0.0 && HOLD_POWER_TAU_S >= HOLD_PEAK_TAU_S);
 const _: () = assert!(HOLD_CROSS_TAU_S > 0.0);
+
+/// Heater-not-heating while held, TCA against the PLA sensor (`Supervisor::check_held`): the
+/// largest fall of the TCA's rise less the PLA's model share of its rise, below its recent
+/// peak, while the TCA's reading is below the model's steady rise for its power, K. A TCA that
+/// dies in bend or lock under a closed-loop hold (which turns it up as the reading falls) loses
+/// 4–12 K of it within the lock on both nominal links; the largest healthy fall measured there is
+/// 0.8 K (the lumped paper lock, 50 s of cooling silicone), and none of the 5 800 healthy
+/// ensemble morphs trips it (docs/safety.md). `HOLD_MAX_FALL_K` misses a dead TCA in lock
+/// because the PLA's power drop at lock explains any TCA fall for tens of seconds.
+pub const HELD_MAX_FALL_K: f32 = 2.0;
+/// Heater-not-heating while held, TCA: the lag of the own model rise that explains a fall
+/// after a power drop, s (the TCA bead's response to its heater; a shorter lag only explains
+/// more, sooner).
+pub const HELD_RESPONSE_TAU_S: f32 = 2.0;
+const _: () = assert!(HELD_MAX_FALL_K > 0.0 && HELD_MAX_FALL_K < HOLD_MAX_FALL_K);
+const _: () = assert!(HELD_RESPONSE_TAU_S > 0.0 && HELD_RESPONSE_TAU_S < HOLD_PEAK_TAU_S);
 
 /// One heater's held watch: its sensor's recent peak while judged, °C, and its own and the
 /// other heater's recent commanded power, W.
@@ -1093,5 +1291,126 @@ mod tests {
             }
         }
         assert!(tripped_s.is_some());
+    }
+
+    /// Runs `sup` on readings `temps(t_s) = (pla_c, tca_c)` at `cmd(t_s)` for `secs`; returns
+    /// the first fault and when, s.
+    fn first_fault(
+        sup: &mut Supervisor,
+        cmd: impl Fn(f32) -> Powers,
+        phase: Phase,
+        secs: u64,
+        temps: impl Fn(f32) -> (f32, f32),
+    ) -> Option<(Fault, f32)> {
+        (0..secs * 10).find_map(|tick| {
+            let ms = tick * 100;
+            let t_s = ms as f32 / 1000.0;
+            let (pla_c, tca_c) = temps(t_s);
+            sup.check(ms, &frame(ms, pla_c, tca_c), cmd(t_s), phase)
+                .err()
+                .map(|f| (f, ms as f32 / 1000.0))
+        })
+    }
+
+    #[test]
+    fn a_held_tca_that_keeps_its_rise_passes_and_one_that_sinks_with_the_pla_trips() {
+        // Lock: PLA off and cooling from 70 °C, TCA held at 1.4 W (model rise 48 K) reading
+        // 55 °C: alive it stays (or creeps up), dead it sinks at 0.5 K/s.
+        let cmd = Powers {
+            pla_w: 0.0,
+            tca_w: 1.4,
+        };
+        let pla = |t: f32| 22.0 + 48.0 * libm::expf(-t / 15.0);
+        let mut alive = Supervisor::new();
+        assert!(first_fault(
+            &mut alive,
+            |_| cmd,
+            Phase::Lock,
+            30,
+            |t| (pla(t), 55.0 + 0.1 * t)
+        )
+        .is_none());
+        let mut dead = Supervisor::new();
+        let (f, at_s) = first_fault(
+            &mut dead,
+            |_| cmd,
+            Phase::Lock,
+            30,
+            |t| (pla(t), 55.0 - 0.5 * t),
+        )
+        .expect("a sinking TCA never tripped");
+        assert_eq!(
+            (f.code, f.subject),
+            (FaultCode::HeaterNotHeating, Subject::Heater(Heater::Tca))
+        );
+        assert!(at_s < 10.0, "{at_s}");
+    }
+
+    #[test]
+    fn a_pla_rising_while_turned_down_trips_after_the_grace_and_a_cooling_one_never_does() {
+        // Bend: 20 s at 4 W, then the PLA turned down to 0.05 W with the TCA at 1 W, the PLA
+        // reading 48 K above ambient, above what 4x the commanded powers explain (37 K).
+        let cmd = |t: f32| Powers {
+            pla_w: if t < 20.0 { 4.0 } else { 0.05 },
+            tca_w: 1.0,
+        };
+        let heated = |t: f32| 22.0 + 48.0 * (t / 20.0).min(1.0);
+        // The TCA warms as a live heater at 1 W does (to 0.8 of its model rise), plus a share
+        // of the PLA's heat.
+        let tca = |t: f32| {
+            22.0 + 0.8 * R_TT_K_PER_W * (1.0 - libm::expf(-t / 5.0)) + 0.3 * (heated(t) - 22.0)
+        };
+        let mut cooling = Supervisor::new();
+        assert_eq!(
+            first_fault(&mut cooling, cmd, Phase::Bend, 60, |t| {
+                (heated(t) - 0.3 * (t - 20.0).max(0.0), tca(t))
+            })
+            .map(|(f, at_s)| (f.code, at_s)),
+            None
+        );
+        let mut stuck = Supervisor::new();
+        let (f, at_s) = first_fault(&mut stuck, cmd, Phase::Bend, 60, |t| {
+            (heated(t) + 0.5 * (t - 20.0).max(0.0), tca(t))
+        })
+        .expect("a stuck PLA heater never tripped");
+        assert_eq!(
+            (f.code, f.subject),
+            (FaultCode::HeatingWhileOff, Subject::Heater(Heater::Pla))
+        );
+        // Turned down at 20 s (seen a tick later): the grace, then 3 K at 0.5 K/s.
+        let after_s = at_s - 20.0;
+        assert!(
+            (LOW_GRACE_S..LOW_GRACE_S + 7.0).contains(&after_s),
+            "{after_s}"
+        );
+    }
+
+    #[test]
+    fn a_pla_reading_frozen_above_the_tca_with_its_heater_off_trips_sensor_frozen() {
+        let cmd = Powers {
+            pla_w: 0.0,
+            tca_w: 1.4,
+        };
+        // Live: the rod cools (and its reading with it); frozen: it stays at 70 °C.
+        let mut live = Supervisor::new();
+        assert!(first_fault(
+            &mut live,
+            |_| cmd,
+            Phase::Lock,
+            20,
+            |t| (70.0 - 0.5 * t, 55.0)
+        )
+        .is_none());
+        let mut frozen = Supervisor::new();
+        let (f, at_s) = first_fault(&mut frozen, |_| cmd, Phase::Lock, 20, |_| (70.0, 55.0))
+            .expect("a frozen PLA reading never tripped");
+        assert_eq!(
+            (f.code, f.subject),
+            (FaultCode::SensorFrozen, Subject::Sensor(Sensor::Pla))
+        );
+        assert!(
+            (FROZEN_WINDOW_S..FROZEN_WINDOW_S + 0.3).contains(&at_s),
+            "{at_s}"
+        );
     }
 }

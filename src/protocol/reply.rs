@@ -509,7 +509,7 @@ impl fmt::Display for FaultText<'_> {
             }
             FaultCode::HeatingWhileOff => write!(
                 l,
-                "heating-while-off {s} sensor rose {v} K with both heaters off; check its MOSFET"
+                "heating-while-off {s} rose {v} K with its heater off; check its MOSFET"
             ),
             FaultCode::StaleSensor => write!(l, "stale-sensor no sensor frame for {v} s"),
             FaultCode::SupplyOutOfRange => write!(
@@ -520,7 +520,7 @@ impl fmt::Display for FaultText<'_> {
             ),
             FaultCode::PhaseTimeout => write!(l, "phase-timeout phase {s} did not finish in time"),
             FaultCode::SensorFrozen => {
-                write!(l, "sensor-frozen {s} moved {v} K as its power changed")
+                write!(l, "sensor-frozen {s} moved {v} K where it had to move")
             }
             FaultCode::SensorImplausible => {
                 write!(l, "sensor-implausible {s} off its expected rise by {v} K")

@@ -8,11 +8,15 @@
 //! A fault injected in idle or release where nothing heats (a dead heater) can only show once
 //! heat is asked for: there the run sends the next `MORPH` [`IDLE_BEFORE_MORPH_S`] after
 //! injection (or after the running morph ended), and the time still counts from injection.
+//!
+//! Each row also gives the time from when the fault became observable ([`Observable`]: the
+//! first tick after injection at which it makes a difference the sensors could show), and the
+//! aims are judged on that time.
 
 use morphlink::bench::Noise;
 use morphlink::protocol::{classify, LineKind, Mode};
 use morphlink::supervisor::{PLA_LIMITS, TCA_LIMITS};
-use morphlink::vocab::Phase;
+use morphlink::vocab::{Heater, Phase};
 use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
 use morphlink_plant::Plant;
 use morphlink_sim::{LinkSetup, Rig};
@@ -39,6 +43,26 @@ pub struct Args {
     pub mode: String,
 }
 
+/// When an injected fault first makes a difference the sensors could show.
+#[derive(Clone, Copy, Debug)]
+enum Observable {
+    /// At once (an open or shorted thermistor, a drift, the supply).
+    AtInjection,
+    /// Once the controller commands this heater on (a heater that is open).
+    HeaterOn(Heater),
+    /// Once the controller commands this heater below the power it dissipates (a stuck one).
+    BelowStuck(Heater),
+    /// Once the true temperature this sensor watches has moved
+    /// [`FROZEN_OBSERVABLE_MOVE_K`] from its value at injection (a frozen reading).
+    TruthMoves(Heater),
+    /// Never in these runs, and why.
+    Never(&'static str),
+}
+
+/// How far the true temperature must move from its value at injection before a frozen
+/// reading of it is observable, K.
+pub const FROZEN_OBSERVABLE_MOVE_K: f64 = 1.0;
+
 /// One injectable fault: its `SIM` line and the aim it is held to.
 struct FaultCase {
     /// The name in the table.
@@ -47,6 +71,17 @@ struct FaultCase {
     line: String,
     /// Its detection-time aim, s (`None`: none stated).
     aim_s: Option<f64>,
+    /// When it becomes observable.
+    observable: Observable,
+}
+
+/// The heater a `pla`/`tca` target word names (`None`: `amb`).
+fn heater_of(word: &str) -> Option<Heater> {
+    match word {
+        "pla" => Some(Heater::Pla),
+        "tca" => Some(Heater::Tca),
+        _ => None,
+    }
 }
 
 /// Every injectable fault.
@@ -54,10 +89,17 @@ fn cases() -> Vec<FaultCase> {
     let mut v = Vec::new();
     for sensor in ["pla", "tca", "amb"] {
         for kind in ["thermistor-open", "thermistor-short", "thermistor-stuck"] {
+            let stuck = kind == "thermistor-stuck";
+            let observable = match heater_of(sensor) {
+                Some(h) if stuck => Observable::TruthMoves(h),
+                None if stuck => Observable::Never("the bath does not change in these runs"),
+                _ => Observable::AtInjection,
+            };
             v.push(FaultCase {
                 name: format!("{kind} {sensor}"),
                 line: format!("SIM FAULT {kind} {sensor}"),
-                aim_s: (kind == "thermistor-stuck").then_some(AIM_SENSOR_S),
+                aim_s: stuck.then_some(AIM_SENSOR_S),
+                observable,
             });
         }
         for rate in [-DRIFT_K_PER_S, DRIFT_K_PER_S] {
@@ -65,15 +107,22 @@ fn cases() -> Vec<FaultCase> {
                 name: format!("thermistor-drift {sensor} {rate:+.1} K/s"),
                 line: format!("SIM FAULT thermistor-drift {sensor} {rate}"),
                 aim_s: Some(AIM_SENSOR_S),
+                observable: Observable::AtInjection,
             });
         }
     }
-    for heater in ["pla", "tca"] {
+    for heater in Heater::ALL {
         for kind in ["heater-open", "heater-stuck"] {
+            let observable = if kind == "heater-open" {
+                Observable::HeaterOn(heater)
+            } else {
+                Observable::BelowStuck(heater)
+            };
             v.push(FaultCase {
-                name: format!("{kind} {heater}"),
-                line: format!("SIM FAULT {kind} {heater}"),
+                name: format!("{kind} {}", heater.as_str()),
+                line: format!("SIM FAULT {kind} {}", heater.as_str()),
                 aim_s: Some(AIM_HEATER_S),
+                observable,
             });
         }
     }
@@ -82,6 +131,7 @@ fn cases() -> Vec<FaultCase> {
             name: format!("supply {volts} V"),
             line: format!("SIM SUPPLY {volts}"),
             aim_s: None,
+            observable: Observable::AtInjection,
         });
     }
     v
@@ -98,7 +148,39 @@ struct Outcome {
     peak_c: [f64; 2],
     /// A `MORPH` had to be sent after injection (the fault only shows with heat).
     next_morph: bool,
+    /// Seconds from injection to when the fault became observable (`None`: it never did
+    /// before the alarm or the end of the run).
+    observable_s: Option<f64>,
 }
+
+/// Whether `o` holds on this tick of `rig` (`at_injection`: the true temperatures then).
+fn observable_now<P: Plant>(o: Observable, rig: &Rig<P>, at_injection: [f64; 2]) -> bool {
+    let t = rig.plant().truth();
+    let cmd = rig.ctrl.powers();
+    match o {
+        Observable::AtInjection => true,
+        Observable::HeaterOn(h) => cmd.of(h) > 0.0,
+        Observable::BelowStuck(h) => {
+            let dissipated_w = match h {
+                Heater::Pla => t.pla_w,
+                Heater::Tca => t.tca_w,
+            };
+            (cmd.of(h) as f64) < dissipated_w - STUCK_OBSERVABLE_MARGIN_W
+        }
+        Observable::TruthMoves(h) => {
+            let now_c = match h {
+                Heater::Pla => t.pla_c,
+                Heater::Tca => t.tca_c,
+            };
+            (now_c - at_injection[h.index()]).abs() >= FROZEN_OBSERVABLE_MOVE_K
+        }
+        Observable::Never(_) => false,
+    }
+}
+
+/// A stuck heater is observable once the commanded power is this far below what it
+/// dissipates, W (a tenth of the TCA's 0.4 W judging threshold: above the PWM's resolution).
+pub const STUCK_OBSERVABLE_MARGIN_W: f64 = 0.04;
 
 /// Runs `case` injected in `phase` of a morph in `mode` on `rig`.
 fn run_case<P: Plant>(mut rig: Rig<P>, case: &FaultCase, phase: Phase, mode: &str) -> Outcome {
@@ -130,13 +212,19 @@ fn run_case<P: Plant>(mut rig: Rig<P>, case: &FaultCase, phase: Phase, mode: &st
         done_first: false,
         peak_c: [f64::NAN; 2],
         next_morph: false,
+        observable_s: None,
     };
     if !reached {
         return out;
     }
+    let truth0 = rig.plant().truth();
+    let at_injection = [truth0.pla_c, truth0.tca_c];
     let mut idle_since: Option<u64> = None;
     let mut peak = [f64::MIN; 2];
     while rig.now_ms() - t0 < (MAX_WAIT_S * 1000.0) as u64 {
+        if out.observable_s.is_none() && observable_now(case.observable, &rig, at_injection) {
+            out.observable_s = Some((rig.now_ms() - t0) as f64 / 1000.0);
+        }
         rig.tick();
         let t = rig.plant().truth();
         peak = [peak[0].max(t.pla_c), peak[1].max(t.tca_c)];
@@ -172,16 +260,32 @@ fn run_case<P: Plant>(mut rig: Rig<P>, case: &FaultCase, phase: Phase, mode: &st
     out
 }
 
-/// One table cell: the time and alarm, and whether the aim and the limits held.
-fn cell(o: &Outcome, aim_s: Option<f64>) -> String {
+/// One table cell: the time and alarm (from injection, and from when the fault became
+/// observable), and whether the aim (judged from observable) and the limits held.
+fn cell(o: &Outcome, case: &FaultCase) -> String {
     let limit_c = PLA_LIMITS.max_c.min(TCA_LIMITS.max_c) as f64;
-    let mut s = match &o.alarm {
-        None if o.peak_c[0].is_nan() => "phase not reached".to_string(),
-        None => format!("**no alarm in {MAX_WAIT_S:.0} s**"),
-        Some((t, code)) => {
+    let mut s = match (&o.alarm, o.observable_s) {
+        (None, _) if o.peak_c[0].is_nan() => "phase not reached".to_string(),
+        (None, _) if matches!(case.observable, Observable::Never(_)) => {
+            let Observable::Never(why) = case.observable else {
+                unreachable!()
+            };
+            format!("no alarm in {MAX_WAIT_S:.0} s: not observable ({why})")
+        }
+        (None, None) => format!("no alarm in {MAX_WAIT_S:.0} s: never observable"),
+        (None, Some(obs)) => {
+            format!("**no alarm in {MAX_WAIT_S:.0} s** (observable from {obs:.1} s)")
+        }
+        (Some((t, code)), obs) => {
+            let from_obs = obs.map(|o| t - o);
             let mut s = format!("{t:.1} s `{code}`");
-            if let Some(aim) = aim_s {
-                if *t > aim {
+            match (case.observable, from_obs) {
+                (Observable::AtInjection, _) => {}
+                (_, Some(d)) => s.push_str(&format!(" ({d:.1} s from observable)")),
+                (_, None) => s.push_str(" (before observable)"),
+            }
+            if let Some(aim) = case.aim_s {
+                if from_obs.unwrap_or(0.0) > aim {
                     s.push_str(&format!(" **(aim {aim:.0} s missed)**"));
                 }
             }
@@ -251,7 +355,7 @@ pub fn run(args: &Args) -> Result<(), String> {
                                 mode,
                             );
                             let l = run_case(Rig::new(lumped), case, p, mode);
-                            (cell(&h, case.aim_s), cell(&l, case.aim_s))
+                            (cell(&h, case), cell(&l, case))
                         })
                         .collect::<Vec<_>>()
                 })
