@@ -81,11 +81,14 @@ impl Strategy for Closed {
         match t.phase {
             Phase::Soften => pla_c >= t.th.soft_threshold_c,
             Phase::Bend => {
-                // Also waits for the TCA thermistor to slow down, so the observer has learnt the
-                // model's error before the PLA freezes the shape.
-                let learnt =
-                    o.measured_rate_k_per_s(HeatedNode::Tca).abs() <= LEARN_MAX_RATE_K_PER_S;
-                self.drive.bend_done(t, pla_c, tca_c, learnt)
+                // Also waits for both thermistors to slow down, so the observer has learnt the
+                // model's error before the PLA freezes the shape: a PLA estimate not yet
+                // corrected by its thermistor can call a rod soft whose core is still glassy
+                // (the high-fidelity links then lock before the rod has flowed).
+                let learnt = |n| o.measured_rate_k_per_s(n).abs() <= LEARN_MAX_RATE_K_PER_S;
+                let (tca_learnt, pla_learnt) = (learnt(HeatedNode::Tca), learnt(HeatedNode::Pla));
+                self.drive
+                    .bend_done(t, pla_c, tca_c, tca_learnt, pla_learnt)
             }
             Phase::Lock => self.rigid(t, pla_c),
             Phase::Release => t.in_phase_s >= RELEASE_S,
