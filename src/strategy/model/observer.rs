@@ -219,6 +219,18 @@ impl Observer {
         (sm[0] - sm[1]) / (RATE_FILTER_S.1 - RATE_FILTER_S.0) as f64
     }
 
+    /// How far a heated node's thermistor (smoothed over [`RATE_FILTER_S`]`.0`) is from what
+    /// the observer expects it to read, K (reading − modelled thermistor − disturbance): near 0
+    /// while the model follows the link, large while it runs ahead or behind it.
+    pub fn innovation_k(&self, n: HeatedNode) -> f32 {
+        let i = n.index();
+        let m = self.smooth_c[i][0];
+        if m.is_nan() {
+            return 0.0;
+        }
+        (m - self.sensor_c[i] - self.disturbance_k[i]) as f32
+    }
+
     /// How fast a heated node's thermistor is changing (smoothed), K/s.
     pub fn measured_rate_k_per_s(&self, n: HeatedNode) -> f32 {
         self.rate_k_per_s_of(n.index()) as f32
