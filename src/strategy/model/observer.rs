@@ -334,6 +334,25 @@ mod tests {
         assert!((o.disturbance_k(HeatedNode::Tca) - 5.0).abs() < 0.1);
     }
 
+    #[test]
+    fn innovation_is_small_while_the_model_follows_the_link_and_large_when_it_runs_ahead() {
+        // Soften at 5 W: a thermistor that reads the model's own, and one that sees 60 % of
+        // the rise (a rod heating slower than the model's, a bead off the rod).
+        let run = |share: f64| {
+            let mut o = Observer::new(22.0);
+            for _ in 0..80 {
+                o.predict(0.1, 5.0, 0.0, 22.0);
+                let sensed = 22.0 + share * (o.sensor_c[0] - 22.0);
+                o.correct(0.1, sensed as f32, 22.0);
+            }
+            o.innovation_k(HeatedNode::Pla)
+        };
+        let (follows, ahead) = (run(1.0), run(0.6));
+        assert!(follows.abs() < 0.1, "{follows}");
+        assert!(ahead < -3.0, "{ahead}");
+        assert_eq!(Observer::new(22.0).innovation_k(HeatedNode::Tca), 0.0);
+    }
+
     fn libm_exp(x: f32) -> f32 {
         crate::mathf::exp(x)
     }
