@@ -2,7 +2,7 @@
 //! observer); every phase is gated on the corrected estimate, and the lock temperature is
 //! compensated for the release spring-back.
 
-use super::model::observer::{HeatedNode, Observer, LEARN_MAX_RATE_K_PER_S, SENSOR_TAU_S};
+use super::model::observer::{HeatedNode, LEARN_MAX_RATE_K_PER_S, SENSOR_TAU_S};
 use super::model::{target, ModelDrive};
 use super::{Start, Strategy, TargetTemps, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
 use crate::vocab::{Measurements, Phase, Powers};
@@ -29,7 +29,7 @@ const _: () =
     assert!(RIGID_THRESHOLD_C <= CLOSED_RIGID_COOL_C && CLOSED_RIGID_COOL_C < SOFT_THRESHOLD_C);
 
 /// Bend need not wait for the PLA thermistor to slow while it reads within this of what the
-/// observer expects ([`Observer::innovation_k`]), K: the model follows the rod, so its
+/// observer expects ([`super::model::observer::Observer::innovation_k`]), K: the model follows the rod, so its
 /// estimate holds. 3 K is what the reading's 0.5 s smoothing and a bead lag 1.5 s off the
 /// assumed 3 s make together at the 1.5 K/s the bead rises at late in soften (the lumped
 /// ensemble's lags are 2–6 s); on the high-fidelity links the bead reads far
