@@ -5,7 +5,7 @@
 //! Per tick: ADC counts → classified temperatures and supply volts → supervisor (a trip turns
 //! both heaters off in this same tick and latches) → sequencer → watts → PWM duties.
 
-use crate::calibration::{Calibration, CalibrationError};
+use crate::calibration::{Calibration, CalibrationError, ReportRejection};
 use crate::heater::HeaterConfig;
 use crate::protocol::{self, reply, tune_reply, Command, Mode, OutLine, SimCommand};
 use crate::pulse::Pulse;
@@ -887,20 +887,21 @@ impl Controller {
                     Ok((a, b)) => {
                         tune_reply::measured_map(&mut l, a, b, self.settings.cal.map_count)
                     }
-                    Err(()) => tune_reply::measured_implausible(&mut l),
+                    Err(why) => tune_reply::measured_implausible(&mut l, why),
                 }
             }
             _ => {
                 let need = table::power_for_radius_w(radius_mm).unwrap_or(0.0);
                 if !(need >= MEASURED_MIN_POWER_W) || !(last.power_w >= MEASURED_MIN_POWER_W) {
-                    tune_reply::measured_implausible(&mut l);
+                    let why = ReportRejection::PowerTooSmall(MEASURED_MIN_POWER_W);
+                    tune_reply::measured_implausible(&mut l, why);
                     return out(&l);
                 }
                 match self.settings.cal.fold_power(last.power_w / need) {
                     Ok(scale) => {
                         tune_reply::measured_power(&mut l, scale, self.settings.cal.power_count)
                     }
-                    Err(()) => tune_reply::measured_implausible(&mut l),
+                    Err(why) => tune_reply::measured_implausible(&mut l, why),
                 }
             }
         }

@@ -23,6 +23,7 @@ on_both_links!(
     a_thermistor_that_opens_trips_and_keeps_the_calibration,
     tune_is_refused_while_busy_faulted_or_warm,
     measured_refuses_bad_input_and_changes_nothing,
+    an_implausible_report_says_which_bound_and_changes_nothing,
 );
 
 /// Runs TUNE to its end; returns the line that ended it.
@@ -283,3 +284,20 @@ fn measured_morphs_reduce_the_error_on_a_mismatched_link(link: Link) {
 }
 
 on_both_links!(measured_morphs_reduce_the_error_on_a_mismatched_link);
+
+/// A report the map's bounds refuse (a radius within the measurable range but far tighter than
+/// any TCA error explains) names the bound and changes nothing; the next sane report counts.
+fn an_implausible_report_says_which_bound_and_changes_nothing(link: Link) {
+    let mut b = Bench::on(link);
+    b.run_for(2.0);
+    b.morph(44.0, "auto");
+    let r = b.send("MEASURED 30");
+    assert!(
+        r[0].starts_with("error: out-of-range report refused: map "),
+        "{r:?}"
+    );
+    assert!(r[0].contains("calibration unchanged"), "{r:?}");
+    assert_eq!(b.rig.ctrl.calibration(), Calibration::DEFAULT);
+    let r = b.send("MEASURED 44.2");
+    assert!(r[0].starts_with("ok map_offset_k="), "{r:?}");
+}

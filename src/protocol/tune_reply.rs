@@ -3,7 +3,7 @@
 
 use super::reply::error;
 use super::{ErrorCode, OutLine, EVENT_TAG, OK};
-use crate::calibration::{Calibration, CalibrationError};
+use crate::calibration::{Calibration, CalibrationError, ReportRejection};
 use crate::fixed::Fixed;
 use crate::tune::{Rejection, TuneEvent, TuneFailure, TUNE_START_MAX_RISE_K};
 use crate::vocab::Heater;
@@ -107,16 +107,55 @@ pub fn measured_out_of_range(l: &mut OutLine, min_mm: f32, max_mm: f32) {
     );
 }
 
-/// MEASURED whose correction would leave the calibration's bounds: nothing changed.
-pub fn measured_implausible(l: &mut OutLine) {
+/// MEASURED whose correction would leave the calibration's bounds, naming the bound:
+/// `error: out-of-range report refused: <why>; calibration unchanged, check the measurement
+/// (see README ...)`.
+pub fn measured_implausible(l: &mut OutLine, why: ReportRejection) {
     error(
         l,
         ErrorCode::OutOfRange,
         format_args!(
-            "that radius would move the calibration outside its bounds; unchanged, check the \
-             measurement (see README \"{CALIBRATION_README_SECTION}\")"
+            "report refused: {}; calibration unchanged, check the measurement (see README \
+             \"{CALIBRATION_README_SECTION}\")",
+            Why(why)
         ),
     );
+}
+
+/// A [`ReportRejection`] in words.
+struct Why(ReportRejection);
+
+impl core::fmt::Display for Why {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use crate::calibration::{MAP_MAX_CORRECTION_K, MAP_SLOPE_RANGE, POWER_SCALE_RANGE};
+        match self.0 {
+            ReportRejection::NotFinite => f.write_str("not a finite number"),
+            ReportRejection::Slope(b) => write!(
+                f,
+                "map slope {} outside {}..{}",
+                Fixed(b, 3),
+                Fixed(MAP_SLOPE_RANGE.0, 2),
+                Fixed(MAP_SLOPE_RANGE.1, 2)
+            ),
+            ReportRejection::Correction(k) => write!(
+                f,
+                "map correction {} K over {} K",
+                Fixed(k, 1),
+                Fixed(MAP_MAX_CORRECTION_K, 1)
+            ),
+            ReportRejection::PowerRatio(r) => write!(
+                f,
+                "power ratio {} outside {}..{}",
+                Fixed(r, 3),
+                Fixed(POWER_SCALE_RANGE.0, 2),
+                Fixed(POWER_SCALE_RANGE.1, 2)
+            ),
+            ReportRejection::PowerTooSmall(w) => {
+                write!(f, "a table power under {} W says nothing", Fixed(w, 2))
+            }
+            ReportRejection::Field(info) => write!(f, "{} out of its range", info.name),
+        }
+    }
 }
 
 /// A calibration value refused (by index, for a settings shell).
@@ -145,6 +184,15 @@ fn rejection(l: &mut OutLine, why: &Rejection) {
     match why {
         Rejection::NoFit => {
             let _ = l.push_str("no rising, settling record (both methods failed)");
+        }
+        Rejection::Extrapolated(fit_k, seen_k) => {
+            let _ = write!(
+                l,
+                "fitted rise {} K is over {}x the {} K the record ended at (record too short)",
+                Fixed(*fit_k, 1),
+                Fixed(crate::tune::TUNE_MAX_EXTRAPOLATION, 1),
+                Fixed(*seen_k, 1)
+            );
         }
         Rejection::OutOfBounds(f, v) => {
             let _ = write!(

@@ -40,7 +40,7 @@ impl Strategy for Boost {
         let (pla_c, tca_c) = (o.model_c(HeatedNode::Pla), o.model_c(HeatedNode::Tca));
         match t.phase {
             Phase::Soften => t.m.t_pla_c >= t.th.soft_threshold_c,
-            Phase::Bend => self.drive.bend_done(t, pla_c, tca_c, true),
+            Phase::Bend => self.drive.bend_done(t, pla_c, tca_c, true, true),
             Phase::Lock => t.m.t_pla_c < t.th.rigid_threshold_c,
             Phase::Release => t.in_phase_s >= RELEASE_S,
             Phase::Idle | Phase::Fault => false,

@@ -28,6 +28,17 @@ pub const CLOSED_RIGID_COOL_C: f32 = 50.0;
 const _: () =
     assert!(RIGID_THRESHOLD_C <= CLOSED_RIGID_COOL_C && CLOSED_RIGID_COOL_C < SOFT_THRESHOLD_C);
 
+/// Bend need not wait for the PLA thermistor to slow while it reads within this of what the
+/// observer expects ([`super::model::observer::Observer::innovation_k`]), K: the model follows the rod, so its
+/// estimate holds. 3 K is what the reading's 0.5 s smoothing and a bead lag 1.5 s off the
+/// assumed 3 s make together at the 1.5 K/s the bead rises at late in soften (the lumped
+/// ensemble's lags are 2–6 s); on the high-fidelity links the bead reads far
+/// under the model there (the rod heats slower than the model's), and bend waits. 1.5 K
+/// made the lumped links wait too, 1–2 s longer at the median with no gain in error (`cargo
+/// xtask calibration`).
+pub const CLOSED_PLA_AGREE_K: f32 = 3.0;
+const _: () = assert!(CLOSED_PLA_AGREE_K > 0.0 && CLOSED_PLA_AGREE_K < 5.0);
+
 /// The `closed` strategy.
 #[derive(Clone, Copy, Debug)]
 pub struct Closed {
@@ -81,11 +92,17 @@ impl Strategy for Closed {
         match t.phase {
             Phase::Soften => pla_c >= t.th.soft_threshold_c,
             Phase::Bend => {
-                // Also waits for the TCA thermistor to slow down, so the observer has learnt the
-                // model's error before the PLA freezes the shape.
-                let learnt =
-                    o.measured_rate_k_per_s(HeatedNode::Tca).abs() <= LEARN_MAX_RATE_K_PER_S;
-                self.drive.bend_done(t, pla_c, tca_c, learnt)
+                // Also waits for both thermistors to slow down, so the observer has learnt the
+                // model's error before the PLA freezes the shape: a PLA estimate not yet
+                // corrected by its thermistor can call a rod soft whose core is still glassy
+                // (the high-fidelity links then lock before the rod has flowed). A PLA
+                // thermistor that reads what the model expects need not wait.
+                let learnt = |n| o.measured_rate_k_per_s(n).abs() <= LEARN_MAX_RATE_K_PER_S;
+                let pla_learnt = learnt(HeatedNode::Pla)
+                    || o.innovation_k(HeatedNode::Pla).abs() <= CLOSED_PLA_AGREE_K;
+                let tca_learnt = learnt(HeatedNode::Tca);
+                self.drive
+                    .bend_done(t, pla_c, tca_c, tca_learnt, pla_learnt)
             }
             Phase::Lock => self.rigid(t, pla_c),
             Phase::Release => t.in_phase_s >= RELEASE_S,

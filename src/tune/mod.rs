@@ -53,6 +53,16 @@ pub const TUNE_EARLY_CAP_SHARE: f32 = 0.6;
 /// `TUNE` starts only from a link at rest: PLA and TCA within this of the ambient, K (a warm
 /// link cooling during the test would read as a weaker heater).
 pub const TUNE_START_MAX_RISE_K: f32 = 3.0;
+/// Most a fit's steady rise may exceed the rise its record ended at, as a factor: 1.6 is a
+/// record about one time constant long (63 % of the way). A slow coupling seen over a shorter
+/// record is an extrapolation (a 45 s record read as a 120 s time constant triples its rise)
+/// that the observer would take as heat the link has; such a fit is rejected. The heaters'
+/// own records end at 85 % or more of their rise under water, well inside the bound.
+pub const TUNE_MAX_EXTRAPOLATION: f32 = 1.6;
+const _: () = assert!(TUNE_MAX_EXTRAPOLATION > 1.0 && TUNE_MAX_EXTRAPOLATION <= 2.0);
+/// Samples at the end of a record whose mean is the rise it ended at.
+pub const TUNE_END_SAMPLES: usize = 3;
+const _: () = assert!(TUNE_END_SAMPLES >= 1 && TUNE_END_SAMPLES <= fit::MIN_SAMPLES);
 /// Sample period of the fit's record, s (each sample the mean of this second's ticks).
 pub const TUNE_SAMPLE_S: f32 = 1.0;
 /// Samples a step can hold (the longer step).
@@ -146,6 +156,9 @@ pub enum Rejection {
     NoFit,
     /// The fit's value is outside its field's range (the field and the value).
     OutOfBounds(FieldInfo, f32),
+    /// The fit's steady rise is more than [`TUNE_MAX_EXTRAPOLATION`] times the rise its
+    /// record ended at (fitted, seen; K): the record is too short for its time constant.
+    Extrapolated(f32, f32),
 }
 
 /// Why a tune ended without `done`.
@@ -262,7 +275,16 @@ fn fit_checked(
     rise_field: &str,
     tau_field: Option<&str>,
 ) -> Result<(f32, f32, Method), Rejection> {
+    let end_k = if y.len() >= TUNE_END_SAMPLES {
+        let tail = &y[y.len() - TUNE_END_SAMPLES..];
+        tail.iter().sum::<f32>() / TUNE_END_SAMPLES as f32
+    } else {
+        0.0
+    };
     let check = |f: StepFit| -> Result<(f32, f32, Method), Rejection> {
+        if !(f.rise_k <= TUNE_MAX_EXTRAPOLATION * end_k) {
+            return Err(Rejection::Extrapolated(f.rise_k, end_k));
+        }
         let r = bounded(field(rise_field), f.rise_k / power_w)?;
         let t = match tau_field {
             Some(name) => bounded(field(name), f.tau_s)?,
@@ -489,5 +511,46 @@ impl Tune {
         }
         emit(TuneEvent::Done(self.cal));
         TuneTick::Done(self.cal)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A first-order record of `rise_k` with time constant `tau_s`, `n` samples.
+    fn record(rise_k: f32, tau_s: f32, n: usize) -> [f32; TUNE_MAX_SAMPLES] {
+        let mut y = [0.0f32; TUNE_MAX_SAMPLES];
+        for (i, v) in y.iter_mut().take(n).enumerate() {
+            *v = rise_k * (1.0 - crate::mathf::exp(-((i + 1) as f32 * TUNE_SAMPLE_S) / tau_s));
+        }
+        y
+    }
+
+    #[test]
+    fn a_record_longer_than_its_time_constant_is_fitted() {
+        // 45 s of a 13 s coupling: 97 % of the way.
+        let y = record(4.8, 13.0, 45);
+        let (r, tau, _) = fit_checked(&y[..45], TUNE_TCA_W, "tca_to_pla_k_per_w", None).unwrap();
+        assert!(
+            (r - 8.0).abs() < 0.3 && (tau - 13.0).abs() < 1.5,
+            "{r} {tau}"
+        );
+    }
+
+    #[test]
+    fn a_record_far_shorter_than_its_time_constant_is_an_extrapolation() {
+        // 45 s of a 120 s coupling ends at 31 % of its rise: both methods would triple it.
+        let y = record(12.0, 120.0, 45);
+        match fit_checked(&y[..45], TUNE_TCA_W, "tca_to_pla_k_per_w", None) {
+            Err(Rejection::Extrapolated(fit_k, seen_k)) => {
+                assert!(fit_k > TUNE_MAX_EXTRAPOLATION * seen_k, "{fit_k} {seen_k}");
+                assert!((seen_k - y[44]).abs() < 0.2, "{seen_k}");
+            }
+            other => panic!("{other:?}"),
+        }
+        // A falling or empty record has nothing to extrapolate from.
+        assert!(fit_checked(&[0.0; 20], TUNE_TCA_W, "tca_to_pla_k_per_w", None).is_err());
+        assert!(fit_checked(&[], TUNE_TCA_W, "tca_to_pla_k_per_w", None).is_err());
     }
 }

@@ -6,14 +6,17 @@
 //! [`SETTLE_AFTER_DONE_S`] after `done` with a uniform error of ± [`MEASURE_ERROR_MM`] and
 //! sending `MEASURED`. After TUNE and after each measured morph the targets are morphed again
 //! (each on a fresh copy of the link at rest, with the calibration reached so far). Writes
-//! `docs/calibration.csv`, the chart of the error reached against the number of measured
+//! `docs/calibration.csv` (one row per evaluated morph, with the times bend, lock and release
+//! began), the chart of the error reached against the number of measured
 //! morphs (`docs/calibration.svg`, `.png`) and prints the tables of `docs/calibration.md`.
 
 use morphlink::bench::Noise;
 use morphlink::calibration::Calibration;
-use morphlink::controller::TICK_MS;
+use morphlink::controller::{Event, TICK_MS};
 use morphlink::protocol::{Command, Mode};
+use morphlink::sequencer::SeqEvent;
 use morphlink::table;
+use morphlink::vocab::Phase;
 use morphlink_host::plot::{self, prelude::*};
 use morphlink_model::draw::{splitmix, uniform};
 use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
@@ -104,6 +107,8 @@ struct Eval {
     time_s: f64,
     /// (final − target) / target, % (NaN unless done).
     error_pct: f64,
+    /// Seconds since MORPH at which bend, lock and release began (NaN if never).
+    phase_s: [f64; 3],
 }
 
 /// What one link gave.
@@ -116,9 +121,26 @@ struct LinkResult {
     evals: Vec<Eval>,
 }
 
-/// Runs one MORPH on `rig` to its end and `SETTLE_AFTER_DONE_S` past it; `(time_s, final_mm)`,
-/// NaN unless done.
-fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> (f64, f64) {
+/// What one morph gave: MORPH to done, s, the true radius `SETTLE_AFTER_DONE_S` later, mm
+/// (both NaN unless done), and when bend, lock and release began, s since MORPH.
+struct MorphRun {
+    time_s: f64,
+    final_mm: f64,
+    phase_s: [f64; 3],
+}
+
+/// Which of [`MorphRun::phase_s`] a phase event fills.
+fn phase_slot(phase: Phase) -> Option<usize> {
+    match phase {
+        Phase::Bend => Some(0),
+        Phase::Lock => Some(1),
+        Phase::Release => Some(2),
+        _ => None,
+    }
+}
+
+/// Runs one MORPH on `rig` to its end and `SETTLE_AFTER_DONE_S` past it.
+fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> MorphRun {
     let t0 = rig.now_ms();
     rig.ctrl.handle(
         t0,
@@ -129,20 +151,35 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> (f64, f64) {
         &mut |_| {},
     );
     let end = t0 + (MAX_MORPH_S * 1000.0) as u64;
+    let mut phase_s = [f64::NAN; 3];
     while rig.ctrl.busy() && rig.now_ms() < end {
         rig.tick();
-        while rig.ctrl.pop_event().is_some() {}
+        while let Some(e) = rig.ctrl.pop_event() {
+            if let Event::Seq(SeqEvent::Phase { phase, t_s, .. }) = e {
+                if let Some(i) = phase_slot(phase) {
+                    phase_s[i] = t_s as f64;
+                }
+            }
+        }
     }
     if rig.ctrl.busy() || rig.ctrl.fault().is_some() {
-        return (f64::NAN, f64::NAN);
+        return MorphRun {
+            time_s: f64::NAN,
+            final_mm: f64::NAN,
+            phase_s,
+        };
     }
-    let t = (rig.now_ms() - t0) as f64 / 1000.0;
+    let time_s = (rig.now_ms() - t0) as f64 / 1000.0;
     let settle = (SETTLE_AFTER_DONE_S * 1000.0) as u64 / TICK_MS;
     for _ in 0..settle {
         rig.tick();
         while rig.ctrl.pop_event().is_some() {}
     }
-    (t, rig.radius_mm())
+    MorphRun {
+        time_s,
+        final_mm: rig.radius_mm(),
+        phase_s,
+    }
 }
 
 fn evaluate(
@@ -155,12 +192,13 @@ fn evaluate(
     targets
         .iter()
         .map(|&t| {
-            let (time_s, final_mm) = morph(&mut link.rig(noise, cal), t);
+            let m = morph(&mut link.rig(noise, cal), t);
             Eval {
                 measured,
                 target_mm: t,
-                time_s,
-                error_pct: (final_mm - t as f64) / t as f64 * 100.0,
+                time_s: m.time_s,
+                error_pct: (m.final_mm - t as f64) / t as f64 * 100.0,
+                phase_s: m.phase_s,
             }
         })
         .collect()
@@ -210,7 +248,7 @@ fn run_link(
     for (k, f) in CALIBRATION_FRACTIONS.iter().enumerate() {
         let target = min + (max - min) * f;
         let mut rig = link.rig(noise, &cal);
-        let (_, final_mm) = morph(&mut rig, target);
+        let final_mm = morph(&mut rig, target).final_mm;
         if final_mm.is_finite() {
             let reported = final_mm + uniform(&mut s, (-MEASURE_ERROR_MM, MEASURE_ERROR_MM));
             let now = rig.now_ms();
@@ -398,14 +436,16 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
         .map(|(_, r)| r)
         .collect::<Result<_, _>>()?;
     // CSV: one row per evaluated morph.
-    let mut csv = String::from("plant,draw,air,stage,measured,target_mm,time_s,error_pct,tune\n");
+    let mut csv = String::from(
+        "plant,draw,air,stage,measured,target_mm,time_s,error_pct,bend_s,lock_s,release_s,tune\n",
+    );
     for r in &results {
         for (k, e) in r.evals.iter().enumerate() {
             // The link's TUNE line once, on its first row.
             let tune_line = if k == 0 { r.tune_line.as_str() } else { "" };
             let _ = writeln!(
                 csv,
-                "{},{},{},{},{},{:.2},{:.1},{:.3},\"{}\"",
+                "{},{},{},{},{},{:.2},{:.1},{:.3},{:.1},{:.1},{:.1},\"{}\"",
                 r.plant,
                 r.draw,
                 r.air,
@@ -414,6 +454,9 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                 e.target_mm,
                 e.time_s,
                 e.error_pct,
+                e.phase_s[0],
+                e.phase_s[1],
+                e.phase_s[2],
                 tune_line.replace('"', "'")
             );
         }
@@ -462,16 +505,34 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
         }
         println!("\n(aims: |error| p95 <= {AIM_ERROR_PCT} %, time p50 <= {AIM_TIME_S} s)");
         println!("\nPer target, water links, after TUNE + 3 measured:\n");
-        println!("| target | time p50 | \\|error\\| p50 | \\|error\\| p95 | failed |");
-        println!("| --- | --- | --- | --- | --- |");
+        println!(
+            "| target | time p50 | soften p50 | bend p50 | lock p50 | \\|error\\| p50 | \\|error\\| p95 | failed |"
+        );
+        println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
         for &t in &targets {
-            let (_, failed, p50, p95, t50) = stats(
+            let at = || {
                 sel.iter()
                     .filter(|r| !r.air)
                     .flat_map(|r| r.evals.iter())
-                    .filter(|e| e.measured == Some(3) && e.target_mm == t),
+                    .filter(move |e| e.measured == Some(3) && e.target_mm == t)
+            };
+            let (_, failed, p50, p95, t50) = stats(at());
+            // Phase lengths of the finished morphs: soften to bend, bend to lock, lock to
+            // release.
+            let span = |from: Option<usize>, to: usize| {
+                let mut v: Vec<f64> = at()
+                    .filter(|e| e.error_pct.is_finite())
+                    .map(|e| e.phase_s[to] - from.map_or(0.0, |f| e.phase_s[f]))
+                    .collect();
+                v.sort_by(f64::total_cmp);
+                percentile(&v, 50.0)
+            };
+            println!(
+                "| {t:.2} mm | {t50:.1} s | {:.1} s | {:.1} s | {:.1} s | {p50:.2} % | {p95:.2} % | {failed} |",
+                span(None, 0),
+                span(Some(0), 1),
+                span(Some(1), 2)
             );
-            println!("| {t:.2} mm | {t50:.1} s | {p50:.2} % | {p95:.2} % | {failed} |");
         }
         // Per link: the worst p95 after calibration (the aim is on every link).
         let mut worst: Vec<(u64, f64)> = sel

@@ -162,19 +162,30 @@ impl ModelDrive {
     }
 
     /// Whether bend is over: the TCA (`tca_c`, the strategy's view of it) at its target or as
-    /// close as the link allows, the PLA (`pla_c`) soft and `learnt`, all for
-    /// [`MODEL_SETTLE_S`].
-    pub(crate) fn bend_done(&mut self, t: &Tick, pla_c: f32, tca_c: f32, learnt: bool) -> bool {
+    /// close as the link allows, the PLA (`pla_c`) soft, the TCA's view `learnt` and the PLA's
+    /// `pla_learnt`, all for [`MODEL_SETTLE_S`]. A TCA that is past its target on the PLA's
+    /// heat alone (heater at keep-alive) does not wait for `pla_learnt`: it only warms further
+    /// while it waits, so it locks as it is.
+    pub(crate) fn bend_done(
+        &mut self,
+        t: &Tick,
+        pla_c: f32,
+        tca_c: f32,
+        learnt: bool,
+        pla_learnt: bool,
+    ) -> bool {
         // Above the target with the TCA off is as close as the link can get (warm
         // surroundings and the PLA's heat keep it there): lock as it is.
+        let passive = tca_c > self.tca_target_c && self.applied.tca_w <= MODEL_KEEP_ALIVE_W;
         let reached = (tca_c - self.tca_target_c).abs() <= MODEL_SETTLE_BAND_C
-            || (tca_c > self.tca_target_c && self.applied.tca_w <= MODEL_KEEP_ALIVE_W)
+            || passive
             || (tca_c < self.tca_target_c
                 && self.applied.tca_w
                     >= deliverable_w(&HeaterConfig::TCA, TCA_BOOST_MAX_W, t.supply_v) - 1e-3
                 && self.observer.measured_rate_k_per_s(HeatedNode::Tca) < MODEL_STALL_RATE_K_PER_S
                 && t.since_start_s > STALL_AFTER_S);
-        let at_target = reached && pla_c >= t.th.soft_threshold_c && learnt;
+        let at_target =
+            reached && pla_c >= t.th.soft_threshold_c && learnt && (pla_learnt || passive);
         self.held(t.now_ms, at_target) && t.in_phase_s >= MODEL_SETTLE_S
     }
 

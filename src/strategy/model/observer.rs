@@ -219,6 +219,18 @@ impl Observer {
         (sm[0] - sm[1]) / (RATE_FILTER_S.1 - RATE_FILTER_S.0) as f64
     }
 
+    /// How far a heated node's thermistor (smoothed over [`RATE_FILTER_S`]`.0`) is from what
+    /// the observer expects it to read, K (reading − modelled thermistor − disturbance): near 0
+    /// while the model follows the link, large while it runs ahead or behind it.
+    pub fn innovation_k(&self, n: HeatedNode) -> f32 {
+        let i = n.index();
+        let m = self.smooth_c[i][0];
+        if m.is_nan() {
+            return 0.0;
+        }
+        (m - self.sensor_c[i] - self.disturbance_k[i]) as f32
+    }
+
     /// How fast a heated node's thermistor is changing (smoothed), K/s.
     pub fn measured_rate_k_per_s(&self, n: HeatedNode) -> f32 {
         self.rate_k_per_s_of(n.index()) as f32
@@ -320,6 +332,29 @@ mod tests {
         let truth = o.model_c(HeatedNode::Tca) + 5.0;
         assert!((o.estimate_c(HeatedNode::Tca) - truth).abs() < 0.1);
         assert!((o.disturbance_k(HeatedNode::Tca) - 5.0).abs() < 0.1);
+    }
+
+    #[test]
+    fn innovation_is_small_while_the_model_follows_the_link_and_large_when_it_runs_ahead() {
+        // The PLA at 1.5 W, then 8 s of soften at 5 W: a thermistor that reads the model's
+        // own, and one that sees 60 % of the rise (a rod heating slower than the model's).
+        let run = |share: f64, ticks: usize| {
+            let mut o = Observer::new(22.0);
+            for k in 0..ticks {
+                let w = if k < 80 { 5.0 } else { 1.5 };
+                o.predict(0.1, w, 0.0, 22.0);
+                let sensed = 22.0 + share * (o.sensor_c[0] - 22.0);
+                o.correct(0.1, sensed as f32, 22.0);
+            }
+            o.innovation_k(HeatedNode::Pla)
+        };
+        // Settled, a following thermistor agrees; while it rises fast, the reading's 0.5 s
+        // smoothing trails by half a second of its rate, well inside the 3 K `closed` allows.
+        let (settled, rising, ahead) = (run(1.0, 6000), run(1.0, 80), run(0.6, 80));
+        assert!(settled.abs() < 0.05, "{settled}");
+        assert!(rising < 0.0 && rising > -2.5 * 0.5 * 6.0, "{rising}");
+        assert!(ahead < rising - 1.0, "{ahead} vs {rising}");
+        assert_eq!(Observer::new(22.0).innovation_k(HeatedNode::Tca), 0.0);
     }
 
     fn libm_exp(x: f32) -> f32 {
