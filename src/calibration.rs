@@ -385,10 +385,18 @@ impl Calibration {
     }
 
     /// The TCA map `(a, b)`: the rise the mechanics need is `a + b × the estimate's rise`, K.
-    /// `(0, 1)` with no report.
+    /// `(0, 1)` with no report, and also when the stored sums give a map [`fold_map`] would
+    /// refuse (a slope outside [`MAP_SLOPE_RANGE`], a correction over [`MAP_MAX_CORRECTION_K`],
+    /// or not finite): sums set field by field or saved under other priors never steer a morph
+    /// beyond the bounds a report is held to.
+    ///
+    /// [`fold_map`]: Calibration::fold_map
     pub fn map(&self) -> (f32, f32) {
         let (a, b) = self.map_fit();
-        (a, b.clamp(MAP_SLOPE_RANGE.0, MAP_SLOPE_RANGE.1))
+        match map_bounds(a, b) {
+            Ok(()) => (a, b),
+            Err(_) => (0.0, 1.0),
+        }
     }
 
     /// The map's least-squares fit before its slope is bounded (what a fold checks).
@@ -445,16 +453,7 @@ impl Calibration {
         next.map_sum_xx_k2 += x_k * x_k;
         next.map_sum_xy_k2 += x_k * y_k;
         let (a, b) = next.map_fit();
-        if !(b >= MAP_SLOPE_RANGE.0 && b <= MAP_SLOPE_RANGE.1) {
-            return Err(ReportRejection::Slope(b));
-        }
-        let worst = [MAP_SPAN_K.0, MAP_SPAN_K.1]
-            .iter()
-            .map(|&x| (a + (b - 1.0) * x).abs())
-            .fold(0.0f32, f32::max);
-        if !(worst <= MAP_MAX_CORRECTION_K) {
-            return Err(ReportRejection::Correction(worst));
-        }
+        map_bounds(a, b)?;
         if let Some(f) = next.first_invalid() {
             return Err(ReportRejection::Field(f));
         }
@@ -500,6 +499,25 @@ impl Calibration {
 
 /// The ridge least-squares line through the sums, pulled towards `(0, 1)`; the slope is not
 /// bounded here (see [`Calibration::map`]).
+/// Whether the map `(a, b)` is one a report may give: its slope within [`MAP_SLOPE_RANGE`] and
+/// its correction at most [`MAP_MAX_CORRECTION_K`] over [`MAP_SPAN_K`] (NaN fails both).
+fn map_bounds(a: f32, b: f32) -> Result<(), ReportRejection> {
+    if !a.is_finite() {
+        return Err(ReportRejection::NotFinite);
+    }
+    if !(b >= MAP_SLOPE_RANGE.0 && b <= MAP_SLOPE_RANGE.1) {
+        return Err(ReportRejection::Slope(b));
+    }
+    let worst = [MAP_SPAN_K.0, MAP_SPAN_K.1]
+        .iter()
+        .map(|&x| (a + (b - 1.0) * x).abs())
+        .fold(0.0f32, f32::max);
+    if !(worst <= MAP_MAX_CORRECTION_K) {
+        return Err(ReportRejection::Correction(worst));
+    }
+    Ok(())
+}
+
 fn map_of(n: f32, sx: f32, sy: f32, sxx: f32, sxy: f32) -> (f32, f32) {
     let la = MAP_OFFSET_PRIOR_WEIGHT;
     let lb = MAP_PRIOR_WEIGHT * MAP_PRIOR_RISE_K * MAP_PRIOR_RISE_K;
@@ -656,6 +674,30 @@ mod tests {
         assert_eq!(c.fold_power(5.0), Err(ReportRejection::PowerRatio(5.0)));
         assert_eq!(c.fold_power(f32::NAN), Err(ReportRejection::NotFinite));
         assert_eq!(c, Calibration::default());
+    }
+
+    #[test]
+    fn stored_sums_beyond_a_reports_bounds_steer_nothing() {
+        // Sums set field by field (CONFIG SET, or a blob saved under other priors) that give a
+        // map no report could: eight "reports" of a 60 K correction at every rise.
+        let mut c = Calibration::default();
+        let field = |name: &str| FIELDS.iter().position(|f| f.name == name).unwrap();
+        for (name, v) in [
+            ("map_count", 8.0),
+            ("map_sum_x_k", 8.0 * 30.0),
+            ("map_sum_y_k", 8.0 * 90.0),
+            ("map_sum_xx_k2", 8.0 * 30.0 * 30.0 + 8.0 * 100.0),
+            ("map_sum_xy_k2", 8.0 * 30.0 * 90.0 + 8.0 * 100.0),
+        ] {
+            c.set(field(name), v).unwrap();
+        }
+        assert!(map_bounds(c.map_fit().0, c.map_fit().1).is_err(), "{:?}", c.map_fit());
+        assert_eq!(c.map(), (0.0, 1.0));
+        assert_eq!(c.aim_rise_k(40.0), 40.0);
+        // A report's bounds, NaN included.
+        assert_eq!(map_bounds(f32::NAN, 1.0), Err(ReportRejection::NotFinite));
+        assert!(map_bounds(0.0, f32::NAN).is_err());
+        assert_eq!(map_bounds(0.0, 1.0), Ok(()));
     }
 
     #[test]

@@ -279,9 +279,27 @@ impl Controller {
         self.seq.busy() || self.pulse.is_some() || self.tune.is_some()
     }
 
+    /// Queues `e`; a full queue makes room by dropping its oldest event that is not an alarm
+    /// (an alarm is the one line a stalled host must still see), or, holding only alarms,
+    /// drops the new event unless it is an alarm too.
     fn push(&mut self, e: Event) {
         if self.events.is_full() {
-            self.events.pop_front();
+            let n = self.events.len();
+            let mut kept = false;
+            for _ in 0..n {
+                let old = self.events.pop_front().expect("full queue");
+                if !kept && !matches!(old, Event::Alarm(_)) {
+                    kept = true; // dropped: the oldest non-alarm
+                    continue;
+                }
+                let _ = self.events.push_back(old);
+            }
+            if !kept {
+                if !matches!(e, Event::Alarm(_)) {
+                    return;
+                }
+                self.events.pop_front();
+            }
         }
         let _ = self.events.push_back(e);
     }

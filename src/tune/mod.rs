@@ -281,6 +281,10 @@ fn fit_checked(
     } else {
         0.0
     };
+    // A record that did not end risen (too short, flat or falling) has no fit to judge.
+    if !(end_k > 0.0) {
+        return Err(Rejection::NoFit);
+    }
     let check = |f: StepFit| -> Result<(f32, f32, Method), Rejection> {
         if !(f.rise_k <= TUNE_MAX_EXTRAPOLATION * end_k) {
             return Err(Rejection::Extrapolated(f.rise_k, end_k));

@@ -336,7 +336,7 @@ mod tests {
 
     #[test]
     fn innovation_is_small_while_the_model_follows_the_link_and_large_when_it_runs_ahead() {
-        // The PLA at 1.5 W, then 8 s of soften at 5 W: a thermistor that reads the model's
+        // 8 s of soften at 5 W, then the PLA at 1.5 W: a thermistor that reads the model's
         // own, and one that sees 60 % of the rise (a rod heating slower than the model's).
         let run = |share: f64, ticks: usize| {
             let mut o = Observer::new(22.0);
@@ -348,11 +348,13 @@ mod tests {
             }
             o.innovation_k(HeatedNode::Pla)
         };
-        // Settled, a following thermistor agrees; while it rises fast, the reading's 0.5 s
-        // smoothing trails by half a second of its rate, well inside the 3 K `closed` allows.
+        // Settled, a following thermistor agrees; while it rises fast (the end of the 5 W
+        // step, about 6–7 K/s), the reading's 0.5 s smoothing trails by half a second of that
+        // rate, 3.3 K: just outside the agreement `closed` allows, so a bend does not take a
+        // rod still heating this fast as settled.
         let (settled, rising, ahead) = (run(1.0, 6000), run(1.0, 80), run(0.6, 80));
         assert!(settled.abs() < 0.05, "{settled}");
-        assert!(rising < 0.0 && rising > -2.5 * 0.5 * 6.0, "{rising}");
+        assert!(rising < 0.0 && rising > -0.5 * 8.0, "{rising}");
         assert!(ahead < rising - 1.0, "{ahead} vs {rising}");
         assert_eq!(Observer::new(22.0).innovation_k(HeatedNode::Tca), 0.0);
     }
