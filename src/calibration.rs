@@ -691,7 +691,11 @@ mod tests {
         ] {
             c.set(field(name), v).unwrap();
         }
-        assert!(map_bounds(c.map_fit().0, c.map_fit().1).is_err(), "{:?}", c.map_fit());
+        assert!(
+            map_bounds(c.map_fit().0, c.map_fit().1).is_err(),
+            "{:?}",
+            c.map_fit()
+        );
         assert_eq!(c.map(), (0.0, 1.0));
         assert_eq!(c.aim_rise_k(40.0), 40.0);
         // A report's bounds, NaN included.

@@ -931,3 +931,59 @@ impl Controller {
         out(&l);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::supervisor::{FaultCode, Subject};
+    use crate::vocab::Sensor;
+
+    fn alarm(value: f32) -> Event {
+        Event::Alarm(Fault {
+            code: FaultCode::ThermistorOpen,
+            subject: Subject::Sensor(Sensor::Pla),
+            value,
+        })
+    }
+
+    fn phase(t_s: f32) -> Event {
+        Event::Seq(SeqEvent::Phase {
+            phase: Phase::Bend,
+            t_s,
+            power_w: None,
+        })
+    }
+
+    /// A host that reads no events for a while loses the oldest progress lines, never an
+    /// alarm: a full queue drops its oldest non-alarm event, and with only alarms left, drops
+    /// a new non-alarm event instead.
+    #[test]
+    fn a_full_event_queue_never_evicts_an_alarm() {
+        let mut c = Controller::new(Config::DEFAULT);
+        c.push(alarm(1.0));
+        for k in 0..EVENT_QUEUE + 4 {
+            c.push(phase(k as f32));
+        }
+        let first = c.pop_event();
+        assert!(
+            matches!(first, Some(Event::Alarm(f)) if f.value == 1.0),
+            "{first:?}"
+        );
+        // The oldest progress lines went; the newest stayed, in order.
+        let rest: std::vec::Vec<_> = core::iter::from_fn(|| c.pop_event()).collect();
+        assert_eq!(rest.len(), EVENT_QUEUE - 1);
+        assert!(
+            matches!(rest.last(), Some(Event::Seq(SeqEvent::Phase { t_s, .. })) if *t_s == (EVENT_QUEUE + 3) as f32)
+        );
+        // All alarms: a progress line is dropped, an alarm replaces the oldest alarm.
+        for k in 0..EVENT_QUEUE {
+            c.push(alarm(k as f32));
+        }
+        c.push(phase(0.0));
+        c.push(alarm(99.0));
+        let all: std::vec::Vec<_> = core::iter::from_fn(|| c.pop_event()).collect();
+        assert_eq!(all.len(), EVENT_QUEUE);
+        assert!(all.iter().all(|e| matches!(e, Event::Alarm(_))));
+        assert!(matches!(all.last(), Some(Event::Alarm(f)) if f.value == 99.0));
+    }
+}
