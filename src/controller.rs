@@ -497,7 +497,7 @@ impl Controller {
             Command::Help => {
                 for h in reply::HELP.iter().chain(tune_reply::HELP.iter()) {
                     l.clear();
-                    reply::data(&mut l, h);
+                    reply::data_text(&mut l, h);
                     out(&l);
                 }
                 out(protocol::OK);

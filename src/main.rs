@@ -238,14 +238,23 @@ mod firmware {
     /// Output waiting for the serial port, bytes: two of the longest replies (HELP).
     const OUT_BYTES: usize = 2 * REPLY_BYTES;
 
-    /// Answers one finished line into `reply`; says whether it was an ABORT.
+    /// Answers one finished line: runs it and writes its reply into `reply`, or, with `build`
+    /// false (the reply will be dropped), runs it and only notes whether it replied (one
+    /// empty line stands for the reply). Says whether it was an ABORT.
     fn answer(
         c: &mut Controller,
         now_ms: u64,
         line: Result<&str, &ProtoError>,
+        build: bool,
         reply: &mut heapless::String<REPLY_BYTES>,
     ) -> bool {
-        let mut out = |l: &str| push_line(reply, l);
+        let mut out = |l: &str| {
+            if build {
+                push_line(reply, l);
+            } else if reply.is_empty() {
+                let _ = reply.push('\n');
+            }
+        };
         match line {
             Ok(l) => {
                 if let Some(sim) = c.handle_line(now_ms, l, &mut out) {
@@ -284,13 +293,16 @@ mod firmware {
                 let answered = input.next_line(|line| {
                     reply.clear();
                     let now_ms = Instant::now().as_millis();
+                    // Behind a flood the reply will be dropped: not built at all, so a long
+                    // one (HELP) does not hold the control task up (an ABORT's always is).
+                    let build = !out.drops_replies() || line.is_ok_and(is_abort);
                     with_controller(|c| {
                         let before = c.outputs();
-                        let abort = answer(c, now_ms, line, &mut reply);
-                        (abort, c.outputs() != before)
+                        let abort = answer(c, now_ms, line, build, &mut reply);
+                        (abort, c.outputs() != before, build)
                     })
                 });
-                if let Some((abort, changed)) = answered {
+                if let Some((abort, changed, build)) = answered {
                     if changed || abort {
                         APPLY_NOW.signal(());
                     }
@@ -306,7 +318,11 @@ mod firmware {
                             });
                         }
                     }
-                    out.push_reply(&reply, abort);
+                    if build {
+                        out.push_reply(&reply, abort);
+                    } else if !reply.is_empty() {
+                        out.drop_reply();
+                    }
                     // A MORPH's first event follows its `ok`.
                     out.refill(events);
                 }

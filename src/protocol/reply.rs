@@ -118,6 +118,15 @@ pub fn data(l: &mut OutLine, text: impl fmt::Display) {
     let _ = write!(l, "{DATA_TAG} {text}");
 }
 
+/// `data: <text>` for fixed text, by plain copies rather than `core::fmt`: HELP sends some
+/// twenty of these in one reply, and a flood of HELP must not hold the control task up.
+pub fn data_text(l: &mut OutLine, text: &str) {
+    let _ = l
+        .push_str(DATA_TAG)
+        .and_then(|()| l.push(' '))
+        .and_then(|()| l.push_str(text));
+}
+
 /// The bare success reply, `ok`.
 pub fn ok(l: &mut OutLine) {
     let _ = l.push_str(OK);
@@ -575,6 +584,14 @@ mod tests {
         let mut l = OutLine::new();
         f(&mut l);
         l
+    }
+
+    #[test]
+    fn data_text_is_the_data_line_of_its_text() {
+        for h in HELP {
+            assert_eq!(line(|l| data_text(l, h)), line(|l| data(l, h)), "{h}");
+        }
+        assert_eq!(line(|l| data_text(l, "")).as_str(), "data: ");
     }
 
     #[test]

@@ -9,7 +9,6 @@ use super::{
     parse_line, Assembled, Command, LineAssembler, OutLine, Overrun, ProtoError, ERR_INVALID_LINE,
     ERR_LINE_TOO_LONG, OUT_LINE_BYTES,
 };
-use heapless::Deque;
 
 /// Room for one queued line and its `\n`, bytes: [`OutLine`]'s capacity and one.
 pub const LINE_ROOM: usize = OUT_LINE_BYTES + 1;
@@ -181,8 +180,17 @@ impl<const N: usize> SerialInput<N> {
 /// dropped, every later one is too until the queue has emptied, and then one
 /// `error: busy <n> replies dropped` notice goes out, so the notice counts the replies right
 /// before it. Input never waits for this queue: a flood costs replies, never commands.
+///
+/// The queue is a ring of bytes copied a slice at a time (not byte by byte), and
+/// [`Outbox::drops_replies`] says before a command runs that its reply will be dropped, so the
+/// shell need not build it: a flood of long replies (HELP) then costs the CPU little more than
+/// the commands themselves, and the control task is not held up.
 pub struct Outbox<const N: usize> {
-    q: Deque<u8, N>,
+    buf: [u8; N],
+    /// Index of the oldest queued byte.
+    head: usize,
+    /// Queued bytes.
+    len: usize,
     dropped: u32,
 }
 
@@ -197,14 +205,16 @@ impl<const N: usize> Outbox<N> {
     pub const fn new() -> Self {
         const { assert!(N >= OUT_RESERVE + LINE_ROOM) };
         Self {
-            q: Deque::new(),
+            buf: [0; N],
+            head: 0,
+            len: 0,
             dropped: 0,
         }
     }
 
     /// True when nothing waits for the port.
     pub fn is_empty(&self) -> bool {
-        self.q.is_empty()
+        self.len == 0
     }
 
     /// Replies dropped since the last notice went out.
@@ -212,8 +222,30 @@ impl<const N: usize> Outbox<N> {
         self.dropped
     }
 
+    /// True if the reply to the next command will be dropped whatever its length (a flood is
+    /// being counted and the queue has not emptied yet), unless it is an ABORT's. The shell
+    /// then runs the command without building its reply and counts it with
+    /// [`Outbox::drop_reply`].
+    pub fn drops_replies(&self) -> bool {
+        self.dropped > 0
+    }
+
+    /// Counts one reply as dropped without queueing it (see [`Outbox::drops_replies`]).
+    pub fn drop_reply(&mut self) {
+        self.dropped += 1;
+    }
+
     fn room(&self) -> usize {
-        N - self.q.len()
+        N - self.len
+    }
+
+    /// Appends `bytes` (they fit: checked by the caller) in at most two slice copies.
+    fn append(&mut self, bytes: &[u8]) {
+        let tail = (self.head + self.len) % N;
+        let first = bytes.len().min(N - tail);
+        self.buf[tail..tail + first].copy_from_slice(&bytes[..first]);
+        self.buf[..bytes.len() - first].copy_from_slice(&bytes[first..]);
+        self.len += bytes.len();
     }
 
     /// Queues all of `s` if at least `keep` bytes stay free after it; else nothing.
@@ -221,9 +253,7 @@ impl<const N: usize> Outbox<N> {
         if s.len() + keep > self.room() {
             return false;
         }
-        for b in s.bytes() {
-            let _ = self.q.push_back(b);
-        }
+        self.append(s.as_bytes());
         true
     }
 
@@ -231,7 +261,7 @@ impl<const N: usize> Outbox<N> {
     pub fn push_line(&mut self, line: &str) -> bool {
         let fits = self.offer(line, 1);
         if fits {
-            let _ = self.q.push_back(b'\n');
+            self.append(b"\n");
         }
         fits
     }
@@ -253,7 +283,7 @@ impl<const N: usize> Outbox<N> {
     /// Queues the dropped-replies notice once everything before it is out, then as many event
     /// and alarm lines from `next_event` as there is room for.
     pub fn refill(&mut self, mut next_event: impl FnMut() -> Option<OutLine>) {
-        if self.dropped > 0 && self.q.is_empty() {
+        if self.dropped > 0 && self.is_empty() {
             let mut l = OutLine::new();
             replies_dropped(&mut l, self.dropped);
             if self.push_line(&l) {
@@ -270,15 +300,15 @@ impl<const N: usize> Outbox<N> {
 
     /// The oldest queued bytes, at most [`TX_CHUNK`] (empty when nothing is queued).
     pub fn chunk(&self) -> &[u8] {
-        let (a, _) = self.q.as_slices();
-        &a[..a.len().min(TX_CHUNK)]
+        let n = self.len.min(N - self.head).min(TX_CHUNK);
+        &self.buf[self.head..self.head + n]
     }
 
     /// Removes the `n` oldest bytes: the port took them.
     pub fn sent(&mut self, n: usize) {
-        for _ in 0..n {
-            self.q.pop_front();
-        }
+        let n = n.min(self.len);
+        self.head = (self.head + n) % N;
+        self.len -= n;
     }
 
     /// Removes the bytes of the current [`Outbox::chunk`]: the port failed to send them.
@@ -361,6 +391,48 @@ mod tests {
             sent.ends_with("ok\nevent: phase bend\nalarm: x\n"),
             "{sent}"
         );
+    }
+
+    #[test]
+    fn drops_replies_says_ahead_that_a_reply_goes_uncounted_until_the_flood_ends() {
+        let mut out: Outbox<SMALL> = Outbox::new();
+        let reply = "x".repeat(LINE_ROOM - 1) + "\n";
+        assert!(!out.drops_replies(), "an empty queue takes replies");
+        while out.dropped() == 0 {
+            assert!(!out.drops_replies());
+            out.push_reply(&reply, false);
+        }
+        assert!(out.drops_replies());
+        // Counted like a queued-then-dropped reply, and the notice counts both kinds.
+        out.drop_reply();
+        out.push_reply("ok\n", false);
+        assert_eq!(out.dropped(), 3);
+        drain(&mut out);
+        assert!(out.drops_replies(), "until the notice is queued");
+        out.refill(|| None);
+        assert!(drain(&mut out).starts_with("error: busy 3 replies dropped"));
+        assert!(!out.drops_replies());
+    }
+
+    #[test]
+    fn the_ring_keeps_bytes_in_order_across_its_end() {
+        let mut out: Outbox<SMALL> = Outbox::new();
+        let mut want = String::new();
+        let mut got = String::new();
+        // Lines of lengths that do not divide the ring, sent in uneven pieces, wrap many times.
+        for i in 0..200usize {
+            let line = std::format!("{i}:{}", "y".repeat(i % 37));
+            if out.push_line(&line) {
+                want.push_str(&line);
+                want.push('\n');
+            }
+            let n = out.chunk().len().min(7 + i % 60);
+            got.push_str(core::str::from_utf8(&out.chunk()[..n]).unwrap());
+            out.sent(n);
+        }
+        got.push_str(&drain(&mut out));
+        assert_eq!(got, want);
+        assert!(want.len() > 3 * SMALL, "the ring wrapped");
     }
 
     #[test]
