@@ -370,7 +370,7 @@ mod firmware {
         }
     }
 
-    /// Drops what a write took from `out` (a failed write drops the chunk, logged).
+    /// Drops what a write took from `out` (a failed write drops the rest of its line, logged).
     fn sent<E, const N: usize>(out: &mut Outbox<N>, r: Result<usize, E>) {
         match r {
             Ok(n) => out.sent(n),

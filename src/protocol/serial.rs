@@ -18,6 +18,10 @@ pub const LINE_ROOM: usize = OUT_LINE_BYTES + 1;
 /// waits behind a flood of replies.
 pub const OUT_RESERVE: usize = 2 * LINE_ROOM;
 
+/// Room event lines always leave free in an [`Outbox`], bytes: an ABORT's reply (`ok` and its
+/// `\n`), so events queued behind a flood can never crowd it out.
+pub const ABORT_REPLY_BYTES: usize = super::OK.len() + 1;
+
 /// Most bytes [`Outbox::chunk`] offers the port in one write, so the serial task yields to the
 /// control task between writes (a port may take fewer: the emulated one takes one byte).
 pub const TX_CHUNK: usize = 64;
@@ -192,6 +196,8 @@ pub struct Outbox<const N: usize> {
     /// Queued bytes.
     len: usize,
     dropped: u32,
+    /// The byte at `head` starts a line (the port's last byte was a `\n`, or none was sent).
+    at_line_start: bool,
 }
 
 impl<const N: usize> Default for Outbox<N> {
@@ -209,6 +215,7 @@ impl<const N: usize> Outbox<N> {
             head: 0,
             len: 0,
             dropped: 0,
+            at_line_start: true,
         }
     }
 
@@ -290,7 +297,7 @@ impl<const N: usize> Outbox<N> {
                 self.dropped = 0;
             }
         }
-        while self.room() >= LINE_ROOM {
+        while self.room() >= LINE_ROOM + ABORT_REPLY_BYTES {
             let Some(line) = next_event() else {
                 break;
             };
@@ -307,13 +314,30 @@ impl<const N: usize> Outbox<N> {
     /// Removes the `n` oldest bytes: the port took them.
     pub fn sent(&mut self, n: usize) {
         let n = n.min(self.len);
+        if n > 0 {
+            self.at_line_start = self.buf[(self.head + n - 1) % N] == b'\n';
+        }
         self.head = (self.head + n) % N;
         self.len -= n;
     }
 
-    /// Removes the bytes of the current [`Outbox::chunk`]: the port failed to send them.
+    /// The port failed to send the current [`Outbox::chunk`]: drops it and the rest of the line
+    /// it ends in, and if the port had already taken the start of that line, ends the line
+    /// there with a `\n`, so the host sees a cut line, never two lines run together.
     pub fn send_failed(&mut self) {
-        self.sent(self.chunk().len());
+        let started_mid_line = !self.at_line_start;
+        let mut n = self.chunk().len();
+        while n < self.len && self.buf[(self.head + n - 1) % N] != b'\n' {
+            n += 1;
+        }
+        self.sent(n);
+        if started_mid_line && n > 0 {
+            // Dropping freed at least one byte: room for the `\n` in front.
+            self.head = (self.head + N - 1) % N;
+            self.buf[self.head] = b'\n';
+            self.len += 1;
+            self.at_line_start = true;
+        }
     }
 }
 
@@ -436,17 +460,39 @@ mod tests {
     }
 
     #[test]
-    fn a_failed_send_drops_one_chunk() {
+    fn a_failed_send_drops_its_line_and_never_runs_two_lines_together() {
         let mut out: Outbox<SMALL> = Outbox::new();
         let long = "y".repeat(TX_CHUNK + 10);
-        assert!(out.push_line(&long));
+        // At a line start: the failed chunk's whole line goes, the next line is intact.
+        assert!(out.push_line(&long) && out.push_line("next"));
         out.send_failed();
-        assert_eq!(drain(&mut out).len(), 11);
+        assert_eq!(drain(&mut out), "next\n");
+        // Mid-line (the port took the line's first 5 bytes): the rest of the line goes and a
+        // `\n` ends what the host has, so it reads a cut line, then the next one.
+        assert!(out.push_line(&long) && out.push_line("next"));
+        out.sent(5);
+        out.send_failed();
+        assert_eq!(drain(&mut out), "\nnext\n");
         assert!(
             !out.push_line(&"z".repeat(SMALL)),
             "a line that cannot fit is refused"
         );
         assert!(out.is_empty());
+    }
+
+    #[test]
+    fn events_never_crowd_out_an_aborts_reply() {
+        let mut out: Outbox<SMALL> = Outbox::new();
+        let long = "e".repeat(LINE_ROOM - 1);
+        // As many maximal event lines as refill will queue.
+        out.refill(|| {
+            let mut l = OutLine::new();
+            l.push_str(&long).unwrap();
+            Some(l)
+        });
+        out.push_reply("ok\n", true);
+        assert_eq!(out.dropped(), 0, "the ABORT's ok is queued");
+        assert!(drain(&mut out).ends_with("ok\n"));
     }
 
     /// Feeds `reads` (bytes, lost after them) and collects, per read, whether the scan found
