@@ -299,6 +299,9 @@ struct OffWatch {
 struct LowWatch {
     low_since_ms: Option<u64>,
     min_rise_k: Option<f32>,
+    /// A trip's lowest rise while its sensor still stands more than [`OFF_MAX_RISE_K`] above
+    /// it: the condition RESET waits for (the watch itself restarts when the heaters go off).
+    tripped_min_k: Option<f32>,
 }
 
 /// The TCA's held watch against the PLA sensor (see `Supervisor::check_held`): the recent peak
@@ -625,7 +628,8 @@ impl Supervisor {
             }
         }
         for heater in Heater::ALL {
-            if self.off[heater.index()].heating {
+            if self.off[heater.index()].heating || self.low[heater.index()].tripped_min_k.is_some()
+            {
                 return Err(Fault {
                     code: FaultCode::HeatingWhileOff,
                     subject: Subject::Heater(heater),
@@ -761,8 +765,8 @@ impl Supervisor {
     }
 
     /// Heating-while-off with one heater low: once a heater has been commanded below
-    /// [`HEATING_MIN_POWER_FRACTION`] of its cap for [`LOW_GRACE_S`] while the other heater is
-    /// on (with both off [`Supervisor::check_off`] watches), while its sensor must cool ([`must_cool`]), a rise of [`OFF_MAX_RISE_K`] above its
+    /// [`HEATING_MIN_POWER_FRACTION`] of its cap for [`LOW_GRACE_S`] while either heater is on
+    /// (with both off [`Supervisor::check_off`] watches), while its sensor must cool ([`must_cool`]), a rise of [`OFF_MAX_RISE_K`] above its
     /// lowest reading since (relative to ambient) trips: the heater is on although the
     /// controller turns it down (a stuck MOSFET during a morph).
     fn check_low(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
@@ -774,10 +778,19 @@ impl Supervisor {
                 Heater::Pla => cmd.tca_w > 0.0,
                 Heater::Tca => cmd.pla_w > 0.0,
             };
+            let own_on = cmd.of(heater) > 0.0;
             let low = !(cmd.of(heater) >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater));
+            // A trip holds RESET off while the sensor stays risen above the trip's lowest
+            // reading, whatever the heaters are commanded now (a stuck MOSFET heats on).
+            w.tripped_min_k = w
+                .tripped_min_k
+                .filter(|&m| rise_k.is_finite() && rise_k - m > OFF_MAX_RISE_K);
             // With both off, `check_off` watches it (with its longer grace).
-            if !low || !other_on || !rise_k.is_finite() {
-                *w = LowWatch::default();
+            if !low || !(own_on || other_on) || !rise_k.is_finite() {
+                *w = LowWatch {
+                    tripped_min_k: w.tripped_min_k,
+                    ..LowWatch::default()
+                };
                 continue;
             }
             let since = *w.low_since_ms.get_or_insert(now_ms);
@@ -790,6 +803,7 @@ impl Supervisor {
             let min_k = w.min_rise_k.map_or(rise_k, |k| k.min(rise_k));
             w.min_rise_k = Some(min_k);
             if rise_k - min_k > OFF_MAX_RISE_K {
+                w.tripped_min_k = Some(min_k);
                 return Err(Fault {
                     code: FaultCode::HeatingWhileOff,
                     subject: Subject::Heater(heater),
