@@ -667,6 +667,10 @@ fn a_latched_link_stays_supervised(link: Link) {
     assert_eq!(b.alarms_since(n).len(), 1);
 }
 
+/// A thermistor stuck at rest trips within a morph started at once. `SIM FAULT
+/// thermistor-stuck` repeats the reading to the last bit, so the still-reading check
+/// (`FROZEN_STILL_S`, 5 s) is what trips first; the heater checks would otherwise (before it:
+/// about 10 s after the heater came on).
 fn a_stuck_thermistor_trips_once_its_heater_is_on(link: Link) {
     let mut cases = 0;
     for mode in ["auto", "gated", "closed"] {
@@ -785,6 +789,9 @@ fn a_drifting_thermistor_in_a_morph_trips_before_the_link_overheats(link: Link) 
     );
 }
 
+/// A thermistor frozen in soften trips. The still-reading check (`FROZEN_STILL_S`) now trips
+/// before the power step at bend arms the move watch (`FROZEN_WINDOW_S`; its arms are held to
+/// their windows by the unit tests in `src/supervisor.rs`, with noisy readings).
 fn a_frozen_thermistor_trips_when_its_heater_power_steps(link: Link) {
     let mut cases = 0;
     for mode in ["auto", "paper", "gated", "closed"] {
@@ -920,9 +927,10 @@ fn a_stuck_pla_heater_trips_once_the_controller_turns_it_down(link: Link) {
     );
 }
 
-/// A PLA thermistor frozen in lock trips `sensor-frozen` within its window: the PLA heater is
-/// off and the rod far above what the TCA's heat keeps it at, so a live reading must fall
-/// (before this check it ran to the 600 s lock timeout).
+/// A PLA thermistor frozen in lock trips `sensor-frozen` within the must-cool window: the PLA
+/// heater is off and the rod far above what the TCA's heat keeps it at, so a live reading must
+/// fall (before this check it ran to the 600 s lock timeout). The still-reading check
+/// (`FROZEN_STILL_S`, 5 s) now comes first.
 fn a_frozen_pla_sensor_in_lock_trips_sensor_frozen(link: Link) {
     let mut cases = 0;
     for mode in MODES {
