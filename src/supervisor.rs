@@ -121,7 +121,7 @@ impl Fault {
             },
             (FaultCode::PhaseTimeout, _) => "SOFTEN_TIMEOUT_S",
             (FaultCode::SensorFrozen, _) => {
-                "FROZEN_POWER_STEP_FRACTION, FROZEN_WINDOW_S, MUST_COOL_MARGIN_K"
+                "FROZEN_POWER_STEP_FRACTION, FROZEN_WINDOW_S, MUST_COOL_MARGIN_K, FROZEN_STILL_S"
             }
             (FaultCode::SensorImplausible, _) => {
                 "PLAUS_LOW_GAIN, PLAUS_HIGH_GAIN, PLAUS_MARGIN_K, PLAUS_TIME_S"
@@ -330,6 +330,9 @@ pub struct Supervisor {
     hold: [HoldWatch; 2],
     low: [LowWatch; 2],
     held: HeldWatch,
+    /// Each sensor's last reading and the sample time it was first read at, °C and ms (the
+    /// still-reading watch, [`FROZEN_STILL_S`]).
+    still: [Option<(f32, u64)>; 3],
     amb_slow_c: Option<f32>,
     last_ms: Option<u64>,
 }
@@ -355,6 +358,7 @@ impl Supervisor {
             hold: [HoldWatch::default(); 2],
             low: [LowWatch::default(); 2],
             held: HeldWatch::default(),
+            still: [None; 3],
             amb_slow_c: None,
             last_ms: None,
         }
@@ -438,6 +442,9 @@ impl Supervisor {
         if let Err(f) = supply_ok(frame) {
             found(f);
         }
+        if let Err(f) = self.check_still(frame.sample_ms) {
+            found(f);
+        }
         if let Err(f) = self.check_heating(now_ms, commanded, phase) {
             found(f);
         }
@@ -470,6 +477,34 @@ impl Supervisor {
     /// STATUS shows; [`Supervisor::measurements`] keeps the last good ones for control).
     pub fn live(&self) -> Measurements {
         Measurements::from_array(self.live_c)
+    }
+
+    /// Sensor-frozen, still reading: a sensor whose reading repeats to the last bit for
+    /// [`FROZEN_STILL_S`] of sample time trips, whatever the heaters do. A live reading carries
+    /// the ADC's and the bead's noise (the oversampled sum's last counts change from one reading
+    /// to the next); one that does not is a hung ADC channel or a frozen value. Only frames with a
+    /// new sample time count, so a frame read twice is left to the stale-sensor check.
+    fn check_still(&mut self, sample_ms: u64) -> Result<(), Fault> {
+        for sensor in Sensor::ALL {
+            let i = sensor.index();
+            let temp_c = self.live_c[i];
+            let w = &mut self.still[i];
+            match *w {
+                _ if !temp_c.is_finite() => *w = None,
+                Some((c, since_ms)) if c.to_bits() == temp_c.to_bits() => {
+                    if sample_ms.saturating_sub(since_ms) as f32 / 1000.0 >= FROZEN_STILL_S {
+                        return Err(Fault {
+                            code: FaultCode::SensorFrozen,
+                            subject: Subject::Sensor(sensor),
+                            // Moved by nothing (the alarm says "moved 0.0 K").
+                            value: 0.0,
+                        });
+                    }
+                }
+                _ => *w = Some((temp_c, sample_ms)),
+            }
+        }
+        Ok(())
     }
 
     /// Heater-not-heating, Klipper's `verify_heater` on this link's model. Each heater commanded
@@ -652,6 +687,7 @@ impl Supervisor {
         self.hold = [HoldWatch::default(); 2];
         self.low = [LowWatch::default(); 2];
         self.held = HeldWatch::default();
+        self.still = [None; 3];
         self.amb_slow_c = None;
         self.last_ms = None;
     }
@@ -959,6 +995,15 @@ pub const FROZEN_MIN_MOVE_K: f32 = 0.1;
 /// healthy sensor (the hifi PLA bead, 10 s behind its rod) moves that far within about 3 s of a
 /// 1 W step; 8 s leaves margin and keeps a frozen sensor under the 10 s aim.
 pub const FROZEN_WINDOW_S: f32 = 8.0;
+/// Sensor-frozen, still reading: how long a reading may repeat to the last bit, s of sample
+/// time (any sensor, any phase). The thermistors are read as a sum of 16 12-bit samples, about
+/// 0.003 K per count at 60 °C and 0.016 K at 120 °C, and the quietest bead's noise (0.02 K rms)
+/// spans several counts: two healthy readings in a row are alike about one time in five at
+/// 120 °C, 50 in a row never. A hung channel repeats at once; 5 s (50 readings) finds it within
+/// the 10 s aim wherever it comes, a TCA frozen in a closed-loop hold (whose power and reading
+/// barely move) included.
+pub const FROZEN_STILL_S: f32 = 5.0;
+const _: () = assert!(FROZEN_STILL_S >= 1.0 && FROZEN_STILL_S < FROZEN_WINDOW_S);
 
 /// Sensor-implausible, the envelope's floor: this share of the model's steady rise (own heater
 /// plus the other's share, `R_PP_K_PER_W`/`R_TT_K_PER_W` and `R_TP_K_PER_W` times the commanded
@@ -1169,12 +1214,47 @@ fn reading_fault(sensor: Sensor, reading: Reading) -> Option<Fault> {
 mod tests {
     use super::*;
 
+    /// A frame sampled at `ms` reading `pla` and `tca` (and a 22 °C bath), each with a few
+    /// hundredths of a kelvin of deterministic noise, as a live ADC reading has.
     fn frame(ms: u64, pla: f32, tca: f32) -> Frame {
+        let noise = |k: u64| 0.01 * ((ms / 100 + k) % 3) as f32 - 0.01;
         Frame {
-            readings: [Reading::Ok(pla), Reading::Ok(tca), Reading::Ok(22.0)],
+            readings: [pla + noise(0), tca + noise(1), 22.0 + noise(2)].map(Reading::Ok),
             supply_v: 12.0,
             sample_ms: ms,
         }
+    }
+
+    #[test]
+    fn a_reading_that_repeats_to_the_last_bit_trips_and_a_noisy_or_reread_one_never_does() {
+        let off = Powers::default();
+        let mut noisy = Supervisor::new();
+        let mut reread = Supervisor::new();
+        let mut still = Supervisor::new();
+        let mut tripped_s = None;
+        for tick in 0..200u64 {
+            let ms = tick * 100;
+            assert!(noisy
+                .check(ms, &frame(ms, 22.5, 22.3), off, Phase::Lock)
+                .is_ok());
+            // The same frame read again and again (a late ADC): the stale check's business.
+            let old = frame(ms.min(900), 22.5, 22.3);
+            let r = reread.check(ms, &old, off, Phase::Lock);
+            assert!(r.is_ok() || r.unwrap_err().code == FaultCode::StaleSensor);
+            let mut f = frame(ms, 22.5, 22.3);
+            f.readings[Sensor::Tca.index()] = Reading::Ok(22.3);
+            if tripped_s.is_none() {
+                if let Err(fault) = still.check(ms, &f, off, Phase::Lock) {
+                    assert_eq!(
+                        (fault.code, fault.subject),
+                        (FaultCode::SensorFrozen, Subject::Sensor(Sensor::Tca))
+                    );
+                    tripped_s = Some(ms as f32 / 1000.0);
+                }
+            }
+        }
+        let s = tripped_s.expect("a still reading never tripped");
+        assert!((FROZEN_STILL_S..FROZEN_STILL_S + 0.15).contains(&s), "{s}");
     }
 
     #[test]

@@ -667,6 +667,10 @@ fn a_latched_link_stays_supervised(link: Link) {
     assert_eq!(b.alarms_since(n).len(), 1);
 }
 
+/// A thermistor stuck at rest trips within a morph started at once. `SIM FAULT
+/// thermistor-stuck` repeats the reading to the last bit, so the still-reading check
+/// (`FROZEN_STILL_S`, 5 s) is what trips first; the heater checks would otherwise (before it:
+/// about 10 s after the heater came on).
 fn a_stuck_thermistor_trips_once_its_heater_is_on(link: Link) {
     let mut cases = 0;
     for mode in ["auto", "gated", "closed"] {
@@ -785,6 +789,9 @@ fn a_drifting_thermistor_in_a_morph_trips_before_the_link_overheats(link: Link) 
     );
 }
 
+/// A thermistor frozen in soften trips. The still-reading check (`FROZEN_STILL_S`) now trips
+/// before the power step at bend arms the move watch (`FROZEN_WINDOW_S`; its arms are held to
+/// their windows by the unit tests in `src/supervisor.rs`, with noisy readings).
 fn a_frozen_thermistor_trips_when_its_heater_power_steps(link: Link) {
     let mut cases = 0;
     for mode in ["auto", "paper", "gated", "closed"] {
@@ -925,9 +932,10 @@ fn a_stuck_pla_heater_trips_once_the_controller_turns_it_down(link: Link) {
     );
 }
 
-/// A PLA thermistor frozen in lock trips `sensor-frozen` within its window: the PLA heater is
-/// off and the rod far above what the TCA's heat keeps it at, so a live reading must fall
-/// (before this check it ran to the 600 s lock timeout).
+/// A PLA thermistor frozen in lock trips `sensor-frozen` within the must-cool window: the PLA
+/// heater is off and the rod far above what the TCA's heat keeps it at, so a live reading must
+/// fall (before this check it ran to the 600 s lock timeout). The still-reading check
+/// (`FROZEN_STILL_S`, 5 s) now comes first.
 fn a_frozen_pla_sensor_in_lock_trips_sensor_frozen(link: Link) {
     let mut cases = 0;
     for mode in MODES {
@@ -953,7 +961,50 @@ fn a_frozen_pla_sensor_in_lock_trips_sensor_frozen(link: Link) {
     );
 }
 
+/// A reading frozen in lock or release (any sensor, every mode, both targets) trips
+/// `sensor-frozen` once it has repeated to the last bit for `FROZEN_STILL_S`, whatever the
+/// heaters do: a TCA frozen in a closed-loop lock hold, whose power barely moves, trips before
+/// `done` (it used to trip after it, or in release only with the next morph).
+fn a_reading_frozen_in_lock_or_release_trips_within_the_still_time(link: Link) {
+    let mut cases = 0;
+    let mut worst_s: f64 = 0.0;
+    for mode in MODES {
+        for target in TARGETS_MM {
+            for phase in [Phase::Lock, Phase::Release] {
+                for sensor in ["pla", "tca", "amb"] {
+                    let Some(mut b) = bench_in(link, phase, target, mode, 10.0) else {
+                        continue;
+                    };
+                    cases += 1;
+                    let r = b.send(&format!("SIM FAULT thermistor-stuck {sensor}"));
+                    assert!(r[0].starts_with("ok"), "{r:?}");
+                    let (a, s) = if phase == Phase::Lock {
+                        alarm_before_done(&mut b, &["sensor-frozen"], 10.0)
+                    } else {
+                        let t0 = b.rig.now_ms();
+                        let a = expect_alarm(&mut b, "sensor-frozen", 10.0);
+                        (a, (b.rig.now_ms() - t0) as f64 / 1000.0)
+                    };
+                    assert!(a.contains(sensor), "{mode} {target} {phase:?}: {a}");
+                    assert_names(&a, "FROZEN_POWER_STEP_FRACTION");
+                    println!("{link:?} {mode} {target} {phase:?}: {sensor} frozen: {s:.1} s, {a}");
+                    worst_s = worst_s.max(s);
+                    assert_latched(&mut b, "sensor-frozen");
+                }
+            }
+        }
+    }
+    // FROZEN_STILL_S (5 s) of repeated readings, seen within a tick or two.
+    assert!(worst_s <= 5.3, "{link:?}: {worst_s} s");
+    checked(
+        link,
+        "a_reading_frozen_in_lock_or_release_trips_within_the_still_time",
+        cases,
+    );
+}
+
 on_both_links!(
+    a_reading_frozen_in_lock_or_release_trips_within_the_still_time,
     a_tca_dying_in_bend_or_lock_trips_before_done,
     a_stuck_pla_heater_trips_once_the_controller_turns_it_down,
     a_frozen_pla_sensor_in_lock_trips_sensor_frozen,

@@ -529,7 +529,7 @@ impl fmt::Display for FaultText<'_> {
             ),
             FaultCode::PhaseTimeout => write!(l, "phase-timeout phase {s} did not finish in time"),
             FaultCode::SensorFrozen => {
-                write!(l, "sensor-frozen {s} moved {v} K where it had to move")
+                write!(l, "sensor-frozen {s} moved {v} K")
             }
             FaultCode::SensorImplausible => {
                 write!(l, "sensor-implausible {s} off its expected rise by {v} K")

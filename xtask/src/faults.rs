@@ -46,22 +46,14 @@ pub struct Args {
 /// When an injected fault first makes a difference the sensors could show.
 #[derive(Clone, Copy, Debug)]
 enum Observable {
-    /// At once (an open or shorted thermistor, a drift, the supply).
+    /// At once (an open, shorted or frozen thermistor, a drift, the supply). A frozen reading
+    /// repeats to the last bit from its first frame on, where a live one carries noise.
     AtInjection,
     /// Once the controller commands this heater on (a heater that is open).
     HeaterOn(Heater),
     /// Once the controller commands this heater below the power it dissipates (a stuck one).
     BelowStuck(Heater),
-    /// Once the true temperature this sensor watches has moved
-    /// [`FROZEN_OBSERVABLE_MOVE_K`] from its value at injection (a frozen reading).
-    TruthMoves(Heater),
-    /// Never in these runs, and why.
-    Never(&'static str),
 }
-
-/// How far the true temperature must move from its value at injection before a frozen
-/// reading of it is observable, K.
-pub const FROZEN_OBSERVABLE_MOVE_K: f64 = 1.0;
 
 /// One injectable fault: its `SIM` line and the aim it is held to.
 struct FaultCase {
@@ -75,31 +67,17 @@ struct FaultCase {
     observable: Observable,
 }
 
-/// The heater a `pla`/`tca` target word names (`None`: `amb`).
-fn heater_of(word: &str) -> Option<Heater> {
-    match word {
-        "pla" => Some(Heater::Pla),
-        "tca" => Some(Heater::Tca),
-        _ => None,
-    }
-}
-
 /// Every injectable fault.
 fn cases() -> Vec<FaultCase> {
     let mut v = Vec::new();
     for sensor in ["pla", "tca", "amb"] {
         for kind in ["thermistor-open", "thermistor-short", "thermistor-stuck"] {
             let stuck = kind == "thermistor-stuck";
-            let observable = match heater_of(sensor) {
-                Some(h) if stuck => Observable::TruthMoves(h),
-                None if stuck => Observable::Never("the bath does not change in these runs"),
-                _ => Observable::AtInjection,
-            };
             v.push(FaultCase {
                 name: format!("{kind} {sensor}"),
                 line: format!("SIM FAULT {kind} {sensor}"),
                 aim_s: stuck.then_some(AIM_SENSOR_S),
-                observable,
+                observable: Observable::AtInjection,
             });
         }
         for rate in [-DRIFT_K_PER_S, DRIFT_K_PER_S] {
@@ -153,8 +131,8 @@ struct Outcome {
     observable_s: Option<f64>,
 }
 
-/// Whether `o` holds on this tick of `rig` (`at_injection`: the true temperatures then).
-fn observable_now<P: Plant>(o: Observable, rig: &Rig<P>, at_injection: [f64; 2]) -> bool {
+/// Whether `o` holds on this tick of `rig`.
+fn observable_now<P: Plant>(o: Observable, rig: &Rig<P>) -> bool {
     let t = rig.plant().truth();
     let cmd = rig.ctrl.powers();
     match o {
@@ -167,14 +145,6 @@ fn observable_now<P: Plant>(o: Observable, rig: &Rig<P>, at_injection: [f64; 2])
             };
             (cmd.of(h) as f64) < dissipated_w - STUCK_OBSERVABLE_MARGIN_W
         }
-        Observable::TruthMoves(h) => {
-            let now_c = match h {
-                Heater::Pla => t.pla_c,
-                Heater::Tca => t.tca_c,
-            };
-            (now_c - at_injection[h.index()]).abs() >= FROZEN_OBSERVABLE_MOVE_K
-        }
-        Observable::Never(_) => false,
     }
 }
 
@@ -217,12 +187,10 @@ fn run_case<P: Plant>(mut rig: Rig<P>, case: &FaultCase, phase: Phase, mode: &st
     if !reached {
         return out;
     }
-    let truth0 = rig.plant().truth();
-    let at_injection = [truth0.pla_c, truth0.tca_c];
     let mut idle_since: Option<u64> = None;
     let mut peak = [f64::MIN; 2];
     while rig.now_ms() - t0 < (MAX_WAIT_S * 1000.0) as u64 {
-        if out.observable_s.is_none() && observable_now(case.observable, &rig, at_injection) {
+        if out.observable_s.is_none() && observable_now(case.observable, &rig) {
             out.observable_s = Some((rig.now_ms() - t0) as f64 / 1000.0);
         }
         rig.tick();
@@ -266,12 +234,6 @@ fn cell(o: &Outcome, case: &FaultCase) -> String {
     let limit_c = PLA_LIMITS.max_c.min(TCA_LIMITS.max_c) as f64;
     let mut s = match (&o.alarm, o.observable_s) {
         (None, _) if o.peak_c[0].is_nan() => "phase not reached".to_string(),
-        (None, _) if matches!(case.observable, Observable::Never(_)) => {
-            let Observable::Never(why) = case.observable else {
-                unreachable!()
-            };
-            format!("no alarm in {MAX_WAIT_S:.0} s: not observable ({why})")
-        }
         (None, None) => format!("no alarm in {MAX_WAIT_S:.0} s: never observable"),
         (None, Some(obs)) => {
             format!("**no alarm in {MAX_WAIT_S:.0} s** (observable from {obs:.1} s)")
