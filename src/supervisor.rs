@@ -455,7 +455,7 @@ impl Supervisor {
             .last_ms
             .map_or(0.0, |ms| now_ms.saturating_sub(ms) as f32 / 1000.0);
         self.last_ms = Some(now_ms);
-        if let Err(f) = self.check_frozen(now_ms, commanded) {
+        if let Err(f) = self.check_frozen(now_ms, commanded, phase) {
             found(f);
         }
         if let Err(f) = self.check_plausible(dt_s, commanded) {
@@ -855,7 +855,7 @@ impl Supervisor {
     /// and its sensor reads more than [`MUST_COOL_MARGIN_K`] above the TCA's (plus the
     /// still-air reach of its own low power; the rod must then cool, as it does in lock), the
     /// sensor must move [`FROZEN_MIN_MOVE_K`] (either way) within [`FROZEN_WINDOW_S`].
-    fn check_frozen(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
+    fn check_frozen(&mut self, now_ms: u64, cmd: Powers, phase: Phase) -> Result<(), Fault> {
         let [_, tca_c, amb_c] = self.live_c;
         for heater in Heater::ALL {
             let temp_c = self.live_c[heater.sensor().index()];
@@ -878,8 +878,13 @@ impl Supervisor {
             // so it cannot stay above the TCA's reading (plus its own power's still-air reach).
             let low = !(own_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater));
             let held_up_k = (tca_c - amb_c).max(0.0) + PLAUS_HIGH_GAIN * R_PP_K_PER_W * own_w;
-            let cooling =
-                heater == Heater::Pla && low && temp_c - amb_c > held_up_k + MUST_COOL_MARGIN_K;
+            // Judged in lock only (the phase that waits for the PLA to fall): at rest a rod
+            // near ambient in still air may cool slower than the window can see.
+            let cooling = heater == Heater::Pla
+                && phase == Phase::Lock
+                && low
+                && tca_c.is_finite()
+                && temp_c - amb_c > held_up_k + MUST_COOL_MARGIN_K;
             if w.since_ms.is_none() && ((own_w - ref_w).abs() >= step_w || cooling) {
                 w.since_ms = Some(now_ms);
             }
