@@ -231,7 +231,8 @@ pub const OFF_MAX_RISE_K: f32 = 3.0;
 /// [`HEATING_MIN_POWER_FRACTION`] of its cap, with the other heater on, before its sensor is
 /// watched, s (with both off, [`OFF_GRACE_S`] applies). After a power drop the hifi PLA bead,
 /// 10 s behind its rod, keeps rising for about 3 s while it catches up; 8 s covers it and
-/// leaves a stuck heater caught within 10 s of the controller turning its power down.
+/// leaves a stuck heater caught 8.9–10.3 s after the controller turns its power down (the 3 K
+/// rise at 1.5–2 K/s on top; `tests/safety.rs` bounds it at 11 s).
 pub const LOW_GRACE_S: f32 = 8.0;
 /// Heating-while-off, one heater low: a heater's sensor is watched only while it reads more
 /// than this above the widest rise the commanded powers can explain ([`PLAUS_HIGH_GAIN`] times
