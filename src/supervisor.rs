@@ -123,6 +123,9 @@ impl Fault {
             (FaultCode::SensorFrozen, _) => {
                 "FROZEN_POWER_STEP_FRACTION, FROZEN_WINDOW_S, MUST_COOL_MARGIN_K, FROZEN_STILL_S"
             }
+            (FaultCode::SensorImplausible, Subject::Sensor(Sensor::Amb)) => {
+                "AMB_RAMP_MAX_K_PER_S, AMB_RAMP_SETTLING_SHARE"
+            }
             (FaultCode::SensorImplausible, _) => {
                 "PLAUS_LOW_GAIN, PLAUS_HIGH_GAIN, PLAUS_MARGIN_K, PLAUS_TIME_S"
             }
@@ -334,6 +337,8 @@ pub struct Supervisor {
     /// Each sensor's last reading and the sample time it was first read at, °C and ms (the
     /// still-reading watch, [`FROZEN_STILL_S`]).
     still: [Option<(f32, u64)>; 3],
+    /// The ambient sensor's steady-ramp watch ([`AMB_RAMP_MAX_K_PER_S`]).
+    ramp: RampWatch,
     amb_slow_c: Option<f32>,
     last_ms: Option<u64>,
 }
@@ -360,6 +365,7 @@ impl Supervisor {
             low: [LowWatch::default(); 2],
             held: HeldWatch::default(),
             still: [None; 3],
+            ramp: RampWatch::new(),
             amb_slow_c: None,
             last_ms: None,
         }
@@ -444,6 +450,10 @@ impl Supervisor {
             found(f);
         }
         if let Err(f) = self.check_still(frame.sample_ms) {
+            found(f);
+        }
+        let amb_c = self.live_c[Sensor::Amb.index()];
+        if let Err(f) = self.ramp.update(frame.sample_ms, amb_c) {
             found(f);
         }
         if let Err(f) = self.check_heating(now_ms, commanded, phase) {
@@ -689,6 +699,7 @@ impl Supervisor {
         self.low = [LowWatch::default(); 2];
         self.held = HeldWatch::default();
         self.still = [None; 3];
+        self.ramp = RampWatch::new();
         self.amb_slow_c = None;
         self.last_ms = None;
     }
@@ -1057,6 +1068,118 @@ const _: () = assert!(PLAUS_MARGIN_K > 0.0 && PLAUS_TIME_S > 0.0 && PLAUS_LAG_S 
 const _: () = assert!(FROZEN_MIN_MOVE_K > 0.0 && FROZEN_WINDOW_S < 10.0);
 const _: () = assert!(FROZEN_POWER_STEP_FRACTION > 0.0 && FROZEN_POWER_STEP_FRACTION < 1.0);
 
+/// Sensor-implausible, ambient: the fastest steady change of the surroundings, K/s (6 K/min).
+/// A water bath or a room changes by a fraction of a kelvin a minute; a bath poured or the link
+/// moved is a step, which the ambient bead follows within seconds (its time constant is 2–3 s)
+/// and then holds. A reading that keeps moving faster than this, steadily, for
+/// [`AMB_RAMP_SEGMENTS`] × [`AMB_RAMP_SEGMENT_S`] is a drifting sensor (a cracked bead, a
+/// failing joint): every heated sensor's rise is measured from it, so the plausibility envelope
+/// cannot see it.
+pub const AMB_RAMP_MAX_K_PER_S: f32 = 0.1;
+/// Sensor-implausible, ambient: the length of one segment of the ramp watch, s of sample time;
+/// the watch compares the ambient reading's mean over consecutive segments (a mean of about
+/// 30 readings, so the ADC's noise is far below a segment's change at the threshold, 0.3 K).
+pub const AMB_RAMP_SEGMENT_S: f32 = 3.0;
+/// Sensor-implausible, ambient: how many consecutive segment-to-segment changes must all exceed
+/// [`AMB_RAMP_MAX_K_PER_S`], with one sign: 4 (12 s) finds a 0.2 K/s drift 12–15 s after it
+/// starts, inside the 20 s aim.
+pub const AMB_RAMP_SEGMENTS: usize = 4;
+/// Sensor-implausible, ambient: the evenness a ramp needs: its smallest segment change at least
+/// this share of its largest (the first change after a step, or after a drift starts, covers
+/// part of a segment and is small).
+pub const AMB_RAMP_STEADY_SHARE: f32 = 0.5;
+/// Sensor-implausible, ambient: a ramp must not be settling: its last segment change at least
+/// this share of the mean of its changes. A bath changed at once reaches the bead as a settling
+/// exponential, whose changes shrink by e^(−3 s / tau) a segment: 0.26 a segment for the 2.25 s
+/// bead in water, and below this share over the window for any bead faster than about 30 s;
+/// a drift's changes stay alike.
+pub const AMB_RAMP_SETTLING_SHARE: f32 = 0.9;
+const _: () = assert!(AMB_RAMP_MAX_K_PER_S > 0.0 && AMB_RAMP_SEGMENT_S >= 1.0);
+const _: () = assert!(AMB_RAMP_SEGMENTS >= 2 && AMB_RAMP_SEGMENTS <= 8);
+const _: () = assert!(AMB_RAMP_STEADY_SHARE > 0.0 && AMB_RAMP_STEADY_SHARE < 1.0);
+const _: () = assert!(AMB_RAMP_SETTLING_SHARE > 0.0 && AMB_RAMP_SETTLING_SHARE < 1.0);
+const _: () = assert!((AMB_RAMP_SEGMENTS as f32) * AMB_RAMP_SEGMENT_S + AMB_RAMP_SEGMENT_S <= 20.0);
+
+/// The ambient sensor's steady-ramp watch: the mean reading of the segment in progress and of
+/// the last [`AMB_RAMP_SEGMENTS`] + 1 whole segments.
+#[derive(Clone, Copy, Debug)]
+struct RampWatch {
+    /// When the segment in progress started (sample time, ms), its sum of readings (°C) and
+    /// their count.
+    segment: Option<(u64, f32, u16)>,
+    /// The last whole segments' means, oldest first, °C; `count` of them are filled.
+    means_c: [f32; AMB_RAMP_SEGMENTS + 1],
+    count: usize,
+}
+
+impl RampWatch {
+    const fn new() -> Self {
+        RampWatch {
+            segment: None,
+            means_c: [0.0; AMB_RAMP_SEGMENTS + 1],
+            count: 0,
+        }
+    }
+
+    /// Adds one reading (`temp_c` at `sample_ms`; NaN for none, which starts the watch over)
+    /// and judges the segments once one ends: a steady ramp faster than
+    /// [`AMB_RAMP_MAX_K_PER_S`] trips `sensor-implausible amb` with its rate, K/s.
+    fn update(&mut self, sample_ms: u64, temp_c: f32) -> Result<(), Fault> {
+        if !temp_c.is_finite() {
+            *self = RampWatch::new();
+            return Ok(());
+        }
+        let segment_ms = (AMB_RAMP_SEGMENT_S * 1000.0) as u64;
+        let (start_ms, sum_c, n) = self.segment.get_or_insert((sample_ms, 0.0, 0));
+        if sample_ms.saturating_sub(*start_ms) < segment_ms {
+            *sum_c += temp_c;
+            *n = n.saturating_add(1);
+            return Ok(());
+        }
+        let mean_c = *sum_c / f32::from((*n).max(1));
+        self.segment = Some((sample_ms, temp_c, 1));
+        if self.count == self.means_c.len() {
+            self.means_c.copy_within(1.., 0);
+            self.count -= 1;
+        }
+        self.means_c[self.count] = mean_c;
+        self.count += 1;
+        if self.count < self.means_c.len() {
+            return Ok(());
+        }
+        let mut lo_k = f32::INFINITY;
+        let mut hi_k = 0.0f32;
+        let mut sign = 0.0f32;
+        let mut sum_k = 0.0f32;
+        for pair in self.means_c.windows(2) {
+            let d_k = pair[1] - pair[0];
+            if sign == 0.0 {
+                sign = d_k.signum();
+            }
+            if d_k.signum() != sign {
+                return Ok(());
+            }
+            lo_k = lo_k.min(d_k.abs());
+            hi_k = hi_k.max(d_k.abs());
+            sum_k += d_k.abs();
+        }
+        let last_k = (self.means_c[AMB_RAMP_SEGMENTS] - self.means_c[AMB_RAMP_SEGMENTS - 1]).abs();
+        let mean_k = sum_k / AMB_RAMP_SEGMENTS as f32;
+        if lo_k >= AMB_RAMP_MAX_K_PER_S * AMB_RAMP_SEGMENT_S
+            && lo_k >= AMB_RAMP_STEADY_SHARE * hi_k
+            && last_k >= AMB_RAMP_SETTLING_SHARE * mean_k
+        {
+            let span_s = AMB_RAMP_SEGMENTS as f32 * AMB_RAMP_SEGMENT_S;
+            return Err(Fault {
+                code: FaultCode::SensorImplausible,
+                subject: Subject::Sensor(Sensor::Amb),
+                value: (self.means_c[AMB_RAMP_SEGMENTS] - self.means_c[0]) / span_s,
+            });
+        }
+        Ok(())
+    }
+}
+
 /// Heater-not-heating while held: the largest unexplained fall of a judged heater's sensor
 /// below its recent peak, K (see `Supervisor::check_hold`). A dead TCA's bead loses several
 /// kelvin within seconds; the largest healthy unexplained fall measured on the hifi ensemble
@@ -1263,6 +1386,64 @@ mod tests {
         }
         let s = tripped_s.expect("a still reading never tripped");
         assert!((FROZEN_STILL_S..FROZEN_STILL_S + 0.15).contains(&s), "{s}");
+    }
+
+    /// The ambient ramp watch fed `amb(t_s)` every 100 ms for 120 s: when it first tripped, s.
+    fn ramp_trip_s(amb: impl Fn(f32) -> f32) -> Option<f32> {
+        let mut w = RampWatch::new();
+        (0..1200u64).find_map(|tick| {
+            let (ms, t_s) = (tick * 100, tick as f32 / 10.0);
+            let noise = 0.03 * ((tick % 5) as f32 - 2.0);
+            w.update(ms, amb(t_s) + noise).err().map(|f| {
+                assert_eq!(
+                    (f.code, f.subject),
+                    (FaultCode::SensorImplausible, Subject::Sensor(Sensor::Amb))
+                );
+                assert!(f.value.abs() > AMB_RAMP_MAX_K_PER_S, "{f:?}");
+                t_s
+            })
+        })
+    }
+
+    #[test]
+    fn an_ambient_drift_trips_within_16_s_and_a_bath_step_or_slow_change_never_does() {
+        let t0_s = 5.0;
+        for rate in [-0.2f32, 0.2, 0.5] {
+            let t = ramp_trip_s(|t| 22.0 + rate * (t - t0_s).max(0.0)).expect("drift missed");
+            let span_s = AMB_RAMP_SEGMENTS as f32 * AMB_RAMP_SEGMENT_S;
+            assert!(
+                (t0_s + span_s..=t0_s + span_s + AMB_RAMP_SEGMENT_S + 1.0).contains(&(t)),
+                "{rate} K/s tripped at {t} s"
+            );
+        }
+        // A bath changed at once (22 to 46 °C, or down to 5 °C), as the bead follows it.
+        for (to_c, tau_s) in [
+            (46.0f32, 2.25f32),
+            (46.0, 3.0),
+            (46.0, 10.0),
+            (46.0, 25.0),
+            (5.0, 3.0),
+        ] {
+            let step = |t: f32| {
+                let since = (t - t0_s).max(0.0);
+                22.0 + (to_c - 22.0) * (1.0 - libm::expf(-since / tau_s))
+            };
+            assert_eq!(ramp_trip_s(step), None, "step to {to_c} °C, tau {tau_s} s");
+        }
+        // A bath warming at 3 K/min, and a still one.
+        assert_eq!(ramp_trip_s(|t| 22.0 + 0.05 * t), None);
+        assert_eq!(ramp_trip_s(|_| 22.0), None);
+        // A reading lost (NaN) starts the watch over.
+        let mut w = RampWatch::new();
+        for tick in 0..1200u64 {
+            let t_s = tick as f32 / 10.0;
+            let c = if tick % 100 == 99 {
+                f32::NAN
+            } else {
+                22.0 + 0.2 * t_s
+            };
+            assert!(w.update(tick * 100, c).is_ok(), "tripped at {t_s} s");
+        }
     }
 
     #[test]

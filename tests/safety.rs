@@ -739,6 +739,38 @@ fn a_drifting_thermistor_at_rest_trips_sensor_implausible(link: Link) {
     );
 }
 
+fn a_drifting_ambient_thermistor_trips_within_20_s_in_every_phase(link: Link) {
+    let mut cases = 0;
+    for phase in [
+        Phase::Idle,
+        Phase::Soften,
+        Phase::Bend,
+        Phase::Lock,
+        Phase::Release,
+    ] {
+        for rate in ["-0.2", "0.2"] {
+            let Some(mut b) = bench_in(link, phase, 38.0, "auto", 20.0) else {
+                continue;
+            };
+            let r = b.send(&format!("SIM FAULT thermistor-drift amb {rate}"));
+            assert!(r[0].starts_with("ok fault=thermistor-drift"), "{r:?}");
+            let t0 = b.rig.now_ms();
+            let a = expect_alarm(&mut b, "sensor-implausible", 20.0);
+            let s = (b.rig.now_ms() - t0) as f64 / 1000.0;
+            println!("{link:?} {phase:?}: amb drifting {rate} K/s tripped after {s:.1} s: {a}");
+            assert!(a.starts_with("alarm: sensor-implausible amb drifts"), "{a}");
+            assert_names(&a, "AMB_RAMP_MAX_K_PER_S");
+            assert_latched(&mut b, "sensor-implausible");
+            cases += 1;
+        }
+    }
+    checked(
+        link,
+        "a_drifting_ambient_thermistor_trips_within_20_s_in_every_phase",
+        cases,
+    );
+}
+
 fn a_drifting_thermistor_in_a_morph_trips_before_the_link_overheats(link: Link) {
     let mut cases = 0;
     for mode in ["auto", "gated", "closed"] {
@@ -1009,6 +1041,7 @@ on_both_links!(
     a_stuck_pla_heater_trips_once_the_controller_turns_it_down,
     a_frozen_pla_sensor_in_lock_trips_sensor_frozen,
     a_drifting_thermistor_at_rest_trips_sensor_implausible,
+    a_drifting_ambient_thermistor_trips_within_20_s_in_every_phase,
     a_drifting_thermistor_in_a_morph_trips_before_the_link_overheats,
     a_frozen_thermistor_trips_when_its_heater_power_steps,
     a_stuck_thermistor_trips_once_its_heater_is_on,

@@ -531,6 +531,13 @@ impl fmt::Display for FaultText<'_> {
             FaultCode::SensorFrozen => {
                 write!(l, "sensor-frozen {s} moved {v} K")
             }
+            FaultCode::SensorImplausible if f.subject == Subject::Sensor(Sensor::Amb) => {
+                write!(
+                    l,
+                    "sensor-implausible {s} drifts {} K/s steadily",
+                    Fixed(f.value, 2)
+                )
+            }
             FaultCode::SensorImplausible => {
                 write!(l, "sensor-implausible {s} off its expected rise by {v} K")
             }
@@ -798,7 +805,6 @@ mod alarm_tests {
         let sensors = Sensor::ALL.map(Subject::Sensor);
         let phases = [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release].map(Subject::Phase);
         let heaters = Heater::ALL.map(Subject::Heater);
-        let heated = [Sensor::Pla, Sensor::Tca].map(Subject::Sensor);
         let cases: [(FaultCode, &[Subject]); 11] = [
             (FaultCode::ThermistorOpen, &sensors),
             (FaultCode::ThermistorShort, &sensors),
@@ -809,8 +815,8 @@ mod alarm_tests {
             (FaultCode::StaleSensor, &[Subject::Frame]),
             (FaultCode::SupplyOutOfRange, &[Subject::Supply]),
             (FaultCode::PhaseTimeout, &phases),
-            (FaultCode::SensorFrozen, &heated),
-            (FaultCode::SensorImplausible, &heated),
+            (FaultCode::SensorFrozen, &sensors),
+            (FaultCode::SensorImplausible, &sensors),
         ];
         cases
             .iter()
