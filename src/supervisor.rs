@@ -186,9 +186,11 @@ pub const HEATING_MIN_POWER_FRACTION: f32 = 0.2;
 /// heat by less (see `tests/safety.rs`).
 pub const HEATING_MIN_GAIN_K: f32 = 2.0;
 /// Heater-not-heating: the window for [`HEATING_MIN_GAIN_K`], s. A dead heater trips within
-/// this time of being switched on (or of its phase starting); 10 s is the PLA bead's lag and
-/// 3–4 TCA bead time constants.
-pub const HEATING_WINDOW_S: f32 = 10.0;
+/// this time of being switched on (or of its phase starting). About the PLA bead's lag and 3
+/// TCA bead time constants: 9 s leaves no alarm on the healthy ensemble (`cargo xtask
+/// strategies`, 2026-12-02), where 8 s tripped two healthy hifi morphs in water (closed at
+/// 46.26 mm, boost at 39.59 mm) and 10 s left dead heaters 0.1–0.2 s over the 10 s aim.
+pub const HEATING_WINDOW_S: f32 = 9.0;
 /// Heater-not-heating: the band's floor, K above ambient plus the model's steady rise the other
 /// heater alone would give this sensor (`R_TP_K_PER_W` times its power). Below it the heater has
 /// shown nothing of its own and its sensor must gain; in it the heater has (a dead heater's
