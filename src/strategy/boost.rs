@@ -3,7 +3,7 @@
 //! thermistors, bend on the model.
 
 use super::model::observer::HeatedNode;
-use super::model::{target, ModelDrive};
+use super::model::{target, ModelDrive, PlaView};
 use super::{Start, Strategy, TargetTemps, Tick, RELEASE_S};
 use crate::vocab::{Measurements, Phase, Powers};
 
@@ -40,7 +40,13 @@ impl Strategy for Boost {
         let (pla_c, tca_c) = (o.model_c(HeatedNode::Pla), o.model_c(HeatedNode::Tca));
         match t.phase {
             Phase::Soften => t.m.t_pla_c >= t.th.soft_threshold_c,
-            Phase::Bend => self.drive.bend_done(t, pla_c, tca_c, true, true),
+            Phase::Bend => {
+                let pla = PlaView {
+                    learnt: true,
+                    cold: false,
+                };
+                self.drive.bend_done(t, pla_c, tca_c, true, pla)
+            }
             Phase::Lock => t.m.t_pla_c < t.th.rigid_threshold_c,
             Phase::Release => t.in_phase_s >= RELEASE_S,
             Phase::Idle | Phase::Fault => false,

@@ -3,7 +3,7 @@
 //! compensated for the release spring-back.
 
 use super::model::observer::{HeatedNode, LEARN_MAX_RATE_K_PER_S, SENSOR_TAU_S};
-use super::model::{target, ModelDrive};
+use super::model::{target, ModelDrive, PlaView};
 use super::{Start, Strategy, TargetTemps, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
 use crate::vocab::{Measurements, Phase, Powers};
 
@@ -38,6 +38,20 @@ const _: () =
 /// xtask calibration`).
 pub const CLOSED_PLA_AGREE_K: f32 = 3.0;
 const _: () = assert!(CLOSED_PLA_AGREE_K > 0.0 && CLOSED_PLA_AGREE_K < 5.0);
+
+/// Bend waits for the PLA thermistor to change slower than this, K/s (unless it reads what the
+/// observer expects, [`CLOSED_PLA_AGREE_K`]): a bead still rising says the rod is still
+/// heating, and a rod a few kelvin under the PLA target flows several times slower.
+pub const CLOSED_PLA_SETTLED_K_PER_S: f32 = 0.3;
+
+/// A TCA past its target on the PLA's heat alone still waits in bend while the PLA thermistor,
+/// not yet slowed, reads more than this below what the observer expects, K: the rod is then
+/// colder than the estimate and has not flowed (the high-fidelity links, whose bead reads far
+/// under the model late in soften, locked 4–8 % loose at the loosest target). A reading that
+/// trails the model by a bead lag alone (the lumped links', 2–6 s) is left out: there the rod
+/// has flowed and waiting only bends it further.
+pub const CLOSED_PLA_COLD_K: f32 = 6.0;
+const _: () = assert!(CLOSED_PLA_COLD_K > CLOSED_PLA_AGREE_K);
 
 /// The `closed` strategy.
 #[derive(Clone, Copy, Debug)]
@@ -98,11 +112,17 @@ impl Strategy for Closed {
                 // (the high-fidelity links then lock before the rod has flowed). A PLA
                 // thermistor that reads what the model expects need not wait.
                 let learnt = |n| o.measured_rate_k_per_s(n).abs() <= LEARN_MAX_RATE_K_PER_S;
-                let pla_learnt = learnt(HeatedNode::Pla)
-                    || o.innovation_k(HeatedNode::Pla).abs() <= CLOSED_PLA_AGREE_K;
+                let pla_settled =
+                    o.measured_rate_k_per_s(HeatedNode::Pla).abs() <= CLOSED_PLA_SETTLED_K_PER_S;
+                let pla_learnt =
+                    pla_settled || o.innovation_k(HeatedNode::Pla).abs() <= CLOSED_PLA_AGREE_K;
                 let tca_learnt = learnt(HeatedNode::Tca);
-                self.drive
-                    .bend_done(t, pla_c, tca_c, tca_learnt, pla_learnt)
+                let pla = PlaView {
+                    learnt: pla_learnt,
+                    cold: !learnt(HeatedNode::Pla)
+                        && o.innovation_k(HeatedNode::Pla) < -CLOSED_PLA_COLD_K,
+                };
+                self.drive.bend_done(t, pla_c, tca_c, tca_learnt, pla)
             }
             Phase::Lock => self.rigid(t, pla_c),
             Phase::Release => t.in_phase_s >= RELEASE_S,

@@ -87,6 +87,20 @@ impl Bench {
         Self::with_rig(Rig::with_plant(Box::new(plant.lumped()), plant.noise()))
     }
 
+    /// The ensemble's hifi link `draw` (seed `seed`; the strategy and calibration charts'
+    /// links), with its drawn noise.
+    pub fn hifi_draw(seed: u64, draw: u64) -> Self {
+        let spec = HifiSpec::draw(morphlink::link::LINK, Grid::Reduced, seed, draw)
+            .expect("the ensemble's draws are valid");
+        let noise = morphlink_sim::ensemble::Mismatch::draw(seed, draw)
+            .plant()
+            .noise();
+        Self::with_rig(Rig::with_plant(
+            Box::new(Hifi::new(spec).expect("a drawn link builds")),
+            noise,
+        ))
+    }
+
     fn with_rig(rig: Rig<Box<dyn Plant>>) -> Self {
         Bench {
             rig,

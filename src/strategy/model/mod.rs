@@ -30,6 +30,13 @@ pub const MODEL_SETTLE_BAND_C: f32 = 0.3;
 /// step, so a passing crossing of the band does not count.
 pub const MODEL_SETTLE_S: f32 = 1.5;
 
+/// A TCA past its target on the PLA's heat alone (its heater at keep-alive) waits in bend for
+/// the PLA's view to be learnt, so the rod has flowed, until it is this far over its target,
+/// K: then waiting would only bend the rod past the target (0.27 mm of radius per kelvin), so
+/// bend ends as it is. Under water the passive TCA stays within a kelvin or two of a loose
+/// target while the rod flows; in still air it keeps warming.
+pub const MODEL_PASSIVE_OVERSHOOT_K: f32 = 2.0;
+
 /// Thermistor guard of the model strategies, K: a heater is switched off for the tick while its
 /// thermistor reads more than this above the heater's target temperature. The model assumes
 /// water; in still air the same power heats about five times as much, and the feed-forward
@@ -76,6 +83,16 @@ fn driven(phase: Phase) -> (bool, bool) {
         matches!(phase, Phase::Soften | Phase::Bend),
         matches!(phase, Phase::Soften | Phase::Bend | Phase::Lock),
     )
+}
+
+/// What a strategy knows of its PLA view when bend may end (see [`ModelDrive::bend_done`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PlaView {
+    /// The PLA's view is learnt: its thermistor has slowed or reads what the model expects.
+    pub learnt: bool,
+    /// The PLA thermistor reads far colder than the model expects: the rod is colder than the
+    /// estimate says and may not have flowed.
+    pub cold: bool,
 }
 
 /// The model, the TCA target and the drive state `boost` and `closed` share.
@@ -164,18 +181,20 @@ impl ModelDrive {
     /// Whether bend is over: the TCA (`tca_c`, the strategy's view of it) at its target or as
     /// close as the link allows, the PLA (`pla_c`) soft, the TCA's view `learnt` and the PLA's
     /// `pla_learnt`, all for [`MODEL_SETTLE_S`]. A TCA that is past its target on the PLA's
-    /// heat alone (heater at keep-alive) does not wait for `pla_learnt`: it only warms further
-    /// while it waits, so it locks as it is.
+    /// heat alone (heater at keep-alive) does not wait for `pla_learnt` (it only warms further
+    /// while it waits) unless `pla_cold` says the PLA reads far colder than the model expects
+    /// (the rod has not flowed yet), and then only until it is [`MODEL_PASSIVE_OVERSHOOT_K`]
+    /// over its target.
     pub(crate) fn bend_done(
         &mut self,
         t: &Tick,
         pla_c: f32,
         tca_c: f32,
         learnt: bool,
-        pla_learnt: bool,
+        pla: PlaView,
     ) -> bool {
         // Above the target with the TCA off is as close as the link can get (warm
-        // surroundings and the PLA's heat keep it there): lock as it is.
+        // surroundings and the PLA's heat keep it there).
         let passive = tca_c > self.tca_target_c && self.applied.tca_w <= MODEL_KEEP_ALIVE_W;
         let reached = (tca_c - self.tca_target_c).abs() <= MODEL_SETTLE_BAND_C
             || passive
@@ -184,8 +203,9 @@ impl ModelDrive {
                     >= deliverable_w(&HeaterConfig::TCA, TCA_BOOST_MAX_W, t.supply_v) - 1e-3
                 && self.observer.measured_rate_k_per_s(HeatedNode::Tca) < MODEL_STALL_RATE_K_PER_S
                 && t.since_start_s > STALL_AFTER_S);
-        let at_target =
-            reached && pla_c >= t.th.soft_threshold_c && learnt && (pla_learnt || passive);
+        let overshooting = tca_c > self.tca_target_c + MODEL_PASSIVE_OVERSHOOT_K;
+        let pla_ready = pla.learnt || (passive && (!pla.cold || overshooting));
+        let at_target = reached && pla_c >= t.th.soft_threshold_c && learnt && pla_ready;
         self.held(t.now_ms, at_target) && t.in_phase_s >= MODEL_SETTLE_S
     }
 

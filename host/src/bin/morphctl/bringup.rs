@@ -19,13 +19,16 @@ use std::time::{Duration, Instant};
 /// beside the ambient one, while a wrong part or pull-up (tens of kelvin off) fails.
 pub const REST_SPREAD_K: f64 = 3.0;
 /// Length of each heater's pulse, s: its bead answers within a few seconds (measured rises
-/// below, docs: README "Bring-up").
-pub const PULSE_S: f64 = 10.0;
+/// below, docs: README "Bring-up"), and the pulse ends a second before the supervisor's
+/// heater-not-heating window (`HEATING_WINDOW_S`) would judge it, so a dead heater or crossed
+/// wires get this tool's diagnosis rather than an alarm.
+pub const PULSE_S: f64 = morphlink::supervisor::HEATING_WINDOW_S as f64 - 1.0;
 /// Time after a pulse during which the rise is still followed, s: the beads lag their heater.
 pub const AFTER_PULSE_S: f64 = 10.0;
-/// Least rise of a heater's own thermistor, K. Measured at the cap for 10 s (tests/heat.rs): the
-/// PLA bead rises 15 K (lumped) and 8 K (hifi), the TCA bead 8 K and 3.4 K; 1.5 K is far
-/// above the readings' noise and well under the weakest healthy rise.
+/// Least rise of a heater's own thermistor, K. Measured at 20 % of the cap for 10 s
+/// (tests/heat.rs): the PLA bead rises 15 K (lumped) and 8 K (hifi), the TCA bead 8 K and 3.4 K
+/// (the [`PULSE_S`] pulses a little less: README "Bring-up"); 1.5 K is far above the readings'
+/// noise and well under the weakest healthy rise.
 pub const MIN_OWN_RISE_K: f64 = 1.5;
 /// The own thermistor must rise at least this many times more than the other heater's: the
 /// cross rise measured is under a quarter of the own (PLA pulse: TCA +2 K of +15 K; TCA
