@@ -714,9 +714,9 @@ impl Supervisor {
     /// loses its sensor's rise within seconds, long before a phase ends and `done` reports a
     /// radius from it.
     fn check_hold(&mut self, dt_s: f32, cmd: Powers) -> Result<(), Fault> {
-        let k_peak = (dt_s / HOLD_PEAK_TAU_S).min(1.0);
-        let k_power = (dt_s / HOLD_POWER_TAU_S).min(1.0);
-        let k_cross = (dt_s / HOLD_CROSS_TAU_S).min(1.0);
+        let k_peak = lag_share(dt_s, HOLD_PEAK_TAU_S);
+        let k_power = lag_share(dt_s, HOLD_POWER_TAU_S);
+        let k_cross = lag_share(dt_s, HOLD_CROSS_TAU_S);
         for heater in Heater::ALL {
             let temp_c = self.live_c[heater.sensor().index()];
             let own_w = cmd.of(heater);
@@ -725,7 +725,7 @@ impl Supervisor {
                 Heater::Tca => (R_TT_K_PER_W, cmd.pla_w),
             };
             let w = &mut self.hold[heater.index()];
-            let relax = |x: &mut f32, now: f32, k: f32| *x = now.max(*x + (now - *x) * k);
+            let relax = |x: &mut f32, now: f32, k: f32| *x = now.max(toward(*x, now, k));
             // The recent powers are followed whether judged or not: a heater switched on in a
             // link still hot from earlier power sees its sensor fall at first.
             let (own_ref_w, other_ref_w) = w.recent_w.get_or_insert((own_w, other_w));
@@ -734,7 +734,7 @@ impl Supervisor {
             // The other heater's heat reaches this sensor through the link's slow path: its
             // drop is felt as its lagged power falls, not at once.
             let other_lag_w = w.other_lag_w.get_or_insert(other_w);
-            *other_lag_w += (other_w - *other_lag_w) * k_cross;
+            *other_lag_w = toward(*other_lag_w, other_w, k_cross);
             let explained_k = r_own * (*own_ref_w - own_w)
                 + R_TP_K_PER_W * (*other_ref_w - other_lag_w.min(*other_ref_w));
             if !(own_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater)) || !temp_c.is_finite()
@@ -770,16 +770,14 @@ impl Supervisor {
         let w = &mut self.held;
         let model_k = R_TT_K_PER_W * own_w;
         let response_k = w.response_k.get_or_insert(model_k);
-        *response_k += (model_k - *response_k) * (dt_s / HELD_RESPONSE_TAU_S).min(1.0);
+        *response_k = lag(*response_k, model_k, dt_s, HELD_RESPONSE_TAU_S);
         let response_k = *response_k;
         let [pla_c, tca_c, amb_c] = self.live_c;
         // The PLA's heat reaches the TCA's bead through the silicone, late: its rise and its
         // fall are credited as they arrive (`HOLD_CROSS_TAU_S`).
         let pla_rise_k = pla_c - amb_c;
         let pla_k = match w.pla_k {
-            Some(k) if pla_rise_k.is_finite() => {
-                k + (pla_rise_k - k) * (dt_s / HOLD_CROSS_TAU_S).min(1.0)
-            }
+            Some(k) if pla_rise_k.is_finite() => lag(k, pla_rise_k, dt_s, HOLD_CROSS_TAU_S),
             _ => pla_rise_k,
         };
         w.pla_k = pla_k.is_finite().then_some(pla_k);
@@ -794,14 +792,14 @@ impl Supervisor {
         }
         // A bath that warms moves the ambient bead before the heated ones (`check_plausible`).
         let amb_spread_k = self.amb_slow_c.map_or(0.0, |slow| (amb_c - slow).abs());
-        let k = (dt_s / HOLD_PEAK_TAU_S).min(1.0);
+        let k = lag_share(dt_s, HOLD_PEAK_TAU_S);
         let (peak_k, at_peak_k) = w.peak_k.get_or_insert((q_k, response_k));
-        let relaxed_k = *peak_k + (q_k - *peak_k) * k;
+        let relaxed_k = toward(*peak_k, q_k, k);
         if q_k >= relaxed_k {
             (*peak_k, *at_peak_k) = (q_k, response_k);
         } else {
             *peak_k = relaxed_k;
-            *at_peak_k += (response_k - *at_peak_k) * k;
+            *at_peak_k = toward(*at_peak_k, response_k, k);
         }
         let fall_k = *peak_k - q_k - (*at_peak_k - response_k).max(0.0) - amb_spread_k;
         if fall_k > HELD_MAX_FALL_K {
@@ -927,9 +925,7 @@ impl Supervisor {
         // as their own lag allows: between the ambient reading and its lagged value either
         // may be the one to measure from, so the envelope is widened by their difference.
         let amb_slow_c = match self.amb_slow_c {
-            Some(slow) if amb_c.is_finite() => {
-                slow + (amb_c - slow) * (dt_s / PLAUS_AMB_TAU_S).min(1.0)
-            }
+            Some(slow) if amb_c.is_finite() => lag(slow, amb_c, dt_s, PLAUS_AMB_TAU_S),
             _ => amb_c,
         };
         self.amb_slow_c = amb_slow_c.is_finite().then_some(amb_slow_c);
@@ -1267,9 +1263,7 @@ impl Expectation {
             self.envelope_k = Some((rise_k.max(0.0), rise_k, rise_k));
             return None;
         };
-        let approach = |x: &mut f32, to: f32, tau_s: f32| {
-            *x += (to - *x) * (dt_s / tau_s).min(1.0);
-        };
+        let approach = |x: &mut f32, to: f32, tau_s: f32| *x = lag(*x, to, dt_s, tau_s);
         let to_hi = PLAUS_HIGH_GAIN * steady_k;
         let tau_hi = if to_hi > *hi {
             PLAUS_TAU_FAST_S
@@ -1298,6 +1292,22 @@ impl Expectation {
             0.0
         })
     }
+}
+
+/// The share of the way to its input a first-order lag of time constant `tau_s` moves in
+/// `dt_s` (all of it for a step longer than the time constant): the one lag every watch uses.
+fn lag_share(dt_s: f32, tau_s: f32) -> f32 {
+    (dt_s / tau_s).min(1.0)
+}
+
+/// `x` moved `share` of the way toward `to`.
+fn toward(x: f32, to: f32, share: f32) -> f32 {
+    x + (to - x) * share
+}
+
+/// `x` after `dt_s` of a first-order lag of time constant `tau_s` toward `to`.
+fn lag(x: f32, to: f32, dt_s: f32, tau_s: f32) -> f32 {
+    toward(x, to, lag_share(dt_s, tau_s))
 }
 
 /// A frame older than [`STALE_AFTER_MS`] is a fault.
