@@ -219,8 +219,9 @@ pub const HEATING_BAND_TIMEOUT_S: f32 = 30.0;
 pub const HEATING_BAND_MIN_OWN_SHARE: f32 = 2.0;
 /// A commanded power rise by more than this share restarts [`HEATING_BAND_TIMEOUT_S`].
 pub const HEATING_POWER_STEP_FRACTION: f32 = 0.1;
-// A dead heater must trip within a soften phase, before it can time out.
-const _: () = assert!(HEATING_WINDOW_S < 20.0);
+// A dead heater must trip within a soften phase, before it can time out: the soften timeout's
+// floor is this window plus 10 s (`settings::SOFTEN_TIMEOUT_RANGE_S`, asserted there).
+const _: () = assert!(HEATING_WINDOW_S > 0.0 && HEATING_WINDOW_S < 20.0);
 /// Heating-while-off: how long both heaters must have been commanded off before a heater's
 /// sensor is watched, s. The heat already in the link keeps a lagging bead rising for a few
 /// seconds after turn-off (the hifi PLA bead, 10 s behind its rod, for about 3 s after the 4 W
@@ -685,11 +686,19 @@ impl Supervisor {
                 });
             }
         }
+        if self.ramp.ramping {
+            return Err(Fault {
+                code: FaultCode::SensorImplausible,
+                subject: Subject::Sensor(Sensor::Amb),
+                value: f32::NAN,
+            });
+        }
         supply_ok(frame)
     }
 
     /// Forgets counters and heater watches (after RESET), keeping last temperatures (the
-    /// heating-while-off watch too: RESET is only allowed once it no longer sees a rise).
+    /// heating-while-off watch and the ambient ramp watch too: RESET is only allowed once they
+    /// no longer see a rise or a ramp).
     pub fn rearm(&mut self) {
         self.range = [RangeCheck::new(RangeCheck::DEFAULT_CONSECUTIVE); 3];
         self.limit_count = [0; 3];
@@ -701,7 +710,6 @@ impl Supervisor {
         self.low = [LowWatch::default(); 2];
         self.held = HeldWatch::default();
         self.still = [None; 3];
-        self.ramp = RampWatch::new();
         self.amb_slow_c = None;
         self.last_ms = None;
     }
@@ -1087,10 +1095,10 @@ pub const AMB_RAMP_SEGMENTS: usize = 4;
 /// part of a segment and is small).
 pub const AMB_RAMP_STEADY_SHARE: f32 = 0.5;
 /// Sensor-implausible, ambient: a ramp must not be settling: its last segment change at least
-/// this share of the mean of its changes. A bath changed at once reaches the bead as a settling
-/// exponential, whose changes shrink by e^(−3 s / tau) a segment: 0.26 a segment for the 2.25 s
-/// bead in water, and below this share over the window for any bead faster than about 30 s;
-/// a drift's changes stay alike.
+/// this share of its largest. A bath changed at once reaches the bead as a settling exponential,
+/// whose changes shrink by e^(−3 s / tau) a segment, so its last change is its smallest: at
+/// most 0.74 of its largest for beads up to 10 s and 0.89 up to 25 s (the 2.25 s bead in water:
+/// 0.26), wherever the step falls in a segment; a drift's changes stay alike.
 pub const AMB_RAMP_SETTLING_SHARE: f32 = 0.9;
 const _: () = assert!(AMB_RAMP_MAX_K_PER_S > 0.0 && AMB_RAMP_SEGMENT_S >= 1.0);
 const _: () = assert!(AMB_RAMP_SEGMENTS >= 2 && AMB_RAMP_SEGMENTS <= 8);
@@ -1108,6 +1116,8 @@ struct RampWatch {
     /// The last whole segments' means, oldest first, °C; `count` of them are filled.
     means_c: [f32; AMB_RAMP_SEGMENTS + 1],
     count: usize,
+    /// The last judgement found a steady ramp (RESET waits until one does not).
+    ramping: bool,
 }
 
 impl RampWatch {
@@ -1116,18 +1126,25 @@ impl RampWatch {
             segment: None,
             means_c: [0.0; AMB_RAMP_SEGMENTS + 1],
             count: 0,
+            ramping: false,
         }
     }
 
-    /// Adds one reading (`temp_c` at `sample_ms`; NaN for none, which starts the watch over)
-    /// and judges the segments once one ends: a steady ramp faster than
-    /// [`AMB_RAMP_MAX_K_PER_S`] trips `sensor-implausible amb` with its rate, K/s.
+    /// Adds one reading (`temp_c` at `sample_ms`) and judges the segments once one ends: a
+    /// steady ramp faster than [`AMB_RAMP_MAX_K_PER_S`] trips `sensor-implausible amb` with
+    /// its rate, K/s. A reading that is not a temperature (an open or shorted sample, which the
+    /// range check judges) is skipped, so an intermittent contact cannot hide a drift; a gap
+    /// longer than a segment starts the watch over (means across it are not comparable).
     fn update(&mut self, sample_ms: u64, temp_c: f32) -> Result<(), Fault> {
         if !temp_c.is_finite() {
-            *self = RampWatch::new();
             return Ok(());
         }
         let segment_ms = (AMB_RAMP_SEGMENT_S * 1000.0) as u64;
+        if let Some((start_ms, _, _)) = self.segment {
+            if sample_ms.saturating_sub(start_ms) >= 2 * segment_ms {
+                *self = RampWatch::new();
+            }
+        }
         let (start_ms, sum_c, n) = self.segment.get_or_insert((sample_ms, 0.0, 0));
         if sample_ms.saturating_sub(*start_ms) < segment_ms {
             *sum_c += temp_c;
@@ -1145,28 +1162,8 @@ impl RampWatch {
         if self.count < self.means_c.len() {
             return Ok(());
         }
-        let mut lo_k = f32::INFINITY;
-        let mut hi_k = 0.0f32;
-        let mut sign = 0.0f32;
-        let mut sum_k = 0.0f32;
-        for pair in self.means_c.windows(2) {
-            let d_k = pair[1] - pair[0];
-            if sign == 0.0 {
-                sign = d_k.signum();
-            }
-            if d_k.signum() != sign {
-                return Ok(());
-            }
-            lo_k = lo_k.min(d_k.abs());
-            hi_k = hi_k.max(d_k.abs());
-            sum_k += d_k.abs();
-        }
-        let last_k = (self.means_c[AMB_RAMP_SEGMENTS] - self.means_c[AMB_RAMP_SEGMENTS - 1]).abs();
-        let mean_k = sum_k / AMB_RAMP_SEGMENTS as f32;
-        if lo_k >= AMB_RAMP_MAX_K_PER_S * AMB_RAMP_SEGMENT_S
-            && lo_k >= AMB_RAMP_STEADY_SHARE * hi_k
-            && last_k >= AMB_RAMP_SETTLING_SHARE * mean_k
-        {
+        self.ramping = steady_ramp(&self.means_c);
+        if self.ramping {
             let span_s = AMB_RAMP_SEGMENTS as f32 * AMB_RAMP_SEGMENT_S;
             return Err(Fault {
                 code: FaultCode::SensorImplausible,
@@ -1176,6 +1173,34 @@ impl RampWatch {
         }
         Ok(())
     }
+}
+
+/// Whether consecutive segment means (°C, oldest first) ramp steadily: every change of one sign
+/// and at least [`AMB_RAMP_MAX_K_PER_S`] × [`AMB_RAMP_SEGMENT_S`], the smallest at least
+/// [`AMB_RAMP_STEADY_SHARE`] of the largest and the last at least [`AMB_RAMP_SETTLING_SHARE`]
+/// of the largest (a settling step's last change is its smallest).
+fn steady_ramp(means_c: &[f32]) -> bool {
+    let mut lo_k = f32::INFINITY;
+    let mut hi_k = 0.0f32;
+    let mut sign = 0.0f32;
+    for pair in means_c.windows(2) {
+        let d_k = pair[1] - pair[0];
+        if sign == 0.0 {
+            sign = d_k.signum();
+        }
+        if d_k.signum() != sign {
+            return false;
+        }
+        lo_k = lo_k.min(d_k.abs());
+        hi_k = hi_k.max(d_k.abs());
+    }
+    let last_k = match means_c {
+        [.., a, b] => (b - a).abs(),
+        _ => return false,
+    };
+    lo_k >= AMB_RAMP_MAX_K_PER_S * AMB_RAMP_SEGMENT_S
+        && lo_k >= AMB_RAMP_STEADY_SHARE * hi_k
+        && last_k >= AMB_RAMP_SETTLING_SHARE * hi_k
 }
 
 /// Heater-not-heating while held: the largest unexplained fall of a judged heater's sensor
@@ -1400,7 +1425,8 @@ mod tests {
         assert!((FROZEN_STILL_S..FROZEN_STILL_S + 0.15).contains(&s), "{s}");
     }
 
-    /// The ambient ramp watch fed `amb(t_s)` every 100 ms for 120 s: when it first tripped, s.
+    /// The ambient ramp watch fed `amb(t_s)` every 100 ms for 120 s (NaN skipped as a sample
+    /// the range check rejects): when it first tripped, s.
     fn ramp_trip_s(amb: impl Fn(f32) -> f32) -> Option<f32> {
         let mut w = RampWatch::new();
         (0..1200u64).find_map(|tick| {
@@ -1418,44 +1444,95 @@ mod tests {
     }
 
     #[test]
-    fn an_ambient_drift_trips_within_16_s_and_a_bath_step_or_slow_change_never_does() {
-        let t0_s = 5.0;
-        for rate in [-0.2f32, 0.2, 0.5] {
-            let t = ramp_trip_s(|t| 22.0 + rate * (t - t0_s).max(0.0)).expect("drift missed");
-            let span_s = AMB_RAMP_SEGMENTS as f32 * AMB_RAMP_SEGMENT_S;
-            assert!(
-                (t0_s + span_s..=t0_s + span_s + AMB_RAMP_SEGMENT_S + 1.0).contains(&(t)),
-                "{rate} K/s tripped at {t} s"
-            );
-        }
-        // A bath changed at once (22 to 46 °C, or down to 5 °C), as the bead follows it.
-        for (to_c, tau_s) in [
-            (46.0f32, 2.25f32),
-            (46.0, 3.0),
-            (46.0, 10.0),
-            (46.0, 25.0),
-            (5.0, 3.0),
-        ] {
-            let step = |t: f32| {
-                let since = (t - t0_s).max(0.0);
-                22.0 + (to_c - 22.0) * (1.0 - libm::expf(-since / tau_s))
-            };
-            assert_eq!(ramp_trip_s(step), None, "step to {to_c} °C, tau {tau_s} s");
+    fn an_ambient_drift_trips_within_20_s_and_a_bath_step_or_slow_change_never_does() {
+        let span_s = AMB_RAMP_SEGMENTS as f32 * AMB_RAMP_SEGMENT_S;
+        // Wherever in a segment it starts.
+        for k in 0..12 {
+            let t0_s = 5.0 + k as f32 * AMB_RAMP_SEGMENT_S / 12.0;
+            for rate in [-0.2f32, 0.12, 0.2, 0.5] {
+                let t = ramp_trip_s(|t| 22.0 + rate * (t - t0_s).max(0.0))
+                    .unwrap_or_else(|| panic!("{rate} K/s from {t0_s} s missed"));
+                assert!(
+                    (t0_s + span_s..t0_s + 20.0).contains(&t),
+                    "{rate} K/s from {t0_s} s tripped at {t} s"
+                );
+            }
+            // A bath changed at once (22 to 46 °C, or to 5 °C), as beads of 2.25–25 s follow it.
+            for (to_c, tau_s) in [
+                (46.0f32, 2.25f32),
+                (46.0, 3.0),
+                (46.0, 10.0),
+                (46.0, 25.0),
+                (5.0, 25.0),
+            ] {
+                let step = |t: f32| {
+                    let since = (t - t0_s).max(0.0);
+                    22.0 + (to_c - 22.0) * (1.0 - libm::expf(-since / tau_s))
+                };
+                assert_eq!(
+                    ramp_trip_s(step),
+                    None,
+                    "step to {to_c} °C at {t0_s} s, tau {tau_s} s"
+                );
+            }
         }
         // A bath warming at 3 K/min, and a still one.
         assert_eq!(ramp_trip_s(|t| 22.0 + 0.05 * t), None);
         assert_eq!(ramp_trip_s(|_| 22.0), None);
-        // A reading lost (NaN) starts the watch over.
-        let mut w = RampWatch::new();
-        for tick in 0..1200u64 {
-            let t_s = tick as f32 / 10.0;
-            let c = if tick % 100 == 99 {
+        // A sample lost now and then (an intermittent contact) does not hide a drift.
+        let gappy = |t: f32| {
+            if (t * 10.0) as u32 % 100 == 99 {
                 f32::NAN
             } else {
-                22.0 + 0.2 * t_s
-            };
-            assert!(w.update(tick * 100, c).is_ok(), "tripped at {t_s} s");
+                22.0 + 0.2 * t
+            }
+        };
+        assert!(ramp_trip_s(gappy).is_some_and(|t| t < 20.0));
+        // A gap longer than a segment starts the watch over.
+        let gap = |t: f32| {
+            if (10.0..17.0).contains(&t) {
+                f32::NAN
+            } else {
+                22.0 + 0.2 * t
+            }
+        };
+        assert!(ramp_trip_s(gap).is_some_and(|t| t >= 17.0 + span_s));
+    }
+
+    #[test]
+    fn reset_waits_while_the_ambient_reading_still_ramps() {
+        let mut s = Supervisor::new();
+        let off = Powers::default();
+        let amb_frame = |ms: u64, amb: f32| Frame {
+            readings: [amb + 0.3, amb + 0.2, amb].map(Reading::Ok),
+            supply_v: 12.0,
+            sample_ms: ms,
+        };
+        let mut tripped = false;
+        let mut ms = 0;
+        while ms < 40_000 && !tripped {
+            let amb = 22.0 + 0.2 * ms as f32 / 1000.0 + 0.01 * ((ms / 100) % 3) as f32;
+            tripped = s.check(ms, &amb_frame(ms, amb), off, Phase::Idle).is_err();
+            ms += 100;
         }
+        assert!(tripped);
+        let f = amb_frame(ms, 30.0);
+        assert_eq!(
+            s.condition_clear(ms, &f).map_err(|f| (f.code, f.subject)),
+            Err((FaultCode::SensorImplausible, Subject::Sensor(Sensor::Amb)))
+        );
+        // RESET keeps the watch; once a segment's judgement finds the reading still, it clears.
+        s.rearm();
+        for _ in 0..100 {
+            ms += 100;
+            let _ = s.check(
+                ms,
+                &amb_frame(ms, 30.0 + 0.01 * ((ms / 100) % 3) as f32),
+                off,
+                Phase::Idle,
+            );
+        }
+        assert!(s.condition_clear(ms, &amb_frame(ms, 30.0)).is_ok());
     }
 
     #[test]

@@ -153,7 +153,7 @@ fn on_drawn_hifi_links_closed_bend_ends_once_the_rod_has_stopped_flowing() {
         let mut b = Bench::hifi_draw(20261122, draw);
         assert_eq!(b.send(&format!("MORPH {target} closed")), ["ok"]);
         assert!(b.run_until(300.0, |b| b.phase() != Phase::Soften));
-        // The true radius a second apart through bend, the last pair when lock begins.
+        // The true radius a second apart through bend: the last pair within a second of lock.
         let mut last = (b.rig.radius_mm(), b.rig.radius_mm());
         let mut ticks = 0;
         while b.phase() == Phase::Bend {

@@ -769,6 +769,8 @@ fn a_drifting_ambient_thermistor_trips_within_20_s_in_every_phase(link: Link) {
         "a_drifting_ambient_thermistor_trips_within_20_s_in_every_phase",
         cases,
     );
+    // Every phase, both signs: none may be skipped.
+    assert_eq!(cases, 10, "{link:?}");
 }
 
 fn a_drifting_thermistor_in_a_morph_trips_before_the_link_overheats(link: Link) {

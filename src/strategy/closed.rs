@@ -43,9 +43,12 @@ const _: () = assert!(CLOSED_PLA_AGREE_K > 0.0 && CLOSED_PLA_AGREE_K < 5.0);
 /// observer expects, [`CLOSED_PLA_AGREE_K`]): a bead still rising says the rod is still
 /// heating, and a rod a few kelvin under the PLA target flows several times slower.
 pub const CLOSED_PLA_SETTLED_K_PER_S: f32 = 0.3;
+const _: () = assert!(
+    CLOSED_PLA_SETTLED_K_PER_S > 0.0 && CLOSED_PLA_SETTLED_K_PER_S <= LEARN_MAX_RATE_K_PER_S
+);
 
 /// A TCA past its target on the PLA's heat alone still waits in bend while the PLA thermistor,
-/// not yet slowed, reads more than this below what the observer expects, K: the rod is then
+/// not yet slowed under [`CLOSED_PLA_SETTLED_K_PER_S`], reads more than this below what the observer expects, K: the rod is then
 /// colder than the estimate and has not flowed (the high-fidelity links, whose bead reads far
 /// under the model late in soften, locked 4–8 % loose at the loosest target). A reading that
 /// trails the model by a bead lag alone (the lumped links', 2–6 s) is left out: there the rod
@@ -119,8 +122,7 @@ impl Strategy for Closed {
                 let tca_learnt = learnt(HeatedNode::Tca);
                 let pla = PlaView {
                     learnt: pla_learnt,
-                    cold: !learnt(HeatedNode::Pla)
-                        && o.innovation_k(HeatedNode::Pla) < -CLOSED_PLA_COLD_K,
+                    cold: !pla_settled && o.innovation_k(HeatedNode::Pla) < -CLOSED_PLA_COLD_K,
                 };
                 self.drive.bend_done(t, pla_c, tca_c, tca_learnt, pla)
             }

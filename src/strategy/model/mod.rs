@@ -37,6 +37,13 @@ pub const MODEL_SETTLE_S: f32 = 1.5;
 /// target while the rod flows; in still air it keeps warming.
 pub const MODEL_PASSIVE_OVERSHOOT_K: f32 = 2.0;
 
+/// Longest bend waits on the PLA's view alone once everything else is ready, s: long enough for
+/// a hifi PLA bead, 10 s behind its rod, to slow after soften (`cargo xtask calibration`: 10 s
+/// left the hifi water p95 after TUNE + 3 measured at 3.34 %, 20 s at 1.46 %), short enough that
+/// a PLA thermistor that never slows (drifting low while the PLA is held on it) does not keep
+/// the rod heated until the bend timeout.
+pub const MODEL_PLA_WAIT_MAX_S: f32 = 20.0;
+
 /// Thermistor guard of the model strategies, K: a heater is switched off for the tick while its
 /// thermistor reads more than this above the heater's target temperature. The model assumes
 /// water; in still air the same power heats about five times as much, and the feed-forward
@@ -103,6 +110,8 @@ pub struct ModelDrive {
     last_ms: u64,
     applied: Powers,
     settled_since_ms: Option<u64>,
+    /// Since when bend has waited on the PLA's view alone, ms.
+    pla_wait_since_ms: Option<u64>,
 }
 
 impl ModelDrive {
@@ -127,6 +136,7 @@ impl ModelDrive {
             last_ms: s.now_ms,
             applied: Powers::default(),
             settled_since_ms: None,
+            pla_wait_since_ms: None,
         }
     }
 
@@ -154,6 +164,7 @@ impl ModelDrive {
     /// A new phase: the settle hold starts afresh.
     pub(crate) fn enter(&mut self) {
         self.settled_since_ms = None;
+        self.pla_wait_since_ms = None;
     }
 
     /// Runs the model over the time since the last tick with the powers the heaters delivered,
@@ -180,11 +191,11 @@ impl ModelDrive {
 
     /// Whether bend is over: the TCA (`tca_c`, the strategy's view of it) at its target or as
     /// close as the link allows, the PLA (`pla_c`) soft, the TCA's view `learnt` and the PLA's
-    /// `pla_learnt`, all for [`MODEL_SETTLE_S`]. A TCA that is past its target on the PLA's
-    /// heat alone (heater at keep-alive) does not wait for `pla_learnt` (it only warms further
-    /// while it waits) unless `pla_cold` says the PLA reads far colder than the model expects
-    /// (the rod has not flowed yet), and then only until it is [`MODEL_PASSIVE_OVERSHOOT_K`]
-    /// over its target.
+    /// `pla.learnt`, all for [`MODEL_SETTLE_S`]; the wait on `pla.learnt` alone lasts at most
+    /// [`MODEL_PLA_WAIT_MAX_S`]. A TCA that is past its target on the PLA's heat alone (heater
+    /// at keep-alive) does not wait for `pla.learnt` (it only warms further while it waits)
+    /// unless `pla.cold` says the PLA reads far colder than the model expects (the rod has not
+    /// flowed yet), and then only until it is [`MODEL_PASSIVE_OVERSHOOT_K`] over its target.
     pub(crate) fn bend_done(
         &mut self,
         t: &Tick,
@@ -205,7 +216,17 @@ impl ModelDrive {
                 && t.since_start_s > STALL_AFTER_S);
         let overshooting = tca_c > self.tca_target_c + MODEL_PASSIVE_OVERSHOOT_K;
         let pla_ready = pla.learnt || (passive && (!pla.cold || overshooting));
-        let at_target = reached && pla_c >= t.th.soft_threshold_c && learnt && pla_ready;
+        let ready_but_pla = reached && pla_c >= t.th.soft_threshold_c && learnt;
+        // The wait on the PLA's view alone is bounded: a PLA thermistor that never slows (one
+        // drifting while the PLA is held on it) must not keep the rod heated until the timeout.
+        let waited_out = if ready_but_pla && !pla_ready {
+            let since = *self.pla_wait_since_ms.get_or_insert(t.now_ms);
+            t.now_ms.saturating_sub(since) as f32 / 1000.0 >= MODEL_PLA_WAIT_MAX_S
+        } else {
+            self.pla_wait_since_ms = None;
+            false
+        };
+        let at_target = ready_but_pla && (pla_ready || waited_out);
         self.held(t.now_ms, at_target) && t.in_phase_s >= MODEL_SETTLE_S
     }
 
