@@ -103,8 +103,9 @@ fn morph_while_busy_or_out_of_range_is_refused_and_changes_nothing() {
 }
 
 /// KNOWN GAP, measured (the calibration issue closes it): the radius error of `auto` morphs on the
-/// nominal hifi link after 60 s of rest lies within this band, %. Measured: -8.4 % at 37.4 mm
-/// to +6.3 % at 46.3 mm; the controller's table and model are the lumped link's, not this
+/// nominal hifi link after 60 s of rest lies within this band, %. Measured (2026-12-02, the
+/// compiled-in calibration): −8.8 % at 35.1 mm to −5.4 % at 46.3 mm (docs/performance.md; TUNE
+/// and MEASURED bring it to the link: docs/calibration.md); the controller's table and model are the lumped link's, not this
 /// link's (docs/plant.md, "The controller on the hifi link"). The lumped link's bound is 2 %.
 const HIFI_ERROR_BAND_PCT: f32 = 12.0;
 
