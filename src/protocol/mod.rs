@@ -250,6 +250,9 @@ pub enum ErrorCode {
     NoFinishedMorph,
     /// MEASURED again for a morph whose radius is already counted.
     AlreadyMeasured,
+    /// A command that would start heating (MORPH, TUNE, HEAT) arrived ahead of an ABORT in
+    /// the same read: the ABORT came first, so it was not run.
+    Aborted,
 }
 
 /// A protocol error: a code and a sentence for the user.
@@ -277,6 +280,7 @@ impl ErrorCode {
             ErrorCode::Storage => "storage",
             ErrorCode::NoFinishedMorph => "no-finished-morph",
             ErrorCode::AlreadyMeasured => "already-measured",
+            ErrorCode::Aborted => "aborted",
         }
     }
 }

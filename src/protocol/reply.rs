@@ -73,6 +73,13 @@ pub const ERR_OVERRUN: ProtoError = ProtoError {
         "Input was lost while this line arrived (receive overrun); it was not run, send it again.",
 };
 
+/// A command that would start heating (MORPH, TUNE, HEAT) read ahead of an ABORT in the same
+/// read: the ABORT was acted on first and the command is not run after it.
+pub const ERR_ABORTED_AHEAD: ProtoError = ProtoError {
+    code: ErrorCode::Aborted,
+    text: "An ABORT followed this line in the same read; the heaters stay off and it was not run.",
+};
+
 /// Replies the serial task dropped because commands arrived faster than the line could carry
 /// their replies (each command was run): `error: busy <n> replies dropped; ...`. Sent once the
 /// output has room again, so a flood costs one notice, and input is never what is lost.

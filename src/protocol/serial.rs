@@ -4,7 +4,7 @@
 //! firmware's serial task only moves bytes between these and the board's port
 //! (docs/firmware.md, "The serial path under a flood"); the host tests drive them directly.
 
-use super::reply::{replies_dropped, ERR_OVERRUN};
+use super::reply::{replies_dropped, ERR_ABORTED_AHEAD, ERR_OVERRUN};
 use super::{
     parse_line, Assembled, Command, LineAssembler, OutLine, Overrun, ProtoError, ERR_INVALID_LINE,
     ERR_LINE_TOO_LONG, OUT_LINE_BYTES,
@@ -35,6 +35,16 @@ const _: () = assert!(ABORT_SCAN_BYTES >= "ABORT".len());
 /// True if `line` (without its ending) is the ABORT command.
 pub fn is_abort(line: &str) -> bool {
     matches!(parse_line(line), Ok(Some(Command::Abort)))
+}
+
+/// True if `line` is a command that starts heating: MORPH, TUNE or HEAT.
+fn starts_heating(line: &str) -> bool {
+    matches!(
+        parse_line(line),
+        Ok(Some(
+            Command::Morph { .. } | Command::Tune | Command::Heat { .. }
+        ))
+    )
 }
 
 /// The ABORT-first scan: fed every received read as it arrives, it says whether an `ABORT`
@@ -69,11 +79,19 @@ impl AbortScan {
     /// Scans one read: true if a whole ABORT line (started here or in an earlier read) ends in
     /// `bytes`. `lost_after`: input was lost right after them.
     pub fn scan(&mut self, bytes: &[u8], lost_after: bool) -> bool {
-        let mut found = false;
-        for &b in bytes {
+        self.scan_to(bytes, lost_after).is_some()
+    }
+
+    /// As [`AbortScan::scan`], with where the last ABORT line ending in `bytes` ends: the
+    /// offset just past its line-end byte.
+    pub fn scan_to(&mut self, bytes: &[u8], lost_after: bool) -> Option<usize> {
+        let mut found = None;
+        for (i, &b) in bytes.iter().enumerate() {
             if b == b'\r' || b == b'\n' {
                 let len = usize::from(self.len);
-                found |= !self.skip && core::str::from_utf8(&self.line[..len]).is_ok_and(is_abort);
+                if !self.skip && core::str::from_utf8(&self.line[..len]).is_ok_and(is_abort) {
+                    found = Some(i + 1);
+                }
                 self.len = 0;
                 self.skip = false;
             } else if !self.skip {
@@ -103,6 +121,9 @@ pub struct SerialInput<const N: usize> {
     pos: usize,
     len: usize,
     lost: bool,
+    /// Where the last ABORT line of this read ends (offset past its line end): lines that end
+    /// before it and would start heating are refused ([`ERR_ABORTED_AHEAD`]).
+    abort_end: Option<usize>,
     lines: LineAssembler,
     scan: AbortScan,
 }
@@ -121,6 +142,7 @@ impl<const N: usize> SerialInput<N> {
             pos: 0,
             len: 0,
             lost: false,
+            abort_end: None,
             lines: LineAssembler::new(),
             scan: AbortScan::new(),
         }
@@ -140,12 +162,15 @@ impl<const N: usize> SerialInput<N> {
 
     /// Reports a read of `len` bytes into [`SerialInput::buffer`], `lost_after` if input was
     /// lost right after them. True if an ABORT line ended in them: the shell acts on it now;
-    /// the line is still answered in its turn.
+    /// the line is still answered in its turn, and a MORPH, TUNE or HEAT line read ahead of it
+    /// is answered [`ERR_ABORTED_AHEAD`] instead of run (the user's ABORT stops what was
+    /// sent before it, not only what already runs).
     pub fn received(&mut self, len: usize, lost_after: bool) -> bool {
         self.pos = 0;
         self.len = len.min(N);
         self.lost = lost_after;
-        self.scan.scan(&self.buf[..self.len], lost_after)
+        self.abort_end = self.scan.scan_to(&self.buf[..self.len], lost_after);
+        self.abort_end.is_some()
     }
 
     /// Assembles up to the end of the next line and hands `f` what to do with it: the line to
@@ -160,7 +185,11 @@ impl<const N: usize> SerialInput<N> {
             let byte = self.buf[self.pos];
             self.pos += 1;
             if let Some(line) = self.lines.push_checked(byte) {
+                let ahead_of_abort = self.abort_end.is_some_and(|end| self.pos < end);
                 answer = Some(f(match line {
+                    Ok(Assembled::Line(l)) if ahead_of_abort && starts_heating(l) => {
+                        Err(&ERR_ABORTED_AHEAD)
+                    }
                     Ok(Assembled::Line(l)) => Ok(l),
                     Ok(Assembled::TooLong) => Err(&ERR_LINE_TOO_LONG),
                     Ok(Assembled::Invalid) => Err(&ERR_INVALID_LINE),
@@ -535,6 +564,32 @@ mod tests {
     }
 
     #[test]
+    fn a_heating_command_read_ahead_of_an_abort_is_refused_and_others_still_run() {
+        let got = feed(&[(
+            b"MORPH 38\r\nHEAT pla 1 5\nTUNE\nSTATUS\nABORT\nMORPH 38\n",
+            false,
+        )]);
+        assert!(got[0].0);
+        assert_eq!(
+            got[0].1,
+            [
+                Err("aborted"),
+                Err("aborted"),
+                Err("aborted"),
+                Ok(String::from("STATUS")),
+                Ok(String::from("ABORT")),
+                Ok(String::from("MORPH 38"))
+            ]
+        );
+        // Answered before the ABORT arrived, a MORPH ran (the ABORT then stops it); one whose
+        // line ends in the ABORT's read is refused.
+        let got = feed(&[(b"MORPH 38\n", false), (b"ABORT\n", false)]);
+        assert_eq!(got[0].1, [Ok(String::from("MORPH 38"))]);
+        let got = feed(&[(b"MORPH", false), (b" 38\nABORT\n", false)]);
+        assert_eq!(got[1].1, [Err("aborted"), Ok(String::from("ABORT"))]);
+    }
+
+    #[test]
     fn an_abort_split_across_two_reads_is_found_in_the_second() {
         let got = feed(&[(b"STATUS\nAB", false), (b"ORT\nSTATUS\n", false)]);
         assert!(!got[0].0 && got[1].0);
@@ -589,6 +644,7 @@ mod tests {
     fn line() -> impl Strategy<Value = String> {
         prop_oneof![
             4 => Just(String::from("STATUS")),
+            1 => Just(String::from("MORPH 38")),
             2 => Just(String::from("ABORT")),
             1 => Just(String::from(" abort ")),
             1 => Just(String::from("AB")),
@@ -602,8 +658,9 @@ mod tests {
     proptest! {
         /// Whatever the split into reads and wherever input is lost: the lines run are
         /// exactly the sent lines that arrived whole after a line end that arrived (never
-        /// pieces of two; any other line is answered with an error), and the scan finds an
-        /// ABORT exactly in the read where such an ABORT line ends.
+        /// pieces of two; any other line is answered with an error), less the MORPH lines
+        /// that end ahead of a whole ABORT line in the same read, and the scan finds an ABORT
+        /// exactly in the read where such an ABORT line ends.
         #[test]
         fn lines_survive_any_split_and_loss_whole_or_as_errors(
             lines in prop::collection::vec(line(), 1..30),
@@ -647,8 +704,11 @@ mod tests {
             let clean = |&(s, e): &(usize, usize)| {
                 (s == 0 || arrived[s - 1]) && !gaps.iter().any(|g| (s..=e).contains(g))
             };
+            let is_abort_line = |l: &String| l.len() <= ABORT_SCAN_BYTES && l.trim().eq_ignore_ascii_case("abort");
             let mut input: SerialInput<64> = SerialInput::new();
             let mut run: Vec<String> = Vec::new();
+            // Lines refused as read ahead of an ABORT (index into `lines`).
+            let mut refused = vec![false; lines.len()];
             for &(from, to, lost) in &reads {
                 for c_from in (from..to).step_by(64) {
                     let c_to = (c_from + 64).min(to);
@@ -662,6 +722,19 @@ mod tests {
                             && l.trim().eq_ignore_ascii_case("abort")
                     });
                     prop_assert_eq!(abort, expect, "read {:?}", String::from_utf8_lossy(chunk));
+                    // Where the last whole ABORT line of this read ends: a MORPH line ending
+                    // before it in the same read is refused.
+                    let abort_end = lines
+                        .iter()
+                        .zip(&spans)
+                        .filter(|(l, span)| (c_from..c_to).contains(&span.1) && clean(span) && is_abort_line(l))
+                        .map(|(_, span)| span.1)
+                        .max();
+                    for (i, (l, span)) in lines.iter().zip(&spans).enumerate() {
+                        if l == "MORPH 38" && (c_from..c_to).contains(&span.1) && abort_end.is_some_and(|e| span.1 < e) {
+                            refused[i] = true;
+                        }
+                    }
                     while !input.is_drained() {
                         if let Some(Ok(l)) = input.next_line(|l| l.map(String::from)) {
                             run.push(l);
@@ -672,8 +745,11 @@ mod tests {
             let want: Vec<String> = lines
                 .iter()
                 .zip(&spans)
-                .filter(|(l, span)| l.len() <= crate::protocol::MAX_LINE && clean(span))
-                .map(|(l, _)| l.clone())
+                .zip(&refused)
+                .filter(|((l, span), refused)| {
+                    l.len() <= crate::protocol::MAX_LINE && clean(span) && !**refused
+                })
+                .map(|((l, _), _)| l.clone())
                 .collect();
             prop_assert_eq!(run, want);
         }
