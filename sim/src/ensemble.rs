@@ -68,6 +68,27 @@ pub struct Mismatch {
     pub seed: u64,
 }
 
+/// High-fidelity link `draw` of the ensemble with seed `seed`, on the reduced-order grid (the
+/// strategy and calibration charts' links), and its board's thermistor noise: the lumped draw's
+/// of the same number. One definition for the charts and the tests, so a test of "draw 15"
+/// runs the link the charts call draw 15.
+#[cfg(feature = "hifi")]
+pub fn hifi_draw(
+    seed: u64,
+    draw: u64,
+) -> Result<
+    (morphlink_plant::hifi::HifiSpec, morphlink::bench::Noise),
+    morphlink_model::reference::ReferenceError,
+> {
+    let spec = morphlink_plant::hifi::HifiSpec::draw(
+        morphlink::link::LINK,
+        morphlink_plant::hifi::Grid::Reduced,
+        seed,
+        draw,
+    )?;
+    Ok((spec, Mismatch::draw(seed, draw).plant().noise()))
+}
+
 impl Mismatch {
     /// The nominal link: no mismatch, the nominal sensors.
     pub const NONE: Mismatch = Mismatch {

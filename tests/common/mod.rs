@@ -90,11 +90,8 @@ impl Bench {
     /// The ensemble's hifi link `draw` (seed `seed`; the strategy and calibration charts'
     /// links), with its drawn noise.
     pub fn hifi_draw(seed: u64, draw: u64) -> Self {
-        let spec = HifiSpec::draw(morphlink::link::LINK, Grid::Reduced, seed, draw)
-            .expect("the ensemble's draws are valid");
-        let noise = morphlink_sim::ensemble::Mismatch::draw(seed, draw)
-            .plant()
-            .noise();
+        let (spec, noise) =
+            morphlink_sim::ensemble::hifi_draw(seed, draw).expect("the ensemble's draws are valid");
         Self::with_rig(Rig::with_plant(
             Box::new(Hifi::new(spec).expect("a drawn link builds")),
             noise,

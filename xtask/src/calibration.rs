@@ -19,7 +19,7 @@ use morphlink::table;
 use morphlink::vocab::Phase;
 use morphlink_host::plot::{self, prelude::*};
 use morphlink_model::draw::{splitmix, uniform};
-use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
+use morphlink_plant::hifi::Hifi;
 use morphlink_plant::{Lumped, Plant};
 use morphlink_sim::ensemble::{Mismatch, MAX_MORPH_S, SETTLE_AFTER_DONE_S};
 use morphlink_sim::Rig;
@@ -388,8 +388,8 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                 };
                 let noise = Mismatch::draw(args.seed, draw).plant().noise();
                 let r = if plant == "hifi" {
-                    HifiSpec::draw(morphlink::link::LINK, Grid::Reduced, args.seed, draw)
-                        .and_then(|spec| {
+                    morphlink_sim::ensemble::hifi_draw(args.seed, draw)
+                        .and_then(|(spec, _)| {
                             let air = spec.medium == morphlink_plant::Medium::Air;
                             Hifi::new(spec).map(|p| (p, air))
                         })

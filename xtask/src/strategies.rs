@@ -176,11 +176,10 @@ fn lumped_link(seed: u64, draw: u64) -> (Link, Noise, LinkInfo) {
 /// High-fidelity link number `draw` on the reduced-order grid; its board's thermistor noise
 /// is the lumped draw's of the same number.
 fn hifi_link(seed: u64, draw: u64) -> Result<(Link, Noise, LinkInfo), String> {
-    let spec = HifiSpec::draw(morphlink::link::LINK, Grid::Reduced, seed, draw)
+    let (spec, noise) = morphlink_sim::ensemble::hifi_draw(seed, draw)
         .map_err(|e| format!("hifi draw {draw}: {e}"))?;
     let nominal = HifiSpec::nominal(morphlink::link::LINK, Grid::Reduced)
         .map_err(|e| format!("hifi nominal: {e}"))?;
-    let noise = Mismatch::draw(seed, draw).plant().noise();
     let info = LinkInfo {
         plant: HIFI,
         draw,
