@@ -687,11 +687,7 @@ impl Supervisor {
             }
         }
         if self.ramp.ramping {
-            return Err(Fault {
-                code: FaultCode::SensorImplausible,
-                subject: Subject::Sensor(Sensor::Amb),
-                value: f32::NAN,
-            });
+            return Err(ramp_fault(f32::NAN));
         }
         supply_ok(frame)
     }
@@ -1139,14 +1135,14 @@ impl RampWatch {
         if !temp_c.is_finite() {
             return Ok(());
         }
-        let segment_ms = (AMB_RAMP_SEGMENT_S * 1000.0) as u64;
+        const SEGMENT_MS: u64 = (AMB_RAMP_SEGMENT_S * 1000.0) as u64;
         if let Some((start_ms, _, _)) = self.segment {
-            if sample_ms.saturating_sub(start_ms) >= 2 * segment_ms {
+            if sample_ms.saturating_sub(start_ms) >= 2 * SEGMENT_MS {
                 *self = RampWatch::new();
             }
         }
         let (start_ms, sum_c, n) = self.segment.get_or_insert((sample_ms, 0.0, 0));
-        if sample_ms.saturating_sub(*start_ms) < segment_ms {
+        if sample_ms.saturating_sub(*start_ms) < SEGMENT_MS {
             *sum_c += temp_c;
             *n = n.saturating_add(1);
             return Ok(());
@@ -1165,13 +1161,20 @@ impl RampWatch {
         self.ramping = steady_ramp(&self.means_c);
         if self.ramping {
             let span_s = AMB_RAMP_SEGMENTS as f32 * AMB_RAMP_SEGMENT_S;
-            return Err(Fault {
-                code: FaultCode::SensorImplausible,
-                subject: Subject::Sensor(Sensor::Amb),
-                value: (self.means_c[AMB_RAMP_SEGMENTS] - self.means_c[0]) / span_s,
-            });
+            return Err(ramp_fault(
+                (self.means_c[AMB_RAMP_SEGMENTS] - self.means_c[0]) / span_s,
+            ));
         }
         Ok(())
+    }
+}
+
+/// The ambient ramp's trip: `sensor-implausible amb` at `rate_k_per_s`.
+fn ramp_fault(rate_k_per_s: f32) -> Fault {
+    Fault {
+        code: FaultCode::SensorImplausible,
+        subject: Subject::Sensor(Sensor::Amb),
+        value: rate_k_per_s,
     }
 }
 

@@ -704,7 +704,9 @@ mod tests {
             let clean = |&(s, e): &(usize, usize)| {
                 (s == 0 || arrived[s - 1]) && !gaps.iter().any(|g| (s..=e).contains(g))
             };
-            let is_abort_line = |l: &String| l.len() <= ABORT_SCAN_BYTES && l.trim().eq_ignore_ascii_case("abort");
+            let is_abort_line = |l: &String| {
+                l.len() <= ABORT_SCAN_BYTES && l.trim().eq_ignore_ascii_case("abort")
+            };
             let mut input: SerialInput<64> = SerialInput::new();
             let mut run: Vec<String> = Vec::new();
             // Lines refused as read ahead of an ABORT (index into `lines`).
@@ -716,10 +718,7 @@ mod tests {
                     input.buffer()[..chunk.len()].copy_from_slice(chunk);
                     let abort = input.received(chunk.len(), lost && c_to == to);
                     let expect = lines.iter().zip(&spans).any(|(l, span)| {
-                        (c_from..c_to).contains(&span.1)
-                            && clean(span)
-                            && l.len() <= ABORT_SCAN_BYTES
-                            && l.trim().eq_ignore_ascii_case("abort")
+                        (c_from..c_to).contains(&span.1) && clean(span) && is_abort_line(l)
                     });
                     prop_assert_eq!(abort, expect, "read {:?}", String::from_utf8_lossy(chunk));
                     // Where the last whole ABORT line of this read ends: a MORPH line ending

@@ -114,15 +114,14 @@ impl Strategy for Closed {
                 // corrected by its thermistor can call a rod soft whose core is still glassy
                 // (the high-fidelity links then lock before the rod has flowed). A PLA
                 // thermistor that reads what the model expects need not wait.
-                let learnt = |n| o.measured_rate_k_per_s(n).abs() <= LEARN_MAX_RATE_K_PER_S;
+                let tca_learnt =
+                    o.measured_rate_k_per_s(HeatedNode::Tca).abs() <= LEARN_MAX_RATE_K_PER_S;
                 let pla_settled =
                     o.measured_rate_k_per_s(HeatedNode::Pla).abs() <= CLOSED_PLA_SETTLED_K_PER_S;
-                let pla_learnt =
-                    pla_settled || o.innovation_k(HeatedNode::Pla).abs() <= CLOSED_PLA_AGREE_K;
-                let tca_learnt = learnt(HeatedNode::Tca);
+                let pla_innovation_k = o.innovation_k(HeatedNode::Pla);
                 let pla = PlaView {
-                    learnt: pla_learnt,
-                    cold: !pla_settled && o.innovation_k(HeatedNode::Pla) < -CLOSED_PLA_COLD_K,
+                    learnt: pla_settled || pla_innovation_k.abs() <= CLOSED_PLA_AGREE_K,
+                    cold: !pla_settled && pla_innovation_k < -CLOSED_PLA_COLD_K,
                 };
                 self.drive.bend_done(t, pla_c, tca_c, tca_learnt, pla)
             }
