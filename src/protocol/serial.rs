@@ -47,7 +47,7 @@ fn starts_heating(line: &str) -> bool {
     )
 }
 
-/// The ABORT-first scan: fed every received read as it arrives, it says whether an `ABORT`
+/// The ABORT-first scan: fed every received read as it arrives, it says whether (and where) an `ABORT`
 /// line ended in it, so the shell can stop the heaters before answering the lines read ahead
 /// of it. It follows line boundaries itself (`\r`, `\n`, `\r\n`), so an ABORT split across
 /// two reads is found in the second; after lost input it ignores the line in progress, as
@@ -76,15 +76,10 @@ impl AbortScan {
         }
     }
 
-    /// Scans one read: true if a whole ABORT line (started here or in an earlier read) ends in
-    /// `bytes`. `lost_after`: input was lost right after them.
-    pub fn scan(&mut self, bytes: &[u8], lost_after: bool) -> bool {
-        self.scan_to(bytes, lost_after).is_some()
-    }
-
-    /// As [`AbortScan::scan`], with where the last ABORT line ending in `bytes` ends: the
-    /// offset just past its line-end byte.
-    pub fn scan_to(&mut self, bytes: &[u8], lost_after: bool) -> Option<usize> {
+    /// Scans one read: where the last whole ABORT line (started here or in an earlier read)
+    /// ending in `bytes` ends, the offset just past its line-end byte, or `None` if no ABORT
+    /// line ends in them. `lost_after`: input was lost right after them.
+    pub fn scan(&mut self, bytes: &[u8], lost_after: bool) -> Option<usize> {
         let mut found = None;
         for (i, &b) in bytes.iter().enumerate() {
             if b == b'\r' || b == b'\n' {
@@ -169,7 +164,7 @@ impl<const N: usize> SerialInput<N> {
         self.pos = 0;
         self.len = len.min(N);
         self.lost = lost_after;
-        self.abort_end = self.scan.scan_to(&self.buf[..self.len], lost_after);
+        self.abort_end = self.scan.scan(&self.buf[..self.len], lost_after);
         self.abort_end.is_some()
     }
 
