@@ -41,7 +41,10 @@ const _: () = assert!(CLOSED_PLA_AGREE_K > 0.0 && CLOSED_PLA_AGREE_K < 5.0);
 
 /// Bend waits for the PLA thermistor to change slower than this, K/s (unless it reads what the
 /// observer expects, [`CLOSED_PLA_AGREE_K`]): a bead still rising says the rod is still
-/// heating, and a rod a few kelvin under the PLA target flows several times slower.
+/// heating, and a rod a few kelvin under the PLA target flows several times slower. At the
+/// observer's 0.6 K/s the hifi rod of draw 15 was still flowing 1 mm/s when bend ended; 0.3 K/s
+/// took the hifi water p95 after TUNE + 3 measured from 3.11 to 1.49 % (`cargo xtask
+/// calibration`; 0.2 K/s gave the same).
 pub const CLOSED_PLA_SETTLED_K_PER_S: f32 = 0.3;
 const _: () = assert!(
     CLOSED_PLA_SETTLED_K_PER_S > 0.0 && CLOSED_PLA_SETTLED_K_PER_S <= LEARN_MAX_RATE_K_PER_S
@@ -52,7 +55,8 @@ const _: () = assert!(
 /// colder than the estimate and has not flowed (the high-fidelity links, whose bead reads far
 /// under the model late in soften, locked 4–8 % loose at the loosest target). A reading that
 /// trails the model by a bead lag alone (the lumped links', 2–6 s) is left out: there the rod
-/// has flowed and waiting only bends it further.
+/// has flowed and waiting only bends it further (`cargo xtask calibration`: with 4.5 K, 5
+/// lumped water links ended over 2 %; with 6 K, 1).
 pub const CLOSED_PLA_COLD_K: f32 = 6.0;
 const _: () = assert!(CLOSED_PLA_COLD_K > CLOSED_PLA_AGREE_K);
 

@@ -33,8 +33,9 @@ pub const MODEL_SETTLE_S: f32 = 1.5;
 /// A TCA past its target on the PLA's heat alone (its heater at keep-alive) waits in bend for
 /// the PLA's view to be learnt, so the rod has flowed, until it is this far over its target,
 /// K: then waiting would only bend the rod past the target (0.27 mm of radius per kelvin), so
-/// bend ends as it is. Under water the passive TCA stays within a kelvin or two of a loose
-/// target while the rod flows; in still air it keeps warming.
+/// bend ends as it is. Measured on the hifi ensemble after TUNE + 3 measured morphs (`cargo
+/// xtask calibration`, water): 1 K left draw 18 at 6 % loose (p95 2.16 %), 2 K brought it under
+/// 2 % (p95 2.04 %, before the PLA settle gate); waiting with no bound left still air at 11.8 %.
 pub const MODEL_PASSIVE_OVERSHOOT_K: f32 = 2.0;
 
 /// Longest bend waits on the PLA's view alone once everything else is ready, s: long enough for
