@@ -110,7 +110,9 @@ impl Fault {
             (FaultCode::HeaterNotHeating, _) => {
                 "HEATING_MIN_GAIN_K, HOLD_MAX_FALL_K, HELD_MAX_FALL_K"
             }
-            (FaultCode::HeatingWhileOff, _) => "OFF_GRACE_S, OFF_MAX_RISE_K, LOW_GRACE_S",
+            (FaultCode::HeatingWhileOff, _) => {
+                "OFF_GRACE_S, OFF_MAX_RISE_K, OFF_STORED_MAX_RISE_K, LOW_GRACE_S"
+            }
             (FaultCode::StaleSensor, _) => "STALE_AFTER_MS",
             (FaultCode::SupplyOutOfRange, _) => "SUPPLY_MIN_V, SUPPLY_MAX_V",
             (FaultCode::PhaseTimeout, Subject::Phase(phase)) => match phase {
@@ -232,6 +234,14 @@ pub const OFF_GRACE_S: f32 = 15.0;
 /// cooling link only falls; 3 K is 60 times the sensor noise, and a stuck PLA heater at 10 V
 /// (3.3 W) gains it within a few seconds, long before the 130 °C limit.
 pub const OFF_MAX_RISE_K: f32 = 3.0;
+/// Heating-while-off: a sensor that rises this far above its lowest reading (above ambient)
+/// since both heaters were cut trips at once, within [`OFF_GRACE_S`] too, K. The heat stored in
+/// the link lifts a lagging bead a few kelvin after a cut: at most 9.6 K over an ABORT at 4–30 s
+/// into a morph in every mode on both nominal links in water and still air, on the lumped link
+/// with 2 s and 6 s beads and on 40 high-fidelity draws (the most: hifi draw 22, ABORT 8 s into
+/// an auto morph). A PLA heater stuck on in release gains 12 K within about 5 s, where the
+/// grace alone let the rod pass 130 °C.
+pub const OFF_STORED_MAX_RISE_K: f32 = 12.0;
 
 /// Heating-while-off, one heater low: how long a heater must have been commanded below
 /// [`HEATING_MIN_POWER_FRACTION`] of its cap, with the other heater on, before its sensor is
@@ -252,6 +262,7 @@ pub const MUST_COOL_MARGIN_K: f32 = 3.0;
 const _: () =
     assert!(LOW_GRACE_S > 0.0 && LOW_GRACE_S < HEATING_WINDOW_S && LOW_GRACE_S < OFF_GRACE_S);
 const _: () = assert!(MUST_COOL_MARGIN_K > 0.0 && MUST_COOL_MARGIN_K <= OFF_MAX_RISE_K);
+const _: () = assert!(OFF_STORED_MAX_RISE_K > OFF_MAX_RISE_K);
 
 /// One sensor frame as the supervisor sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -290,22 +301,47 @@ struct HeatWatch {
 /// with room to spare.
 pub type Faults = heapless::Vec<Fault, 8>;
 
-/// One heater's heating-while-off watch: since when both heaters are off, and the sensor's
-/// lowest rise above ambient since the grace ended.
+/// One heater's must-not-rise watch (heating while off, or while turned down): since when its
+/// condition has held, and its sensor's lowest rise above ambient over the whole condition and
+/// since its grace ended. `check_off` and `check_low` each keep one per heater.
+#[derive(Clone, Copy, Debug, Default)]
+struct RiseWatch {
+    since_ms: Option<u64>,
+    /// The lowest rise since the condition began, K.
+    min_all_k: Option<f32>,
+    /// The lowest rise since the grace ended (and, in `check_low`, since the sensor must cool), K.
+    min_k: Option<f32>,
+}
+
+impl RiseWatch {
+    /// Feeds one tick in which the condition holds, with the sensor's rise `rise_k` (K) and
+    /// whether it is judged now: returns the lowest rise since the grace `grace_s` ended, or
+    /// `None` within the grace or while not judged (the lowest is then forgotten).
+    fn update(&mut self, now_ms: u64, grace_s: f32, rise_k: f32, judged: bool) -> Option<f32> {
+        let since = *self.since_ms.get_or_insert(now_ms);
+        self.min_all_k = Some(self.min_all_k.map_or(rise_k, |k| k.min(rise_k)));
+        if (now_ms.saturating_sub(since) as f32) / 1000.0 < grace_s || !judged {
+            self.min_k = None;
+            return None;
+        }
+        let min_k = self.min_k.map_or(rise_k, |k| k.min(rise_k));
+        self.min_k = Some(min_k);
+        Some(min_k)
+    }
+}
+
+/// One heater's heating-while-off watch (both heaters off).
 #[derive(Clone, Copy, Debug, Default)]
 struct OffWatch {
-    off_since_ms: Option<u64>,
-    min_rise_k: Option<f32>,
+    rise: RiseWatch,
     /// The condition holds now (RESET is refused while it does).
     heating: bool,
 }
 
-/// One heater's heating-while-off watch while only it is low: since when it has been low, and
-/// its sensor's lowest rise above ambient since the grace ended.
+/// One heater's heating-while-off watch while only it is low.
 #[derive(Clone, Copy, Debug, Default)]
 struct LowWatch {
-    low_since_ms: Option<u64>,
-    min_rise_k: Option<f32>,
+    rise: RiseWatch,
     /// A trip's lowest rise while its sensor still stands more than [`OFF_MAX_RISE_K`] above
     /// it: the condition RESET waits for (the watch itself restarts when the heaters go off).
     tripped_min_k: Option<f32>,
@@ -636,31 +672,36 @@ impl Supervisor {
 
     /// Heating-while-off: once both heaters have been commanded off for [`OFF_GRACE_S`], a
     /// heater's sensor that rises [`OFF_MAX_RISE_K`] above its lowest reading (above ambient)
-    /// trips: the heater is on although nothing commands it (a stuck MOSFET).
+    /// trips, and from the cut on one that rises [`OFF_STORED_MAX_RISE_K`] above it: the heater
+    /// is on although nothing commands it (a stuck MOSFET).
     fn check_off(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
         let m = self.measurements();
         let both_off = !(cmd.pla_w > 0.0) && !(cmd.tca_w > 0.0);
+        // A bath that cools moves the ambient bead at once and the heated ones over a minute:
+        // the rise is measured from the warmer of the ambient reading and its lagged value
+        // (`PLAUS_AMB_TAU_S`), so a colder bath is not heating.
+        let amb_c = self
+            .amb_slow_c
+            .map_or(m.t_amb_c, |slow| m.t_amb_c.max(slow));
         for heater in Heater::ALL {
             let w = &mut self.off[heater.index()];
-            let rise_k = m.of(heater.sensor()) - m.t_amb_c;
+            let rise_k = m.of(heater.sensor()) - amb_c;
             if !both_off || !rise_k.is_finite() {
                 *w = OffWatch::default();
                 continue;
             }
-            let since = *w.off_since_ms.get_or_insert(now_ms);
-            if (now_ms.saturating_sub(since) as f32) / 1000.0 < OFF_GRACE_S {
-                continue;
-            }
-            let min_k = w.min_rise_k.map_or(rise_k, |k| k.min(rise_k));
-            w.min_rise_k = Some(min_k);
+            let after_grace_k = w.rise.update(now_ms, OFF_GRACE_S, rise_k, true);
             // Measured from the lowest reading, or from ambient if it was below it (a link
             // warming up to a warmer bath is not heating).
-            w.heating = rise_k - min_k.max(0.0) > OFF_MAX_RISE_K;
+            let above = |min_k: f32| rise_k - min_k.max(0.0);
+            let since_off_k = w.rise.min_all_k.map_or(0.0, above);
+            let after_k = after_grace_k.map_or(0.0, above);
+            w.heating = after_k > OFF_MAX_RISE_K || since_off_k > OFF_STORED_MAX_RISE_K;
             if w.heating {
                 return Err(Fault {
                     code: FaultCode::HeatingWhileOff,
                     subject: Subject::Heater(heater),
-                    value: rise_k - min_k.max(0.0),
+                    value: after_k.max(since_off_k),
                 });
             }
         }
@@ -847,15 +888,12 @@ impl Supervisor {
                 };
                 continue;
             }
-            let since = *w.low_since_ms.get_or_insert(now_ms);
-            if (now_ms.saturating_sub(since) as f32) / 1000.0 < LOW_GRACE_S
-                || !must_cool(heater, cmd, rise_k)
-            {
-                w.min_rise_k = None;
+            let Some(min_k) =
+                w.rise
+                    .update(now_ms, LOW_GRACE_S, rise_k, must_cool(heater, cmd, rise_k))
+            else {
                 continue;
-            }
-            let min_k = w.min_rise_k.map_or(rise_k, |k| k.min(rise_k));
-            w.min_rise_k = Some(min_k);
+            };
             if rise_k - min_k > OFF_MAX_RISE_K {
                 w.tripped_min_k = Some(min_k);
                 return Err(Fault {
@@ -1759,6 +1797,47 @@ mod tests {
             (LOW_GRACE_S..LOW_GRACE_S + 7.0).contains(&after_s),
             "{after_s}"
         );
+    }
+
+    #[test]
+    fn a_sensor_rising_far_after_both_heaters_are_cut_trips_within_the_grace_and_stored_heat_never_does(
+    ) {
+        // Release: both heaters cut at 10 s after 10 s of heating, the PLA reading 30 K above
+        // ambient. Stored heat lifts it 9.6 K at most (the ensemble's worst) before it cools; a
+        // stuck heater keeps it rising 2.5 K/s.
+        let cmd = |t: f32| Powers {
+            pla_w: if t < 10.0 { 1.0 } else { 0.0 },
+            tca_w: if t < 10.0 { 0.5 } else { 0.0 },
+        };
+        let warm = |t: f32| 22.0 + 3.0 * t.min(10.0);
+        let after = |t: f32| (t - 10.0).max(0.0);
+        let stored =
+            |t: f32| warm(t) + 9.6 * after(t).min(4.0) / 4.0 - 0.5 * (after(t) - 4.0).max(0.0);
+        // The TCA warms as a live heater at 0.5 W does, then cools.
+        let tca = |t: f32| {
+            22.0 + 14.0 * (1.0 - libm::expf(-t.min(10.0) / 3.0)) * libm::expf(-after(t) / 10.0)
+        };
+        let mut sup = Supervisor::new();
+        assert_eq!(
+            first_fault(&mut sup, cmd, Phase::Release, 40, |t| (stored(t), tca(t)))
+                .map(|(f, at_s)| (f.code, at_s)),
+            None
+        );
+        let mut sup = Supervisor::new();
+        let (f, at_s) = first_fault(&mut sup, cmd, Phase::Release, 40, |t| {
+            (warm(t) + 2.5 * after(t), tca(t))
+        })
+        .expect("a stuck PLA heater never tripped");
+        assert_eq!(
+            (f.code, f.subject),
+            (FaultCode::HeatingWhileOff, Subject::Heater(Heater::Pla))
+        );
+        // 12 K at 2.5 K/s: 4.8 s after the cut (seen a tick later), well inside the 15 s grace.
+        let after_s = at_s - 10.0;
+        assert!((4.8..5.2).contains(&after_s), "{after_s}");
+        assert!(after_s < OFF_GRACE_S);
+        // RESET waits while it still heats.
+        assert!(sup.off[Heater::Pla.index()].heating);
     }
 
     #[test]

@@ -523,10 +523,9 @@ impl fmt::Display for FaultText<'_> {
             FaultCode::HeaterNotHeating => {
                 write!(l, "heater-not-heating {s} rose {v} K; check wiring, MOSFET")
             }
-            FaultCode::HeatingWhileOff => write!(
-                l,
-                "heating-while-off {s} rose {v} K with its heater off; check its MOSFET"
-            ),
+            FaultCode::HeatingWhileOff => {
+                write!(l, "heating-while-off {s} rose {v} K; check its MOSFET")
+            }
             FaultCode::StaleSensor => write!(l, "stale-sensor no sensor frame for {v} s"),
             FaultCode::SupplyOutOfRange => write!(
                 l,
