@@ -114,7 +114,9 @@ impl Fault {
                 "OFF_GRACE_S, OFF_MAX_RISE_K, OFF_STORED_MAX_RISE_K, LOW_GRACE_S"
             }
             (FaultCode::StaleSensor, _) => "STALE_AFTER_MS",
-            (FaultCode::SupplyOutOfRange, _) => "SUPPLY_MIN_V, SUPPLY_MAX_V",
+            (FaultCode::SupplyOutOfRange, _) => {
+                "SUPPLY_MIN_V, SUPPLY_MAX_V, SUPPLY_READ_TOLERANCE_V"
+            }
             (FaultCode::PhaseTimeout, Subject::Phase(phase)) => match phase {
                 Phase::Soften => "SOFTEN_TIMEOUT_S",
                 Phase::Bend => "BEND_TIMEOUT_S",
@@ -165,6 +167,11 @@ pub const AMB_LIMITS: Limits = Limits {
 pub const SUPPLY_MIN_V: f32 = 9.0;
 /// Highest heater supply, V: +25 % of 12 V; above it one PWM step is too coarse for the TCA.
 pub const SUPPLY_MAX_V: f32 = 15.0;
+/// The supply limits are judged on the reading to this much either side, V: half the 0.1 V
+/// step the alarm reports the reading in, so a supply the alarm would print as within its range
+/// never trips (a 9.0 V supply reads 8.9999 V through the divider and the ADC's steps).
+pub const SUPPLY_READ_TOLERANCE_V: f32 = 0.05;
+const _: () = assert!(SUPPLY_READ_TOLERANCE_V >= 0.0 && SUPPLY_READ_TOLERANCE_V < 0.5);
 /// A sensor frame older than this counts as stale, ms. Klipper allows 7 s for hot ends with
 /// time constants of minutes; the TCA's fast thermal part is about 1 s, so 1 s (10 ticks).
 pub const STALE_AFTER_MS: u64 = 1000;
@@ -236,12 +243,21 @@ pub const OFF_GRACE_S: f32 = 15.0;
 pub const OFF_MAX_RISE_K: f32 = 3.0;
 /// Heating-while-off: a sensor that rises this far above its lowest reading (above ambient)
 /// since both heaters were cut trips at once, within [`OFF_GRACE_S`] too, K. The heat stored in
-/// the link lifts a lagging bead a few kelvin after a cut: at most 9.6 K over an ABORT at 4–30 s
-/// into a morph in every mode on both nominal links in water and still air, on the lumped link
-/// with 2 s and 6 s beads and on 40 high-fidelity draws (the most: hifi draw 22, ABORT 8 s into
-/// an auto morph). A PLA heater stuck on in release gains 12 K within about 5 s, where the
-/// grace alone let the rod pass 130 °C.
+/// the link lifts a lagging bead a few kelvin after a cut: where judged (above the other heated
+/// sensor, [`OFF_NEIGHBOUR_MARGIN_K`]) at most 11.2 K over an ABORT at 1–30 s into a morph in
+/// every mode on both nominal links in water and still air, on the lumped link with 2, 3 and
+/// 6 s beads and on 40 high-fidelity draws (the most: hifi draw 22, ABORT 4 s into closed's
+/// soften; `cargo xtask stored-heat`). A PLA heater stuck on in release gains 12 K within about
+/// 5 s, where the grace alone let the rod pass 130 °C.
 pub const OFF_STORED_MAX_RISE_K: f32 = 12.0;
+/// Heating-while-off: a heater's sensor that rises while it reads less than this above the other
+/// heated sensor is not judged, K: with both heaters off it may be warmed by the hotter part of
+/// the link, and heat flows only from hot to cold. In still air the PLA rod, cut after
+/// `paper`'s or `gated`'s long soften at 4 W, warms the TCA's bead by up to 15.6 K over a
+/// minute: without this rule 214 of 3 360 such healthy ABORTed morphs tripped (`cargo xtask
+/// stored-heat`). A stuck heater soon lifts its own sensor above the other's (no row of `cargo
+/// xtask faults` moved). The margin covers the PLA bead reading below its rod.
+pub const OFF_NEIGHBOUR_MARGIN_K: f32 = 3.0;
 
 /// Heating-while-off, one heater low: how long a heater must have been commanded below
 /// [`HEATING_MIN_POWER_FRACTION`] of its cap, with the other heater on, before its sensor is
@@ -263,6 +279,8 @@ const _: () =
     assert!(LOW_GRACE_S > 0.0 && LOW_GRACE_S < HEATING_WINDOW_S && LOW_GRACE_S < OFF_GRACE_S);
 const _: () = assert!(MUST_COOL_MARGIN_K > 0.0 && MUST_COOL_MARGIN_K <= OFF_MAX_RISE_K);
 const _: () = assert!(OFF_STORED_MAX_RISE_K > OFF_MAX_RISE_K);
+const _: () =
+    assert!(OFF_NEIGHBOUR_MARGIN_K >= 0.0 && OFF_NEIGHBOUR_MARGIN_K < OFF_STORED_MAX_RISE_K);
 
 /// One sensor frame as the supervisor sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -302,13 +320,11 @@ struct HeatWatch {
 pub type Faults = heapless::Vec<Fault, 8>;
 
 /// One heater's must-not-rise watch (heating while off, or while turned down): since when its
-/// condition has held, and its sensor's lowest rise above ambient over the whole condition and
-/// since its grace ended. `check_off` and `check_low` each keep one per heater.
+/// condition has held, and its sensor's lowest rise above ambient since its grace ended.
+/// `check_off` and `check_low` each keep one per heater.
 #[derive(Clone, Copy, Debug, Default)]
 struct RiseWatch {
     since_ms: Option<u64>,
-    /// The lowest rise since the condition began, K.
-    min_all_k: Option<f32>,
     /// The lowest rise since the grace ended (and, in `check_low`, since the sensor must cool), K.
     min_k: Option<f32>,
 }
@@ -319,7 +335,6 @@ impl RiseWatch {
     /// `None` within the grace or while not judged (the lowest is then forgotten).
     fn update(&mut self, now_ms: u64, grace_s: f32, rise_k: f32, judged: bool) -> Option<f32> {
         let since = *self.since_ms.get_or_insert(now_ms);
-        self.min_all_k = Some(self.min_all_k.map_or(rise_k, |k| k.min(rise_k)));
         if (now_ms.saturating_sub(since) as f32) / 1000.0 < grace_s || !judged {
             self.min_k = None;
             return None;
@@ -334,6 +349,9 @@ impl RiseWatch {
 #[derive(Clone, Copy, Debug, Default)]
 struct OffWatch {
     rise: RiseWatch,
+    /// The lowest rise since both heaters were cut, grace included, K (the in-grace rule,
+    /// [`OFF_STORED_MAX_RISE_K`]).
+    min_since_cut_k: Option<f32>,
     /// The condition holds now (RESET is refused while it does).
     heating: bool,
 }
@@ -495,16 +513,18 @@ impl Supervisor {
         if let Err(f) = self.ramp.update(frame.sample_ms, amb_c) {
             found(f);
         }
+        let dt_s = self
+            .last_ms
+            .map_or(0.0, |ms| now_ms.saturating_sub(ms) as f32 / 1000.0);
+        self.last_ms = Some(now_ms);
+        // Once a tick, before every check that reads it.
+        self.update_amb_slow(dt_s);
         if let Err(f) = self.check_heating(now_ms, commanded, phase) {
             found(f);
         }
         if let Err(f) = self.check_off(now_ms, commanded) {
             found(f);
         }
-        let dt_s = self
-            .last_ms
-            .map_or(0.0, |ms| now_ms.saturating_sub(ms) as f32 / 1000.0);
-        self.last_ms = Some(now_ms);
         if let Err(f) = self.check_frozen(now_ms, commanded, phase) {
             found(f);
         }
@@ -673,7 +693,8 @@ impl Supervisor {
     /// Heating-while-off: once both heaters have been commanded off for [`OFF_GRACE_S`], a
     /// heater's sensor that rises [`OFF_MAX_RISE_K`] above its lowest reading (above ambient)
     /// trips, and from the cut on one that rises [`OFF_STORED_MAX_RISE_K`] above it: the heater
-    /// is on although nothing commands it (a stuck MOSFET).
+    /// is on although nothing commands it (a stuck MOSFET). Not while it reads less than
+    /// [`OFF_NEIGHBOUR_MARGIN_K`] above the other heated sensor, whose heat may be warming it.
     fn check_off(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
         let m = self.measurements();
         let both_off = !(cmd.pla_w > 0.0) && !(cmd.tca_w > 0.0);
@@ -691,12 +712,19 @@ impl Supervisor {
                 continue;
             }
             let after_grace_k = w.rise.update(now_ms, OFF_GRACE_S, rise_k, true);
+            let min_since_cut_k = w.min_since_cut_k.map_or(rise_k, |k| k.min(rise_k));
+            w.min_since_cut_k = Some(min_since_cut_k);
             // Measured from the lowest reading, or from ambient if it was below it (a link
             // warming up to a warmer bath is not heating).
             let above = |min_k: f32| rise_k - min_k.max(0.0);
-            let since_off_k = w.rise.min_all_k.map_or(0.0, above);
+            let since_off_k = above(min_since_cut_k);
             let after_k = after_grace_k.map_or(0.0, above);
-            w.heating = after_k > OFF_MAX_RISE_K || since_off_k > OFF_STORED_MAX_RISE_K;
+            // Heat flows from hot to cold: a sensor below the other heated one may be warmed by
+            // it (a NaN other reading explains nothing).
+            let other_c = m.of(heater.other().sensor());
+            let warmed_by_other = m.of(heater.sensor()) < other_c + OFF_NEIGHBOUR_MARGIN_K;
+            w.heating = !warmed_by_other
+                && (after_k > OFF_MAX_RISE_K || since_off_k > OFF_STORED_MAX_RISE_K);
             if w.heating {
                 return Err(Fault {
                     code: FaultCode::HeatingWhileOff,
@@ -812,6 +840,8 @@ impl Supervisor {
     fn check_held(&mut self, dt_s: f32, cmd: Powers, phase: Phase) -> Result<(), Fault> {
         let heater = Heater::Tca;
         let own_w = cmd.of(heater);
+        // A bath that warms moves the ambient bead before the heated ones (`check_plausible`).
+        let amb_spread_k = self.amb_spread_k();
         let w = &mut self.held;
         let model_k = R_TT_K_PER_W * own_w;
         let response_k = w.response_k.get_or_insert(model_k);
@@ -835,8 +865,6 @@ impl Supervisor {
             w.peak_k = None;
             return Ok(());
         }
-        // A bath that warms moves the ambient bead before the heated ones (`check_plausible`).
-        let amb_spread_k = self.amb_slow_c.map_or(0.0, |slow| (amb_c - slow).abs());
         let k = lag_share(dt_s, HOLD_PEAK_TAU_S);
         let (peak_k, at_peak_k) = w.peak_k.get_or_insert((q_k, response_k));
         let relaxed_k = toward(*peak_k, q_k, k);
@@ -957,6 +985,25 @@ impl Supervisor {
         Ok(())
     }
 
+    /// Moves the ambient reading's lagged value ([`PLAUS_AMB_TAU_S`]) on by `dt_s`: the heated
+    /// beads follow a change of the bath that much later, so the checks that measure a rise
+    /// from the ambient reading take the lag into account (forgotten while the reading is bad).
+    fn update_amb_slow(&mut self, dt_s: f32) {
+        let amb_c = self.live_c[Sensor::Amb.index()];
+        let slow_c = match self.amb_slow_c {
+            Some(slow) if amb_c.is_finite() => lag(slow, amb_c, dt_s, PLAUS_AMB_TAU_S),
+            _ => amb_c,
+        };
+        self.amb_slow_c = slow_c.is_finite().then_some(slow_c);
+    }
+
+    /// How far the ambient reading stands from its lagged value, K (0 before the first good
+    /// reading): where a bath has just changed, how much either may be the one to measure from.
+    fn amb_spread_k(&self) -> f32 {
+        let amb_c = self.live_c[Sensor::Amb.index()];
+        self.amb_slow_c.map_or(0.0, |slow| (amb_c - slow).abs())
+    }
+
     /// Sensor-implausible: each heated sensor's rise above the ambient sensor must stay within
     /// the supervisor's envelope of the model's steady rise for the commanded powers (see
     /// [`Expectation`]) widened by [`PLAUS_MARGIN_K`]; outside it for [`PLAUS_TIME_S`] (a leaky
@@ -966,12 +1013,7 @@ impl Supervisor {
         // A bath that warms or cools moves the ambient bead at once and the heated ones only
         // as their own lag allows: between the ambient reading and its lagged value either
         // may be the one to measure from, so the envelope is widened by their difference.
-        let amb_slow_c = match self.amb_slow_c {
-            Some(slow) if amb_c.is_finite() => lag(slow, amb_c, dt_s, PLAUS_AMB_TAU_S),
-            _ => amb_c,
-        };
-        self.amb_slow_c = amb_slow_c.is_finite().then_some(amb_slow_c);
-        let amb_spread_k = (amb_c - amb_slow_c).abs();
+        let amb_spread_k = self.amb_spread_k();
         for heater in Heater::ALL {
             let temp_c = self.live_c[heater.sensor().index()];
             let e = &mut self.plaus[heater.index()];
@@ -1389,9 +1431,12 @@ fn fresh(now_ms: u64, frame: &Frame) -> Result<(), Fault> {
     Ok(())
 }
 
-/// A supply outside [`SUPPLY_MIN_V`]..=[`SUPPLY_MAX_V`] is a fault.
+/// A supply outside [`SUPPLY_MIN_V`]..=[`SUPPLY_MAX_V`] (read to [`SUPPLY_READ_TOLERANCE_V`]) is a
+/// fault.
 fn supply_ok(frame: &Frame) -> Result<(), Fault> {
-    if !(frame.supply_v >= SUPPLY_MIN_V && frame.supply_v <= SUPPLY_MAX_V) {
+    let v = frame.supply_v;
+    if !(v >= SUPPLY_MIN_V - SUPPLY_READ_TOLERANCE_V && v < SUPPLY_MAX_V + SUPPLY_READ_TOLERANCE_V)
+    {
         return Err(Fault {
             code: FaultCode::SupplyOutOfRange,
             subject: Subject::Supply,
@@ -1431,6 +1476,25 @@ mod tests {
             readings: [pla + noise(0), tca + noise(1), 22.0 + noise(2)].map(Reading::Ok),
             supply_v: 12.0,
             sample_ms: ms,
+        }
+    }
+
+    #[test]
+    fn a_supply_at_its_limits_passes_through_the_adc_and_one_a_step_outside_trips() {
+        let sense = crate::controller::SupplySense::DEFAULT;
+        let read = |v: f32| Frame {
+            supply_v: sense.volts(sense.counts(v)),
+            ..frame(0, 22.0, 22.0)
+        };
+        for v in [SUPPLY_MIN_V, 12.0, SUPPLY_MAX_V] {
+            assert!(
+                supply_ok(&read(v)).is_ok(),
+                "{v} V (reads {})",
+                read(v).supply_v
+            );
+        }
+        for v in [SUPPLY_MIN_V - 0.1, SUPPLY_MAX_V + 0.1, 5.0, 20.0] {
+            assert!(supply_ok(&read(v)).is_err(), "{v} V");
         }
     }
 
@@ -1803,8 +1867,8 @@ mod tests {
     fn a_sensor_rising_far_after_both_heaters_are_cut_trips_within_the_grace_and_stored_heat_never_does(
     ) {
         // Release: both heaters cut at 10 s after 10 s of heating, the PLA reading 30 K above
-        // ambient. Stored heat lifts it 9.6 K at most (the ensemble's worst) before it cools; a
-        // stuck heater keeps it rising 2.5 K/s.
+        // ambient. Stored heat lifts it 11.2 K at most (the ensemble's worst, `cargo xtask
+        // stored-heat`) before it cools; a stuck heater keeps it rising 2.5 K/s.
         let cmd = |t: f32| Powers {
             pla_w: if t < 10.0 { 1.0 } else { 0.0 },
             tca_w: if t < 10.0 { 0.5 } else { 0.0 },
@@ -1812,7 +1876,7 @@ mod tests {
         let warm = |t: f32| 22.0 + 3.0 * t.min(10.0);
         let after = |t: f32| (t - 10.0).max(0.0);
         let stored =
-            |t: f32| warm(t) + 9.6 * after(t).min(4.0) / 4.0 - 0.5 * (after(t) - 4.0).max(0.0);
+            |t: f32| warm(t) + 11.2 * after(t).min(4.0) / 4.0 - 0.5 * (after(t) - 4.0).max(0.0);
         // The TCA warms as a live heater at 0.5 W does, then cools.
         let tca = |t: f32| {
             22.0 + 14.0 * (1.0 - libm::expf(-t.min(10.0) / 3.0)) * libm::expf(-after(t) / 10.0)
@@ -1838,6 +1902,46 @@ mod tests {
         assert!(after_s < OFF_GRACE_S);
         // RESET waits while it still heats.
         assert!(sup.off[Heater::Pla.index()].heating);
+    }
+
+    #[test]
+    fn a_tca_warmed_by_the_hotter_pla_after_a_cut_passes_and_one_that_passes_the_pla_trips() {
+        // Still air: a long soften at 4 W, then both heaters cut at 20 s. The rod's heat warms
+        // the TCA's bead 15 K over a minute, past both heating-while-off rules, while it reads
+        // below the cooling PLA; a stuck TCA heater climbs past the PLA and trips.
+        let cmd = |t: f32| Powers {
+            pla_w: if t < 20.0 { 4.0 } else { 0.0 },
+            tca_w: 0.0,
+        };
+        let after = |t: f32| (t - 20.0).max(0.0);
+        let pla = |t: f32| {
+            if t < 20.0 {
+                22.0 + 3.0 * t
+            } else {
+                37.0 + 45.0 * libm::expf(-after(t) / 20.0)
+            }
+        };
+        let warmed = |t: f32| 22.0 + 15.0 * (1.0 - libm::expf(-after(t) / 30.0));
+        let mut sup = Supervisor::new();
+        assert_eq!(
+            first_fault(&mut sup, cmd, Phase::Idle, 100, |t| (pla(t), warmed(t)))
+                .map(|(f, at_s)| (f.code, at_s)),
+            None
+        );
+        let stuck = |t: f32| 22.0 + 3.0 * after(t);
+        let mut sup = Supervisor::new();
+        let (f, at_s) = first_fault(&mut sup, cmd, Phase::Idle, 100, |t| (pla(t), stuck(t)))
+            .expect("a stuck TCA heater never tripped");
+        assert_eq!(
+            (f.code, f.subject),
+            (FaultCode::HeatingWhileOff, Subject::Heater(Heater::Tca))
+        );
+        // It passes the PLA's reading plus the margin about 14 s after the cut.
+        let crossed_s = (0..1000)
+            .map(|i| 20.0 + i as f32 * 0.1)
+            .find(|&t| stuck(t) >= pla(t) + OFF_NEIGHBOUR_MARGIN_K)
+            .unwrap();
+        assert!((at_s - crossed_s).abs() <= 0.2, "{at_s} {crossed_s}");
     }
 
     #[test]

@@ -93,6 +93,14 @@ impl Heater {
     /// Every heater, in index order.
     pub const ALL: [Heater; 2] = [Heater::Pla, Heater::Tca];
 
+    /// The other heater of the link.
+    pub const fn other(self) -> Heater {
+        match self {
+            Heater::Pla => Heater::Tca,
+            Heater::Tca => Heater::Pla,
+        }
+    }
+
     /// Index of this heater in per-heater arrays: PLA 0, TCA 1.
     pub const fn index(self) -> usize {
         match self {

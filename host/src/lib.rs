@@ -9,4 +9,5 @@ pub mod emulator;
 pub mod plants;
 pub mod plot;
 pub mod remote_plant;
+pub mod speed;
 pub mod workspace;

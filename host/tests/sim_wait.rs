@@ -41,3 +41,39 @@ fn sim_wait_skips_time_in_real_time_mode_too() {
     );
     assert!(lines.last().unwrap().starts_with("event: done"), "{text}");
 }
+
+/// A speed outside `morphlink_host::speed::SPEED_RANGE` is refused with a clear error and exit
+/// code 2 by morph-sim and morphctl alike; before, `--speed 1e-30` panicked in the pacing.
+#[test]
+fn a_speed_outside_its_range_is_refused_not_a_panic() {
+    for speed in ["1e-30", "1e30", "0"] {
+        let out = run_with_input(
+            env!("CARGO_BIN_EXE_morph-sim"),
+            ["--speed", speed],
+            b"STATUS\n",
+        );
+        let err = text(&out.stderr);
+        assert_eq!(
+            out.status.code(),
+            Some(2),
+            "morph-sim --speed {speed}: {err}"
+        );
+        assert!(
+            err.contains("--speed must be a factor of real time from 0.001"),
+            "{err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+        let out = run_with_input(
+            env!("CARGO_BIN_EXE_morphctl"),
+            ["--sim", "--sim-speed", speed, "info"],
+            b"",
+        );
+        let err = text(&out.stderr);
+        assert!(!out.status.success(), "morphctl --sim-speed {speed}: {err}");
+        assert!(
+            err.contains("--sim-speed must be a factor of real time"),
+            "{err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}

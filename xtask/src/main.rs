@@ -11,6 +11,7 @@ mod calibration;
 mod emulate;
 mod faults;
 mod flash;
+mod stored_heat;
 mod strategies;
 use morphlink_host::workspace::Workspace;
 use std::process::ExitCode;
@@ -34,6 +35,8 @@ enum Task {
     Emulate(emulate::Args),
     /// Inject every fault in every phase on the hifi and lumped links: the detection-time table.
     Faults(faults::Args),
+    /// ABORT morphs on healthy links: the stored-heat rise `OFF_STORED_MAX_RISE_K` is set above.
+    StoredHeat(stored_heat::Args),
     /// TUNE and MEASURED over a mismatch ensemble: docs/calibration.csv, .svg, .png.
     Calibration(calibration::Args),
     /// Build a board's firmware (its feature) and flash it with probe-rs (its chip).
@@ -53,6 +56,7 @@ fn main() -> ExitCode {
         Task::Strategies(a) => strategies::run(&a, &ws.root),
         Task::Emulate(a) => emulate::run(&a, &ws),
         Task::Faults(a) => faults::run(&a),
+        Task::StoredHeat(a) => stored_heat::run(&a),
         Task::Calibration(a) => calibration::run(&a, &ws.root),
         Task::Flash(a) => flash::run(flash::Action::Flash, &a, &ws),
         Task::Run(a) => flash::run(flash::Action::Run, &a, &ws),

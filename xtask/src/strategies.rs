@@ -231,7 +231,7 @@ fn oracle_on(link: &Link, target_mm: f32) -> Option<oracle::OracleRun> {
 }
 
 /// Runs `f` on every item of `items` on `threads` workers, with a progress bar named `what`.
-fn parallel<T: Sync, R: Send>(
+pub(crate) fn parallel<T: Sync, R: Send>(
     items: &[T],
     threads: usize,
     what: &str,

@@ -101,7 +101,7 @@ fn parse_speed(s: &str) -> Result<Speed, String> {
         return Ok(Speed::Max);
     }
     match s.parse::<f64>() {
-        Ok(f) if f > 0.0 && f.is_finite() => Ok(Speed::Factor(f)),
+        Ok(f) => morphlink_host::speed::check("--speed", f).map(Speed::Factor),
         _ => Err(format!(
             "speed must be a positive number or `max`, got `{s}`"
         )),

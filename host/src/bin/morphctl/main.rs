@@ -199,13 +199,8 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
         Cmd::Run { file, .. } => Some(script::read(file)?),
         _ => None,
     };
-    for speed in [cli.sim_speed, cli.tcp_speed] {
-        if !(speed.is_finite() && speed > 0.0) {
-            return Err(format!(
-                "--sim-speed and --tcp-speed must be above 0, not {speed}"
-            ));
-        }
-    }
+    morphlink_host::speed::check("--sim-speed", cli.sim_speed)?;
+    morphlink_host::speed::check("--tcp-speed", cli.tcp_speed)?;
     let target = if cli.sim {
         Target::Sim {
             program: cli.sim_program.clone().unwrap_or_else(default_sim_program),

@@ -1,0 +1,256 @@
+//! `cargo xtask stored-heat`: how far the heat stored in a healthy link lifts a heated
+//! thermistor after both heaters are cut, the figure heating-while-off's limits are set above
+//! (`OFF_STORED_MAX_RISE_K` from the cut, `OFF_MAX_RISE_K` after `OFF_GRACE_S`). A morph is
+//! ABORTed at every [`ABORT_STEP_S`] from [`ABORT_FIRST_S`] to [`ABORT_LAST_S`] into it, in every
+//! mode, on the nominal lumped link in water and still air with beads of each
+//! [`LUMPED_BEAD_TAUS_S`], on the nominal hifi link in water and still air, and on the hifi
+//! ensemble's draws. For [`WATCH_S`] after the cut the STATUS readings give each heated sensor's
+//! rise above ambient over its lowest since the cut (measured from ambient when it was below
+//! it), in all and where the supervisor judges it (the sensor at least
+//! `OFF_NEIGHBOUR_MARGIN_K` above the other). Prints the worst case per link family (the table
+//! of docs/safety.md) and fails if any run alarms or reaches a limit.
+
+use crate::strategies::parallel;
+use morphlink::bench::Noise;
+use morphlink::protocol::{classify, client::Status, LineKind, MODES};
+use morphlink::supervisor::{
+    OFF_GRACE_S, OFF_MAX_RISE_K, OFF_NEIGHBOUR_MARGIN_K, OFF_STORED_MAX_RISE_K,
+};
+use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
+use morphlink_plant::{Lumped, Medium, Plant};
+use morphlink_sim::ensemble::Mismatch;
+use morphlink_sim::ensemble::TICKS_PER_S;
+use morphlink_sim::Rig;
+
+/// The morph ABORTed, mm (the README's example).
+pub const TARGET_MM: f32 = 38.0;
+/// The earliest ABORT, s into the morph (in soften).
+pub const ABORT_FIRST_S: u64 = 1;
+/// The latest ABORT, s into the morph (lock on both nominal links).
+pub const ABORT_LAST_S: u64 = 30;
+/// The step between ABORT times, s (soften lasts 3–5 s on the nominal links).
+pub const ABORT_STEP_S: u64 = 1;
+/// How long after the cut the readings are watched, s: past `OFF_GRACE_S` (15 s) and the
+/// slowest bead's peak.
+pub const WATCH_S: u64 = 60;
+/// The lumped link's bead time constants tried, s (the ensemble draws 2–6 s; nominal 3 s).
+pub const LUMPED_BEAD_TAUS_S: [f64; 3] = [2.0, 3.0, 6.0];
+
+/// Options of the task.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// High-fidelity ensemble links to draw (the strategy charts' draws).
+    #[arg(long, default_value_t = crate::strategies::DEFAULT_HIFI_DRAWS)]
+    pub hifi_draws: u64,
+    /// Worker threads.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+}
+
+/// One link to ABORT morphs on: its family name (the printed rows), its name, the plant.
+struct Link {
+    family: &'static str,
+    name: String,
+    plant: Box<dyn Fn() -> Box<dyn RunOn + Send> + Send + Sync>,
+}
+
+/// What one ABORTed morph showed after the cut, K: each the largest over both heated sensors.
+#[derive(Clone, Debug, Default)]
+struct Rises {
+    /// Rise above the lowest since the cut, explained by the other sensor or not.
+    raw_k: f32,
+    /// The same, only where the supervisor judges it (the sensor reads at least
+    /// `OFF_NEIGHBOUR_MARGIN_K` above the other): against `OFF_STORED_MAX_RISE_K`.
+    judged_k: f32,
+    /// Rise above the lowest since `OFF_GRACE_S` ended, where judged: against `OFF_MAX_RISE_K`.
+    after_grace_k: f32,
+    /// The first alarm line, if any came (before or after the ABORT).
+    alarm: Option<String>,
+}
+
+/// A rig with its plant erased, so lumped and hifi links share one list.
+trait RunOn {
+    /// Runs one morph in `mode`, ABORTs it `abort_s` in, and watches the readings for
+    /// [`WATCH_S`].
+    fn run(&mut self, mode: &str, abort_s: u64) -> Rises;
+}
+
+impl<P: Plant> RunOn for Rig<P> {
+    fn run(&mut self, mode: &str, abort_s: u64) -> Rises {
+        let mut r = Rises::default();
+        let events = |rig: &mut Rig<P>, r: &mut Rises| {
+            rig.drain_events(&mut |l| {
+                if classify(l) == LineKind::Alarm && r.alarm.is_none() {
+                    r.alarm = Some(l.to_string());
+                }
+            });
+        };
+        for _ in 0..20 {
+            self.tick();
+        }
+        self.handle_line(&format!("MORPH {TARGET_MM} {mode}"), &mut |_| {});
+        let ticks = |s: u64| s * TICKS_PER_S;
+        for _ in 0..ticks(abort_s) {
+            self.tick();
+            events(self, &mut r);
+        }
+        self.handle_line("ABORT", &mut |_| {});
+        let mut min_k: [Option<f32>; 2] = [None; 2];
+        let mut min_after_k: [Option<f32>; 2] = [None; 2];
+        for tick in 0..ticks(WATCH_S) {
+            self.tick();
+            events(self, &mut r);
+            let mut temps = None;
+            self.handle_line("STATUS", &mut |l: &str| {
+                temps = Status::parse(l).map(|s| s.temps_c);
+            });
+            let Some([Some(pla), Some(tca), Some(amb)]) = temps else {
+                continue;
+            };
+            let after_grace = tick as f32 / TICKS_PER_S as f32 >= OFF_GRACE_S;
+            for (i, (own_c, other_c)) in [(pla, tca), (tca, pla)].into_iter().enumerate() {
+                let rise_k = own_c - amb;
+                let lowest = |m: &mut Option<f32>| {
+                    let v = m.map_or(rise_k, |k| k.min(rise_k));
+                    *m = Some(v);
+                    rise_k - v.max(0.0)
+                };
+                let above_k = lowest(&mut min_k[i]);
+                let judged = own_c >= other_c + OFF_NEIGHBOUR_MARGIN_K;
+                r.raw_k = r.raw_k.max(above_k);
+                if judged {
+                    r.judged_k = r.judged_k.max(above_k);
+                }
+                if after_grace {
+                    let after_k = lowest(&mut min_after_k[i]);
+                    if judged {
+                        r.after_grace_k = r.after_grace_k.max(after_k);
+                    }
+                }
+            }
+        }
+        r
+    }
+}
+
+/// The links: the lumped nominal ones, the hifi nominal ones, the hifi draws.
+fn links(hifi_draws: u64) -> Result<Vec<Link>, String> {
+    let mut v = Vec::new();
+    for air in [false, true] {
+        let medium = if air { "air" } else { "water" };
+        for tau in LUMPED_BEAD_TAUS_S {
+            let setup = Mismatch {
+                air,
+                sensor_tau_s: tau,
+                ..Mismatch::NONE
+            }
+            .plant();
+            let (plant, noise): (Lumped, Noise) = (setup.lumped(), setup.noise());
+            v.push(Link {
+                family: "lumped nominal",
+                name: format!("lumped {medium} bead {tau} s"),
+                plant: Box::new(move || Box::new(Rig::with_plant(plant.clone(), noise))),
+            });
+        }
+        let mut spec = HifiSpec::nominal(morphlink::link::LINK, Grid::Reduced)
+            .map_err(|e| format!("hifi nominal: {e}"))?;
+        if air {
+            spec.medium = Medium::Air;
+        }
+        let plant = Hifi::new(spec).map_err(|e| format!("hifi nominal: {e}"))?;
+        v.push(Link {
+            family: "hifi nominal",
+            name: format!("hifi nominal {medium}"),
+            plant: Box::new(move || Box::new(Rig::with_plant(plant.clone(), Noise::NOMINAL))),
+        });
+    }
+    for d in 0..hifi_draws {
+        let (spec, noise) = morphlink_sim::ensemble::hifi_draw(crate::strategies::DEFAULT_SEED, d)
+            .map_err(|e| format!("hifi draw {d}: {e}"))?;
+        let plant = Hifi::new(spec).map_err(|e| format!("hifi draw {d}: {e}"))?;
+        v.push(Link {
+            family: "hifi draws",
+            name: format!("hifi draw {d}"),
+            plant: Box::new(move || Box::new(Rig::with_plant(plant.clone(), noise))),
+        });
+    }
+    Ok(v)
+}
+
+/// Runs the task: prints the worst stored-heat rise per link family and overall.
+pub fn run(args: &Args) -> Result<(), String> {
+    let links = links(args.hifi_draws)?;
+    let aborts: Vec<u64> = (ABORT_FIRST_S..=ABORT_LAST_S)
+        .step_by(ABORT_STEP_S as usize)
+        .collect();
+    let jobs: Vec<(usize, &str, u64)> = (0..links.len())
+        .flat_map(|l| {
+            let aborts = &aborts;
+            MODES
+                .iter()
+                .flat_map(move |m| aborts.iter().map(move |&a| (l, m.as_str(), a)))
+        })
+        .collect();
+    let results = parallel(&jobs, args.threads, "ABORTed morphs", |&(l, mode, a)| {
+        (links[l].plant)().run(mode, a)
+    })?;
+    println!(
+        "| links | runs | largest rise after the cut | judged (limit {OFF_STORED_MAX_RISE_K} K) | judged after the grace (limit {OFF_MAX_RISE_K} K) | alarms |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- |");
+    for family in ["lumped nominal", "hifi nominal", "hifi draws"] {
+        let rows: Vec<_> = jobs
+            .iter()
+            .zip(&results)
+            .filter(|((l, _, _), _)| links[*l].family == family)
+            .collect();
+        let worst = |f: fn(&Rises) -> f32| {
+            rows.iter()
+                .max_by(|x, y| f(x.1).total_cmp(&f(y.1)))
+                .map(|((l, mode, a), r)| {
+                    format!(
+                        "{:.1} K ({}, ABORT {a} s into {mode})",
+                        f(r),
+                        links[*l].name
+                    )
+                })
+                .unwrap_or_default()
+        };
+        println!(
+            "| {family} | {} | {} | {} | {} | {} |",
+            rows.len(),
+            worst(|r| r.raw_k),
+            worst(|r| r.judged_k),
+            worst(|r| r.after_grace_k),
+            rows.iter().filter(|(_, r)| r.alarm.is_some()).count()
+        );
+    }
+    let failed: Vec<String> = jobs
+        .iter()
+        .zip(&results)
+        .filter(|(_, r)| {
+            r.alarm.is_some()
+                || r.judged_k >= OFF_STORED_MAX_RISE_K
+                || r.after_grace_k >= OFF_MAX_RISE_K
+        })
+        .map(|((l, mode, a), r)| {
+            format!(
+                "{} {mode} ABORT {a} s: judged rise {:.1} K, after the grace {:.1} K; {}",
+                links[*l].name,
+                r.judged_k,
+                r.after_grace_k,
+                r.alarm.as_deref().unwrap_or("no alarm")
+            )
+        })
+        .collect();
+    if failed.is_empty() {
+        println!("\nNo run alarmed or came within a limit.");
+        Ok(())
+    } else {
+        Err(format!(
+            "{} runs alarmed or reached a heating-while-off limit:\n{}",
+            failed.len(),
+            failed.join("\n")
+        ))
+    }
+}
