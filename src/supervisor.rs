@@ -130,6 +130,8 @@ impl Fault {
             (FaultCode::SensorImplausible, Subject::Sensor(Sensor::Amb)) => {
                 "AMB_RAMP_MAX_K_PER_S, AMB_RAMP_SETTLING_SHARE"
             }
+            // The line cap leaves room for one name: the README row names both.
+            (FaultCode::SensorImplausible, Subject::Heater(_)) => "CROSS_MAX_LEAD_K",
             (FaultCode::SensorImplausible, _) => {
                 "PLAUS_LOW_GAIN, PLAUS_HIGH_GAIN, PLAUS_MARGIN_K, PLAUS_TIME_S"
             }
@@ -258,6 +260,17 @@ pub const OFF_STORED_MAX_RISE_K: f32 = 12.0;
 /// stored-heat`). A stuck heater soon lifts its own sensor above the other's (no row of `cargo
 /// xtask faults` moved). The margin covers the PLA bead reading below its rod.
 pub const OFF_NEIGHBOUR_MARGIN_K: f32 = 3.0;
+/// Sensor-implausible, crossed: the PLA heater is judged by the crossed-wires check while it is
+/// commanded at least this share of its cap (from 2.5 W: soften's power) and the TCA below
+/// [`HEATING_MIN_POWER_FRACTION`] of its own: then the PLA's own bead must lead.
+pub const CROSS_MIN_POWER_FRACTION: f32 = 0.5;
+/// Sensor-implausible, crossed: while judged ([`CROSS_MIN_POWER_FRACTION`]) the TCA's sensor
+/// may gain at most this much more than the PLA's own since that began, K. A heater warms its
+/// own bead first and most; the other bead sees its heat through the silicone, later and less. With the PLA and TCA thermistors swapped, `closed` cuts the TCA as the PLA rod's
+/// reading passes the TCA's target and holds the PLA at 5 W as the TCA's cooling bead reads
+/// "PLA": before this check the rod passed 130 °C (138 °C lumped, 134 °C hifi) before the
+/// over-temperature trip.
+pub const CROSS_MAX_LEAD_K: f32 = 3.0;
 
 /// Heating-while-off, one heater low: how long a heater must have been commanded below
 /// [`HEATING_MIN_POWER_FRACTION`] of its cap, with the other heater on, before its sensor is
@@ -281,6 +294,10 @@ const _: () = assert!(MUST_COOL_MARGIN_K > 0.0 && MUST_COOL_MARGIN_K <= OFF_MAX_
 const _: () = assert!(OFF_STORED_MAX_RISE_K > OFF_MAX_RISE_K);
 const _: () =
     assert!(OFF_NEIGHBOUR_MARGIN_K >= 0.0 && OFF_NEIGHBOUR_MARGIN_K < OFF_STORED_MAX_RISE_K);
+const _: () = assert!(CROSS_MAX_LEAD_K > 0.0 && CROSS_MAX_LEAD_K <= HEATING_BAND_K);
+const _: () = assert!(
+    CROSS_MIN_POWER_FRACTION > HEATING_MIN_POWER_FRACTION && CROSS_MIN_POWER_FRACTION <= 1.0
+);
 
 /// One sensor frame as the supervisor sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -391,6 +408,9 @@ pub struct Supervisor {
     hold: [HoldWatch; 2],
     low: [LowWatch; 2],
     held: HeldWatch,
+    /// The PLA and TCA readings when the PLA heater was last found on alone, °C (the
+    /// crossed-wires watch, [`CROSS_MAX_LEAD_K`]).
+    cross_start_c: Option<(f32, f32)>,
     /// Each sensor's last reading and the sample time it was first read at, °C and ms (the
     /// still-reading watch, [`FROZEN_STILL_S`]).
     still: [Option<(f32, u64)>; 3],
@@ -421,6 +441,7 @@ impl Supervisor {
             hold: [HoldWatch::default(); 2],
             low: [LowWatch::default(); 2],
             held: HeldWatch::default(),
+            cross_start_c: None,
             still: [None; 3],
             ramp: RampWatch::new(),
             amb_slow_c: None,
@@ -538,6 +559,9 @@ impl Supervisor {
             found(f);
         }
         if let Err(f) = self.check_low(now_ms, commanded) {
+            found(f);
+        }
+        if let Err(f) = self.check_cross(commanded) {
             found(f);
         }
         self.measurements()
@@ -774,6 +798,7 @@ impl Supervisor {
         self.hold = [HoldWatch::default(); 2];
         self.low = [LowWatch::default(); 2];
         self.held = HeldWatch::default();
+        self.cross_start_c = None;
         self.still = [None; 3];
         self.amb_slow_c = None;
         self.last_ms = None;
@@ -880,6 +905,32 @@ impl Supervisor {
                 code: FaultCode::HeaterNotHeating,
                 subject: Subject::Heater(heater),
                 value: -fall_k,
+            });
+        }
+        Ok(())
+    }
+
+    /// Sensor-implausible, crossed: while the PLA heater is commanded at least
+    /// [`CROSS_MIN_POWER_FRACTION`] of its cap and the TCA below [`HEATING_MIN_POWER_FRACTION`]
+    /// of its own, the TCA's sensor must not gain more than [`CROSS_MAX_LEAD_K`] over the PLA's
+    /// since that began: heat reaches the PLA's own bead first. A TCA held alone is left out: in
+    /// still air a lock that stalls holds it for minutes, and the cooled rod's bead, warmed by
+    /// it, overtook its held one by 3 K (lumped draw 22 of `cargo xtask strategies`, 32.9 mm).
+    fn check_cross(&mut self, cmd: Powers) -> Result<(), Fault> {
+        let judged = cmd.pla_w >= CROSS_MIN_POWER_FRACTION * heater_cap_w(Heater::Pla)
+            && !(cmd.tca_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(Heater::Tca));
+        let [pla_c, tca_c, _] = self.live_c;
+        if !judged || !pla_c.is_finite() || !tca_c.is_finite() {
+            self.cross_start_c = None;
+            return Ok(());
+        }
+        let (pla0_c, tca0_c) = *self.cross_start_c.get_or_insert((pla_c, tca_c));
+        let lead_k = (tca_c - tca0_c) - (pla_c - pla0_c);
+        if lead_k > CROSS_MAX_LEAD_K {
+            return Err(Fault {
+                code: FaultCode::SensorImplausible,
+                subject: Subject::Heater(Heater::Pla),
+                value: lead_k,
             });
         }
         Ok(())
@@ -1942,6 +1993,48 @@ mod tests {
             .find(|&t| stuck(t) >= pla(t) + OFF_NEIGHBOUR_MARGIN_K)
             .unwrap();
         assert!((at_s - crossed_s).abs() <= 0.2, "{at_s} {crossed_s}");
+    }
+
+    #[test]
+    fn a_pla_heater_warming_the_tca_thermistor_more_than_its_own_trips_and_a_lagging_bead_never_does(
+    ) {
+        // Soften at 5 W with the TCA off: the PLA's own bead rises, late (a 10 s lag) but more
+        // than the TCA's, which sees the heat through the silicone.
+        let cmd = |_t: f32| Powers {
+            pla_w: 5.0,
+            tca_w: 0.0,
+        };
+        let own = |t: f32| 22.0 + 60.0 * (1.0 - libm::expf(-t / 10.0));
+        let through = |t: f32| 22.0 + 0.25 * (own(t) - 22.0) * (1.0 - libm::expf(-t / 5.0));
+        let mut sup = Supervisor::new();
+        assert_eq!(
+            first_fault(&mut sup, cmd, Phase::Soften, 20, |t| (own(t), through(t)))
+                .map(|(f, _)| f.code),
+            None
+        );
+        // The wires swapped: the TCA input reads the PLA's bead.
+        let mut sup = Supervisor::new();
+        let (f, at_s) = first_fault(&mut sup, cmd, Phase::Soften, 20, |t| (through(t), own(t)))
+            .expect("swapped thermistors never tripped");
+        assert_eq!(
+            (f.code, f.subject),
+            (FaultCode::SensorImplausible, Subject::Heater(Heater::Pla))
+        );
+        assert!(
+            f.value > CROSS_MAX_LEAD_K && at_s < 1.0,
+            "{f:?} at {at_s} s"
+        );
+        // With the TCA on (closed's soften) the check stands aside.
+        let both = |_t: f32| Powers {
+            pla_w: 5.0,
+            tca_w: 2.0,
+        };
+        let mut sup = Supervisor::new();
+        let f = first_fault(&mut sup, both, Phase::Soften, 3, |t| (through(t), own(t)));
+        let crossed = |f: &Fault| {
+            f.code == FaultCode::SensorImplausible && f.subject == Subject::Heater(Heater::Pla)
+        };
+        assert!(f.is_none_or(|(f, _)| !crossed(&f)), "{f:?}");
     }
 
     #[test]

@@ -10,9 +10,10 @@
 //! there could not be told from the false one.
 #[macro_use]
 mod common;
-use common::{Bench, Link};
+use common::{Bench, Link, Wiring};
 use morphlink::controller::Outputs;
 use morphlink::protocol::{classify, LineKind};
+use morphlink::supervisor::{PLA_LIMITS, TCA_LIMITS};
 use morphlink::vocab::Phase;
 use morphlink_plant::Plant;
 
@@ -623,9 +624,108 @@ fn cool_downs_after_a_morph_or_an_abort_raise_no_alarm(link: Link) {
             );
         }
     }
+    // Still air: the PLA rod, cut after 20 s of paper's or gated's 4 W soften, warms the TCA's
+    // bead for a minute while it reads below the PLA (`OFF_NEIGHBOUR_MARGIN_K`); this tripped
+    // heating-while-off tca on both links (`cargo xtask stored-heat`).
+    for mode in ["paper", "gated"] {
+        let mut b = Bench::on(link);
+        assert!(b.send("SIM MEDIUM air")[0].starts_with("ok"));
+        assert_eq!(b.send(&format!("MORPH 38 {mode}")), ["ok"]);
+        b.run_for(20.0);
+        assert_eq!(b.send("ABORT"), ["ok"]);
+        let tca_c = |b: &mut Bench| status_temp(b, "t_tca_c");
+        let cut_c = tca_c(&mut b);
+        b.run_for(60.0);
+        let later_c = tca_c(&mut b);
+        assert!(b.alarms_since(0).is_empty(), "{mode} in air: {:?}", b.lines);
+        if mode == "paper" {
+            // The case that tripped: the TCA bead, off in paper's soften, warmed by the rod.
+            assert!(
+                later_c > cut_c + 3.0,
+                "the TCA bead rose only {cut_c} -> {later_c}"
+            );
+        }
+        cases += 1;
+    }
     checked(
         link,
         "cool_downs_after_a_morph_or_an_abort_raise_no_alarm",
+        cases,
+    );
+}
+
+/// A STATUS temperature field, °C.
+fn status_temp(b: &mut Bench, key: &str) -> f32 {
+    let s = b.send("STATUS");
+    Bench::field(&s[0], key).unwrap().parse().unwrap()
+}
+
+/// MORPH straight after ABORT (a warm link that cannot show a cold link's rise) ends without an
+/// alarm in every mode whose healthy morph does, ABORTed in soften, bend or lock.
+fn a_morph_right_after_an_abort_raises_no_alarm(link: Link) {
+    let mut cases = 0;
+    for mode in MODES {
+        if !healthy(link, mode, 38.0) {
+            continue;
+        }
+        for phase in [Phase::Soften, Phase::Bend, Phase::Lock] {
+            let Some(mut b) = bench_in(link, phase, 38.0, mode, 0.0) else {
+                continue;
+            };
+            cases += 1;
+            assert_eq!(b.send("ABORT"), ["ok"]);
+            b.morph(38.0, mode);
+            assert!(
+                b.alarms_since(0).is_empty(),
+                "{mode} ABORTed in {phase:?}: {:?}",
+                b.lines
+            );
+            assert!(b.lines.iter().any(|l| classify(l) == LineKind::Done));
+        }
+    }
+    checked(link, "a_morph_right_after_an_abort_raises_no_alarm", cases);
+}
+
+/// A healthy link wired wrong, its PLA and TCA thermistors swapped or its PLA thermistor come
+/// off its heater, trips before `done` in every mode whose healthy morph ends without an alarm,
+/// with the true temperatures under their limits: `done` never reports a radius from such
+/// readings.
+fn a_swapped_or_detached_thermistor_trips_before_done(link: Link) {
+    let mut cases = 0;
+    let mut failures = Vec::new();
+    for wiring in [Wiring::Swapped, Wiring::PlaOffItsHeater] {
+        for mode in MODES {
+            if !healthy(link, mode, 38.0) {
+                continue;
+            }
+            cases += 1;
+            let mut b = Bench::miswired(link, wiring);
+            b.run_for(2.0);
+            assert_eq!(b.send(&format!("MORPH 38 {mode}")), ["ok"]);
+            let mut peak_c = [f64::MIN; 2];
+            let t0 = b.rig.now_ms();
+            b.run_until(400.0, |b| {
+                let t = b.rig.plant().truth();
+                peak_c = [peak_c[0].max(t.pla_c), peak_c[1].max(t.tca_c)];
+                b.phase() == Phase::Fault || !b.rig.ctrl.busy()
+            });
+            let at_s = (b.rig.now_ms() - t0) as f64 / 1000.0;
+            let alarms = b.alarms();
+            println!("{wiring:?} {mode}: {alarms:?} at {at_s:.1} s, true peak {peak_c:.0?} °C");
+            let done = b.lines.iter().any(|l| classify(l) == LineKind::Done);
+            let over = peak_c[0] >= PLA_LIMITS.max_c as f64 || peak_c[1] >= TCA_LIMITS.max_c as f64;
+            if b.phase() != Phase::Fault || done || over {
+                failures.push(format!(
+                    "{wiring:?} {mode}: {alarms:?} at {at_s:.1} s, done {done}, peak {peak_c:.0?}"
+                ));
+            }
+            assert_eq!(b.rig.ctrl.powers().pla_w + b.rig.ctrl.powers().tca_w, 0.0);
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+    checked(
+        link,
+        "a_swapped_or_detached_thermistor_trips_before_done",
         cases,
     );
 }
@@ -1061,6 +1161,8 @@ on_both_links!(
     a_morph_in_a_bath_too_warm_to_lock_ends_in_phase_timeout,
     abort_in_every_phase_turns_both_heaters_off_at_once,
     a_stalled_controller_cannot_leave_a_heater_on,
+    a_morph_right_after_an_abort_raises_no_alarm,
+    a_swapped_or_detached_thermistor_trips_before_done,
 );
 
 /// Every mode's healthy morph on both nominal links, to the safety tests' targets, ends without

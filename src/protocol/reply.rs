@@ -544,6 +544,10 @@ impl fmt::Display for FaultText<'_> {
                     Fixed(f.value, 2)
                 )
             }
+            FaultCode::SensorImplausible if matches!(f.subject, Subject::Heater(_)) => write!(
+                l,
+                "sensor-implausible {s} heater alone, tca gains {v} K more; check wiring, tca MOSFET"
+            ),
             FaultCode::SensorImplausible => {
                 write!(l, "sensor-implausible {s} off its expected rise by {v} K")
             }
@@ -811,7 +815,7 @@ mod alarm_tests {
         let sensors = Sensor::ALL.map(Subject::Sensor);
         let phases = [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release].map(Subject::Phase);
         let heaters = Heater::ALL.map(Subject::Heater);
-        let cases: [(FaultCode, &[Subject]); 11] = [
+        let cases: [(FaultCode, &[Subject]); 12] = [
             (FaultCode::ThermistorOpen, &sensors),
             (FaultCode::ThermistorShort, &sensors),
             (FaultCode::UnderTemperature, &sensors),
@@ -823,6 +827,7 @@ mod alarm_tests {
             (FaultCode::PhaseTimeout, &phases),
             (FaultCode::SensorFrozen, &sensors),
             (FaultCode::SensorImplausible, &sensors),
+            (FaultCode::SensorImplausible, &heaters),
         ];
         cases
             .iter()

@@ -10,7 +10,8 @@ use crate::vocab::{Measurements, Phase, Powers};
 /// `closed` ends lock when the observer's PLA estimate and the PLA thermistor corrected for its
 /// lag (reading + assumed lag × its rate, what a first-order sensor trails by) are both below
 /// [`RIGID_THRESHOLD_C`]. Under water this ends lock about 3 s before the bare thermistor would;
-/// a thermistor that stops falling (warm surroundings) holds the lock, whatever the model says.
+/// a thermistor that stops falling holds the lock, whatever the model says, until it has stalled
+/// cool enough for the shape to hold ([`CLOSED_LOCK_STALL_MAX_C`]).
 pub const CLOSED_RIGID_LEAD_S: f32 = SENSOR_TAU_S;
 /// The lag correction of [`CLOSED_RIGID_LEAD_S`] is used only while the surroundings read at
 /// least this far below [`RIGID_THRESHOLD_C`], K: then the rod keeps cooling after release and a
@@ -60,6 +61,29 @@ const _: () = assert!(
 pub const CLOSED_PLA_COLD_K: f32 = 6.0;
 const _: () = assert!(CLOSED_PLA_COLD_K > CLOSED_PLA_AGREE_K);
 
+/// `closed` also ends lock once the PLA thermistor has stalled, changing slower than this, K/s,
+/// at a temperature under [`CLOSED_LOCK_STALL_MAX_C`], in cool surroundings
+/// ([`CLOSED_LEAD_AMBIENT_MARGIN_K`], so the rod keeps cooling after release; a bath too warm
+/// for the rod to turn rigid still ends in the lock timeout): in still air the TCA's hold keeps the rod
+/// warm (at 34 mm the nominal links settle at 52.6 °C lumped and 54 °C hifi, above
+/// [`CLOSED_RIGID_COOL_C`]), and waiting for a temperature the link will not reach kept the TCA
+/// on until the 600 s lock timeout. 0.03 K/s is within a few kelvin of the settled value at the
+/// still-air cooling time of minutes; under water the rod passes these temperatures at
+/// several K/s, so no water morph of the ensemble changed (`cargo xtask strategies`).
+pub const CLOSED_LOCK_STALL_K_PER_S: f32 = 0.03;
+/// The warmest stalled PLA reading that ends lock, °C: 4 K under the 62 °C glass transition.
+/// Released there the shape held on both ensembles' still-air links as well as it did after
+/// the full wait (the runs that ended either way have the same final radius to 0.02 %, 60 s
+/// after `done`; 56 and 59 °C gave the same); a rod that settles warmer is left to the lock
+/// timeout (`LOCK_TIMEOUT_S`), as the link cannot lock that radius in those surroundings.
+pub const CLOSED_LOCK_STALL_MAX_C: f32 = 58.0;
+const _: () = assert!(
+    CLOSED_LOCK_STALL_K_PER_S > 0.0
+        && CLOSED_LOCK_STALL_K_PER_S < CLOSED_PLA_SETTLED_K_PER_S
+        && CLOSED_RIGID_COOL_C < CLOSED_LOCK_STALL_MAX_C
+        && CLOSED_LOCK_STALL_MAX_C < SOFT_THRESHOLD_C
+);
+
 /// The `closed` strategy.
 #[derive(Clone, Copy, Debug)]
 pub struct Closed {
@@ -83,7 +107,8 @@ impl Closed {
         }
     }
 
-    /// Whether the PLA counts as rigid: see [`CLOSED_RIGID_LEAD_S`].
+    /// Whether the PLA counts as rigid: see [`CLOSED_RIGID_LEAD_S`], or has stalled where the
+    /// shape holds ([`CLOSED_LOCK_STALL_K_PER_S`]).
     fn rigid(&self, t: &Tick, pla_c: f32) -> bool {
         let m = t.m;
         let rigid_threshold_c = t.th.rigid_threshold_c;
@@ -97,7 +122,12 @@ impl Closed {
         } else {
             (m.t_pla_c, rigid_threshold_c)
         };
-        pla_c < rigid_c && lead_c < rigid_c
+        // Only where the rod keeps cooling after release (a bath too warm to lock never ends).
+        let stalled = cool_surroundings
+            && rate.abs() <= CLOSED_LOCK_STALL_K_PER_S
+            && m.t_pla_c < CLOSED_LOCK_STALL_MAX_C
+            && pla_c < CLOSED_LOCK_STALL_MAX_C;
+        (pla_c < rigid_c && lead_c < rigid_c) || stalled
     }
 }
 

@@ -98,6 +98,19 @@ impl Bench {
         ))
     }
 
+    /// The nominal `link` wired wrong: `wiring` rewrites its bead temperatures on their way to
+    /// the board (see [`Miswired`]).
+    pub fn miswired(link: Link, wiring: Wiring) -> Self {
+        let plant: Box<dyn Plant> = match link {
+            Link::Lumped => Box::new(LinkSetup::NOMINAL.lumped()),
+            Link::Hifi => Box::new(nominal_hifi()),
+        };
+        Self::with_rig(Rig::with_plant(
+            Box::new(Miswired::new(plant, wiring)),
+            Noise::NOMINAL,
+        ))
+    }
+
     fn with_rig(rig: Rig<Box<dyn Plant>>) -> Self {
         Bench {
             rig,
@@ -220,5 +233,62 @@ impl Bench {
     #[allow(dead_code)]
     pub fn alarms(&self) -> Vec<String> {
         self.alarms_since(0)
+    }
+}
+
+/// A wiring fault between the link and the board's thermistor inputs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Wiring {
+    /// The PLA and TCA thermistors swapped.
+    Swapped,
+    /// The PLA thermistor come off its heater: it reads the silicone's surface, a fifth of the
+    /// rod's rise above the bath, a minute behind.
+    PlaOffItsHeater,
+}
+
+/// A plant seen through a wiring fault (the plant itself is healthy).
+pub struct Miswired {
+    plant: Box<dyn Plant>,
+    wiring: Wiring,
+    /// The off-heater bead's lagged temperature, °C.
+    off_c: Option<f64>,
+}
+
+impl Miswired {
+    /// The time constant of a bead off its heater, s.
+    pub const OFF_TAU_S: f64 = 60.0;
+    /// The share of the rod's rise a bead off its heater sees.
+    pub const OFF_SHARE: f64 = 0.2;
+
+    pub fn new(plant: Box<dyn Plant>, wiring: Wiring) -> Self {
+        Miswired {
+            plant,
+            wiring,
+            off_c: None,
+        }
+    }
+}
+
+impl Plant for Miswired {
+    fn step(&mut self, dt_s: f64, duty: morphlink_plant::Duties) {
+        self.plant.step(dt_s, duty);
+        let s = self.plant.sample();
+        let to = s.t_amb_c + Self::OFF_SHARE * (s.t_pla_c - s.t_amb_c);
+        let c = self.off_c.get_or_insert(to);
+        *c += (to - *c) * (dt_s / Self::OFF_TAU_S).min(1.0);
+    }
+    fn sample(&self) -> morphlink_plant::Sample {
+        let mut s = self.plant.sample();
+        match self.wiring {
+            Wiring::Swapped => std::mem::swap(&mut s.t_pla_c, &mut s.t_tca_c),
+            Wiring::PlaOffItsHeater => s.t_pla_c = self.off_c.unwrap_or(s.t_amb_c),
+        }
+        s
+    }
+    fn truth(&self) -> morphlink_plant::Truth {
+        self.plant.truth()
+    }
+    fn set(&mut self, setting: morphlink_plant::Setting) -> Result<(), morphlink_plant::SetError> {
+        self.plant.set(setting)
     }
 }
