@@ -61,25 +61,39 @@ const _: () = assert!(
 pub const CLOSED_PLA_COLD_K: f32 = 6.0;
 const _: () = assert!(CLOSED_PLA_COLD_K > CLOSED_PLA_AGREE_K);
 
-/// `closed` also ends lock once the PLA thermistor has stalled, changing slower than this, K/s,
-/// at a temperature under [`CLOSED_LOCK_STALL_MAX_C`], in cool surroundings
-/// ([`CLOSED_LEAD_AMBIENT_MARGIN_K`], so the rod keeps cooling after release; a bath too warm
-/// for the rod to turn rigid still ends in the lock timeout): in still air the TCA's hold keeps the rod
-/// warm (at 34 mm the nominal links settle at 52.6 °C lumped and 54 °C hifi, above
-/// [`CLOSED_RIGID_COOL_C`]), and waiting for a temperature the link will not reach kept the TCA
-/// on until the 600 s lock timeout. 0.03 K/s is within a few kelvin of the settled value at the
-/// still-air cooling time of minutes; under water the rod passes these temperatures at
-/// several K/s, so no water morph of the ensemble changed (`cargo xtask strategies`).
+/// `closed` also ends lock once the PLA thermistor has stalled, changing slower than this
+/// either way, K/s, for [`CLOSED_LOCK_STALL_S`] in a row, at a temperature under
+/// [`CLOSED_LOCK_STALL_MAX_C`], in cool surroundings ([`CLOSED_LEAD_AMBIENT_MARGIN_K`], so the rod
+/// keeps cooling after release; a bath too warm for the rod to turn rigid still ends in the lock
+/// timeout). In still air the TCA's hold keeps the rod warm (at 34 mm the nominal links settle at
+/// 52.6 °C lumped and 54 °C hifi, above [`CLOSED_RIGID_COOL_C`]), and waiting for a temperature
+/// the link will not reach kept the TCA on until the 600 s lock timeout. 0.03 K/s is within a
+/// few kelvin of the settled value at the still-air cooling time of minutes; under water the rod
+/// passes these temperatures at several K/s, so no water morph of the ensemble changed (`cargo
+/// xtask strategies`).
 pub const CLOSED_LOCK_STALL_K_PER_S: f32 = 0.03;
+/// How long the PLA thermistor must stay stalled before lock ends on it, s: from a rate under
+/// [`CLOSED_LOCK_STALL_K_PER_S`], with no rate over [`CLOSED_LOCK_STALL_RESET_K_PER_S`] since. A
+/// reading whose cooling a drift upward cancels passes through zero rate within seconds under
+/// water.
+pub const CLOSED_LOCK_STALL_S: f32 = 10.0;
+/// A PLA rate over this, either way, K/s, ends a stall ([`CLOSED_LOCK_STALL_S`]): the observer's
+/// rate carries up to 0.05 K/s of noise, which at the stall rate itself restarted the count
+/// for a minute on the nominal still-air links.
+pub const CLOSED_LOCK_STALL_RESET_K_PER_S: f32 = 0.06;
 /// The warmest stalled PLA reading that ends lock, °C: 4 K under the 62 °C glass transition.
-/// Released there the shape held on both ensembles' still-air links as well as it did after
-/// the full wait (the runs that ended either way have the same final radius to 0.02 %, 60 s
-/// after `done`; 56 and 59 °C gave the same); a rod that settles warmer is left to the lock
-/// timeout (`LOCK_TIMEOUT_S`), as the link cannot lock that radius in those surroundings.
+/// Released there the shape held on both ensembles' still-air links as it did after the full
+/// wait (the runs that ended either way have the same final radius to 0.02 %, 60 s after
+/// `done`; 56 and 59 °C gave the same), and it does not creep later: the hifi plant's
+/// viscoelastic rod, released at 54 °C at 34 mm, is within 0.01 mm of it 600 s after `done`
+/// (`tests/morph.rs`). A rod that settles warmer is left to the lock timeout
+/// (`LOCK_TIMEOUT_S`): the link cannot lock that radius in those surroundings.
 pub const CLOSED_LOCK_STALL_MAX_C: f32 = 58.0;
 const _: () = assert!(
     CLOSED_LOCK_STALL_K_PER_S > 0.0
         && CLOSED_LOCK_STALL_K_PER_S < CLOSED_PLA_SETTLED_K_PER_S
+        && CLOSED_LOCK_STALL_S > 0.0
+        && CLOSED_LOCK_STALL_RESET_K_PER_S > CLOSED_LOCK_STALL_K_PER_S
         && CLOSED_RIGID_COOL_C < CLOSED_LOCK_STALL_MAX_C
         && CLOSED_LOCK_STALL_MAX_C < SOFT_THRESHOLD_C
 );
@@ -92,6 +106,8 @@ pub struct Closed {
     /// This link's TCA map from MEASURED reports, `(a, b)` (see
     /// [`crate::calibration::Calibration::map`]).
     map: (f32, f32),
+    /// Since when the PLA has read stalled in lock, ms ([`CLOSED_LOCK_STALL_K_PER_S`]).
+    stalled_since_ms: Option<u64>,
 }
 
 impl Closed {
@@ -104,12 +120,13 @@ impl Closed {
         Closed {
             drive: ModelDrive::new(s, t),
             map,
+            stalled_since_ms: None,
         }
     }
 
     /// Whether the PLA counts as rigid: see [`CLOSED_RIGID_LEAD_S`], or has stalled where the
     /// shape holds ([`CLOSED_LOCK_STALL_K_PER_S`]).
-    fn rigid(&self, t: &Tick, pla_c: f32) -> bool {
+    fn rigid(&mut self, t: &Tick, pla_c: f32) -> bool {
         let m = t.m;
         let rigid_threshold_c = t.th.rigid_threshold_c;
         let rate = self.drive.observer().measured_rate_k_per_s(HeatedNode::Pla);
@@ -123,10 +140,20 @@ impl Closed {
             (m.t_pla_c, rigid_threshold_c)
         };
         // Only where the rod keeps cooling after release (a bath too warm to lock never ends).
-        let stalled = cool_surroundings
-            && rate.abs() <= CLOSED_LOCK_STALL_K_PER_S
+        let may_stall = cool_surroundings
             && m.t_pla_c < CLOSED_LOCK_STALL_MAX_C
             && pla_c < CLOSED_LOCK_STALL_MAX_C;
+        // Starts under the stall rate, ends over the reset rate (the rate's noise between).
+        self.stalled_since_ms = match self.stalled_since_ms {
+            Some(since) if may_stall && rate.abs() <= CLOSED_LOCK_STALL_RESET_K_PER_S => {
+                Some(since)
+            }
+            _ if may_stall && rate.abs() <= CLOSED_LOCK_STALL_K_PER_S => Some(t.now_ms),
+            _ => None,
+        };
+        let stalled = self.stalled_since_ms.is_some_and(|since| {
+            t.now_ms.saturating_sub(since) as f32 / 1000.0 >= CLOSED_LOCK_STALL_S
+        });
         (pla_c < rigid_c && lead_c < rigid_c) || stalled
     }
 }
@@ -134,6 +161,7 @@ impl Closed {
 impl Strategy for Closed {
     fn enter(&mut self, _phase: Phase, _now_ms: u64) {
         self.drive.enter();
+        self.stalled_since_ms = None;
     }
 
     fn phase_done(&mut self, t: &Tick) -> bool {

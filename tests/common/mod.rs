@@ -241,8 +241,8 @@ impl Bench {
 pub enum Wiring {
     /// The PLA and TCA thermistors swapped.
     Swapped,
-    /// The PLA thermistor come off its heater: it reads the silicone's surface, a fifth of the
-    /// rod's rise above the bath, a minute behind.
+    /// The PLA thermistor come off its heater: it reads the silicone's surface, a fifth of what
+    /// the PLA bead in place would read above the bath, a minute behind.
     PlaOffItsHeater,
 }
 
@@ -290,5 +290,8 @@ impl Plant for Miswired {
     }
     fn set(&mut self, setting: morphlink_plant::Setting) -> Result<(), morphlink_plant::SetError> {
         self.plant.set(setting)
+    }
+    fn failure(&self) -> Option<&str> {
+        self.plant.failure()
     }
 }

@@ -7,8 +7,11 @@
 //! ensemble's draws. For [`WATCH_S`] after the cut the STATUS readings give each heated sensor's
 //! rise above ambient over its lowest since the cut (measured from ambient when it was below
 //! it), in all and where the supervisor judges it (the sensor at least
-//! `OFF_NEIGHBOUR_MARGIN_K` above the other). Prints the worst case per link family (the table
-//! of docs/safety.md) and fails if any run alarms or reaches a limit.
+//! `OFF_NEIGHBOUR_MARGIN_K` above the other). A second pass sends the same MORPH again
+//! [`REMORPH_DELAYS_S`] after an ABORT at each of [`REMORPH_ABORTS_S`] and runs it to its end (a
+//! warm link, a bead still warming). Prints the worst case per link family and the second
+//! pass's alarms (the tables of docs/safety.md) and fails if any run of either pass raises an
+//! alarm of the plausibility and heater checks or reaches a limit.
 
 use crate::strategies::parallel;
 use morphlink::bench::Noise;
@@ -33,6 +36,13 @@ pub const ABORT_STEP_S: u64 = 1;
 /// How long after the cut the readings are watched, s: past `OFF_GRACE_S` (15 s) and the
 /// slowest bead's peak.
 pub const WATCH_S: u64 = 60;
+/// The second pass: ABORT times, s into the first morph, after which the same MORPH is sent
+/// again [`REMORPH_DELAYS_S`] later.
+pub const REMORPH_ABORTS_S: [u64; 3] = [4, 10, 20];
+/// The second pass: delays between the ABORT and the next MORPH, s.
+pub const REMORPH_DELAYS_S: [u64; 4] = [0, 3, 10, 30];
+/// Longest a second morph is run for, s (the lock timeout's 600 s and some).
+pub const MORPH_MAX_S: u64 = 700;
 /// The lumped link's bead time constants tried, s (the ensemble draws 2–6 s; nominal 3 s).
 pub const LUMPED_BEAD_TAUS_S: [f64; 3] = [2.0, 3.0, 6.0];
 
@@ -73,6 +83,11 @@ trait RunOn {
     /// Runs one morph in `mode`, ABORTs it `abort_s` in, and watches the readings for
     /// [`WATCH_S`].
     fn run(&mut self, mode: &str, abort_s: u64) -> Rises;
+    /// Runs one morph in `mode`, ABORTs it `abort_s` in, sends the same MORPH `delay_s` later
+    /// and runs it to its end: the first alarm of the supervisor's plausibility and heater
+    /// checks, if any (a phase timeout or an over-temperature trip is the strategy's, not a
+    /// false alarm; the ensemble charts count those).
+    fn rerun(&mut self, mode: &str, abort_s: u64, delay_s: u64) -> Option<String>;
 }
 
 impl<P: Plant> RunOn for Rig<P> {
@@ -130,6 +145,36 @@ impl<P: Plant> RunOn for Rig<P> {
             }
         }
         r
+    }
+    fn rerun(&mut self, mode: &str, abort_s: u64, delay_s: u64) -> Option<String> {
+        let mut alarm = None;
+        let run = |rig: &mut Rig<P>, ticks: u64, alarm: &mut Option<String>| {
+            for _ in 0..ticks {
+                rig.tick();
+                rig.drain_events(&mut |l| {
+                    let code = l.strip_prefix("alarm: ").and_then(|r| r.split(' ').next());
+                    let false_alarm =
+                        code.is_some_and(|c| !["phase-timeout", "over-temperature"].contains(&c));
+                    if false_alarm && alarm.is_none() {
+                        *alarm = Some(l.to_string());
+                    }
+                });
+            }
+        };
+        let morph = format!("MORPH {TARGET_MM} {mode}");
+        run(self, 20, &mut alarm);
+        self.handle_line(&morph, &mut |_| {});
+        run(self, abort_s * TICKS_PER_S, &mut alarm);
+        self.handle_line("ABORT", &mut |_| {});
+        run(self, delay_s * TICKS_PER_S, &mut alarm);
+        self.handle_line(&morph, &mut |_| {});
+        for _ in 0..MORPH_MAX_S {
+            run(self, TICKS_PER_S, &mut alarm);
+            if !self.ctrl.busy() {
+                break;
+            }
+        }
+        alarm
     }
 }
 
@@ -225,24 +270,66 @@ pub fn run(args: &Args) -> Result<(), String> {
             rows.iter().filter(|(_, r)| r.alarm.is_some()).count()
         );
     }
-    let failed: Vec<String> = jobs
-        .iter()
-        .zip(&results)
-        .filter(|(_, r)| {
-            r.alarm.is_some()
-                || r.judged_k >= OFF_STORED_MAX_RISE_K
-                || r.after_grace_k >= OFF_MAX_RISE_K
-        })
-        .map(|((l, mode, a), r)| {
-            format!(
-                "{} {mode} ABORT {a} s: judged rise {:.1} K, after the grace {:.1} K; {}",
-                links[*l].name,
-                r.judged_k,
-                r.after_grace_k,
-                r.alarm.as_deref().unwrap_or("no alarm")
-            )
+    let rejobs: Vec<(usize, &str, u64, u64)> = (0..links.len())
+        .flat_map(|l| {
+            MODES.iter().flat_map(move |m| {
+                REMORPH_ABORTS_S.iter().flat_map(move |&a| {
+                    REMORPH_DELAYS_S.iter().map(move |&d| (l, m.as_str(), a, d))
+                })
+            })
         })
         .collect();
+    let realarms = parallel(
+        &rejobs,
+        args.threads,
+        "MORPHs after an ABORT",
+        |&(l, mode, a, d)| (links[l].plant)().rerun(mode, a, d),
+    )?;
+    println!("\nMORPH again 0, 3, 10 or 30 s after an ABORT 4, 10 or 20 s into a morph:\n");
+    println!("| links | runs | alarms of the plausibility and heater checks |");
+    println!("| --- | --- | --- |");
+    for family in ["lumped nominal", "hifi nominal", "hifi draws"] {
+        let rows: Vec<_> = rejobs
+            .iter()
+            .zip(&realarms)
+            .filter(|((l, ..), _)| links[*l].family == family)
+            .collect();
+        println!(
+            "| {family} | {} | {} |",
+            rows.len(),
+            rows.iter().filter(|(_, a)| a.is_some()).count()
+        );
+    }
+    let mut failed: Vec<String> = rejobs
+        .iter()
+        .zip(&realarms)
+        .filter_map(|((l, mode, a, d), alarm)| {
+            alarm.as_ref().map(|al| {
+                format!(
+                    "{} {mode} ABORT {a} s, MORPH {d} s later: {al}",
+                    links[*l].name
+                )
+            })
+        })
+        .collect();
+    failed.extend(
+        jobs.iter()
+            .zip(&results)
+            .filter(|(_, r)| {
+                r.alarm.is_some()
+                    || r.judged_k >= OFF_STORED_MAX_RISE_K
+                    || r.after_grace_k >= OFF_MAX_RISE_K
+            })
+            .map(|((l, mode, a), r)| {
+                format!(
+                    "{} {mode} ABORT {a} s: judged rise {:.1} K, after the grace {:.1} K; {}",
+                    links[*l].name,
+                    r.judged_k,
+                    r.after_grace_k,
+                    r.alarm.as_deref().unwrap_or("no alarm")
+                )
+            }),
+    );
     if failed.is_empty() {
         println!("\nNo run alarmed or came within a limit.");
         Ok(())

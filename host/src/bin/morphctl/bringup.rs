@@ -10,7 +10,7 @@
 use crate::link::{Link, LinkError, REPLY_TIMEOUT_S};
 use morphlink::protocol::client::{classify, LineKind, Status};
 use morphlink::pulse::max_power_w;
-use morphlink::supervisor::{SUPPLY_MAX_V, SUPPLY_MIN_V, SUPPLY_READ_TOLERANCE_V};
+use morphlink::supervisor::{supply_in_range, SUPPLY_MAX_V, SUPPLY_MIN_V};
 use morphlink::vocab::Heater;
 use std::time::{Duration, Instant};
 
@@ -101,8 +101,7 @@ pub fn judge(rest: &Rest, pulses: Option<(Rise, Rise)>) -> Vec<Check> {
         ));
     }
     let v = rest.supply_v;
-    let tol = SUPPLY_READ_TOLERANCE_V as f64;
-    let supply_ok = v >= SUPPLY_MIN_V as f64 - tol && v < SUPPLY_MAX_V as f64 + tol;
+    let supply_ok = supply_in_range(v as f32);
     out.push(check(
         supply_ok,
         format!(
