@@ -276,11 +276,6 @@ pub const CROSS_MIN_POWER_FRACTION: f32 = 0.5;
 /// "PLA": before this check the rod passed 130 °C (138 °C lumped, 134 °C hifi) before the
 /// over-temperature trip.
 pub const CROSS_MAX_LEAD_K: f32 = 3.0;
-/// Sensor-implausible, crossed: the window [`CROSS_MAX_LEAD_K`] is judged over, s; it starts
-/// again after this. Swapped wires open a lead of 1–4 K/s at soften's power; a TCA bead still
-/// warming from heat stored before (a MORPH soon after an ABORT in still air, about 0.2 K/s)
-/// gains less than the lead within it.
-pub const CROSS_WINDOW_S: f32 = 10.0;
 
 /// Heating-while-off, one heater low: how long a heater must have been commanded below
 /// [`HEATING_MIN_POWER_FRACTION`] of its cap, with the other heater on, before its sensor is
@@ -306,7 +301,6 @@ const _: () =
     assert!(OFF_NEIGHBOUR_MARGIN_K >= 0.0 && OFF_NEIGHBOUR_MARGIN_K < OFF_STORED_MAX_RISE_K);
 const _: () = assert!(CROSS_MAX_LEAD_K > 0.0 && CROSS_MAX_LEAD_K <= HEATING_BAND_K);
 const _: () = assert!(OFF_NEIGHBOUR_MAX_RISE_K > OFF_STORED_MAX_RISE_K);
-const _: () = assert!(CROSS_WINDOW_S > 0.0 && CROSS_WINDOW_S <= 20.0);
 const _: () = assert!(
     CROSS_MIN_POWER_FRACTION > HEATING_MIN_POWER_FRACTION && CROSS_MIN_POWER_FRACTION <= 1.0
 );
@@ -405,15 +399,6 @@ struct HeldWatch {
     pla_k: Option<f32>,
 }
 
-/// One window of the crossed-wires watch (see `Supervisor::check_cross`): when it began, the
-/// PLA's lowest reading since and the TCA's reading then, °C.
-#[derive(Clone, Copy, Debug)]
-struct CrossWindow {
-    since_ms: u64,
-    pla_min_c: f32,
-    tca_start_c: f32,
-}
-
 /// The supervisor's state: consecutive-sample counters, last good temperatures and the
 /// heater watches.
 #[derive(Clone, Copy, Debug)]
@@ -429,8 +414,9 @@ pub struct Supervisor {
     hold: [HoldWatch; 2],
     low: [LowWatch; 2],
     held: HeldWatch,
-    /// The crossed-wires watch's window ([`CROSS_MAX_LEAD_K`]).
-    cross: Option<CrossWindow>,
+    /// The crossed-wires watch ([`CROSS_MAX_LEAD_K`]): the PLA's lowest reading since the PLA
+    /// heater was found on alone and the TCA's reading then, °C.
+    cross: Option<(f32, f32)>,
     /// Each sensor's last reading and the sample time it was first read at, °C and ms (the
     /// still-reading watch, [`FROZEN_STILL_S`]).
     still: [Option<(f32, u64)>; 3],
@@ -581,7 +567,7 @@ impl Supervisor {
         if let Err(f) = self.check_low(now_ms, commanded) {
             found(f);
         }
-        if let Err(f) = self.check_cross(now_ms, commanded) {
+        if let Err(f) = self.check_cross(commanded) {
             found(f);
         }
         self.measurements()
@@ -764,10 +750,15 @@ impl Supervisor {
             let since_off_k = above(min_since_cut_k);
             let after_k = after_grace_k.map_or(0.0, above);
             // Heat flows from hot to cold: a sensor below the other heated one may be warmed by
-            // it, up to a ceiling. Judged on this frame's readings (a bad one is NaN and explains
-            // nothing; the last good value of a sensor that has failed would).
-            let own_c = self.live_c[heater.sensor().index()];
-            let other_c = self.live_c[heater.other().sensor().index()];
+            // it, up to a ceiling. Judged on the last good readings, so one glitch changes
+            // nothing; a sensor whose range check stands tripped has failed and explains nothing.
+            let other = heater.other().sensor();
+            let own_c = m.of(heater.sensor());
+            let other_c = if self.range[other.index()].tripped() {
+                f32::NAN
+            } else {
+                m.of(other)
+            };
             let warmed_by_other =
                 own_c < other_c + OFF_NEIGHBOUR_MARGIN_K && since_off_k <= OFF_NEIGHBOUR_MAX_RISE_K;
             w.heating = !warmed_by_other
@@ -936,12 +927,12 @@ impl Supervisor {
     /// Sensor-implausible, crossed: while the PLA heater is commanded at least
     /// [`CROSS_MIN_POWER_FRACTION`] of its cap and the TCA below [`HEATING_MIN_POWER_FRACTION`]
     /// of its own, the TCA's sensor must not gain more than [`CROSS_MAX_LEAD_K`] over the PLA's
-    /// within [`CROSS_WINDOW_S`] (the PLA's gain counted from its lowest reading since the window
-    /// began: a lagging bead may still fall for a moment): heat reaches the PLA's own bead first.
-    /// A TCA held alone is left out: in still air a lock that stalls holds it for minutes, and
-    /// the cooled rod's bead, warmed by it, overtook its held one by 3 K (lumped draw 22 of
-    /// `cargo xtask strategies`, 32.9 mm).
-    fn check_cross(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
+    /// since that began (the PLA's gain counted from its lowest reading since: a lagging bead may
+    /// still fall for a moment when heating resumes): heat reaches the PLA's own bead first. A
+    /// TCA held alone is left out: in still air a lock that stalls holds it for minutes, and the
+    /// cooled rod's bead, warmed by it, overtook its held one by 3 K (lumped draw 22 of `cargo
+    /// xtask strategies`, 32.9 mm).
+    fn check_cross(&mut self, cmd: Powers) -> Result<(), Fault> {
         let judged = cmd.pla_w >= CROSS_MIN_POWER_FRACTION * heater_cap_w(Heater::Pla)
             && !(cmd.tca_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(Heater::Tca));
         let [pla_c, tca_c, _] = self.live_c;
@@ -949,19 +940,9 @@ impl Supervisor {
             self.cross = None;
             return Ok(());
         }
-        let w = match self.cross {
-            Some(w) if (now_ms.saturating_sub(w.since_ms) as f32) / 1000.0 < CROSS_WINDOW_S => w,
-            _ => CrossWindow {
-                since_ms: now_ms,
-                pla_min_c: pla_c,
-                tca_start_c: tca_c,
-            },
-        };
-        let w = self.cross.insert(CrossWindow {
-            pla_min_c: w.pla_min_c.min(pla_c),
-            ..w
-        });
-        let lead_k = (tca_c - w.tca_start_c) - (pla_c - w.pla_min_c);
+        let (pla_min_c, tca_start_c) = self.cross.get_or_insert((pla_c, tca_c));
+        *pla_min_c = pla_min_c.min(pla_c);
+        let lead_k = (tca_c - *tca_start_c) - (pla_c - *pla_min_c);
         if lead_k > CROSS_MAX_LEAD_K {
             return Err(Fault {
                 code: FaultCode::SensorImplausible,
@@ -2027,15 +2008,23 @@ mod tests {
             (f.code, f.subject),
             (FaultCode::HeatingWhileOff, Subject::Heater(Heater::Tca))
         );
-        // It trips once it passes the PLA's reading plus the margin (13.6 s after the cut) or
-        // rises past the ceiling (`OFF_NEIGHBOUR_MAX_RISE_K`, 6.7 s), whichever comes first.
-        let crossed_s = (0..1000)
-            .map(|i| 20.0 + i as f32 * 0.1)
-            .find(|&t| stuck(t) >= pla(t) + OFF_NEIGHBOUR_MARGIN_K)
-            .unwrap();
+        // Under the hot PLA its rise is explained until the ceiling (`OFF_NEIGHBOUR_MAX_RISE_K`):
+        // 20 K at 3 K/s, 6.7 s after the cut (it would pass the PLA only at 13.6 s).
         let ceiling_s = 20.0 + OFF_NEIGHBOUR_MAX_RISE_K / 3.0;
-        let expected_s = crossed_s.min(ceiling_s);
-        assert!((at_s - expected_s).abs() <= 0.2, "{at_s} {expected_s}");
+        assert!((at_s - ceiling_s).abs() <= 0.2, "{at_s} {ceiling_s}");
+        // A slower stuck TCA under a PLA holding 45 °C: explained until it passes the PLA plus
+        // the margin (48 °C from 30 °C at 1 K/s: 18 s, a rise of 18 K, under the ceiling).
+        let off = |_t: f32| Powers {
+            pla_w: 0.0,
+            tca_w: 0.0,
+        };
+        let f = all_faults(off, Phase::Idle, 40, |t| (45.0, 30.0 + t));
+        let (_, at_s) = f
+            .iter()
+            .find(|(f, _)| f.code == FaultCode::HeatingWhileOff)
+            .expect("a stuck TCA passing the PLA never tripped");
+        let crossed_s = 45.0 + OFF_NEIGHBOUR_MARGIN_K - 30.0;
+        assert!((at_s - crossed_s).abs() <= 0.2, "{at_s} {crossed_s}");
     }
 
     /// Every fault of every tick over `secs` s, at 10 ticks a second.
@@ -2053,13 +2042,7 @@ mod tests {
             let t_s = ms as f32 / 1000.0;
             let (pla_c, tca_c) = temps(t_s);
             let mut faults = Faults::new();
-            sup.check_all(
-                ms,
-                &frame(ms, pla_c, tca_c),
-                cmd(t_s),
-                Phase::Soften,
-                &mut faults,
-            );
+            sup.check_all(ms, &frame(ms, pla_c, tca_c), cmd(t_s), phase, &mut faults);
             all.extend(faults.iter().map(|f| (*f, t_s)));
         }
         all

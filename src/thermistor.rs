@@ -230,6 +230,12 @@ impl RangeCheck {
         }
     }
 
+    /// Whether the check stands tripped: its leaky count has reached the trip count (the
+    /// sensor counts as failed until good samples bring it down).
+    pub fn tripped(&self) -> bool {
+        self.count >= self.consecutive
+    }
+
     /// Feeds one classified sample. Returns `Some(Open)`/`Some(Short)` (this sample's class)
     /// on every out-of-range sample once the leaky count has reached the trip count (so a
     /// persisting fault keeps being reported); a good sample takes one off the count.

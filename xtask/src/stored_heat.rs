@@ -10,8 +10,10 @@
 //! `OFF_NEIGHBOUR_MARGIN_K` above the other). A second pass sends the same MORPH again
 //! [`REMORPH_DELAYS_S`] after an ABORT at each of [`REMORPH_ABORTS_S`] and runs it to its end (a
 //! warm link, a bead still warming). Prints the worst case per link family and the second
-//! pass's alarms (the tables of docs/safety.md) and fails if any run of either pass raises an
-//! alarm of the plausibility and heater checks or reaches a limit.
+//! pass's alarms (the tables of docs/safety.md). Fails if a first-pass run alarms or its judged
+//! rise reaches a heating-while-off limit, or a second-pass run raises an alarm of the
+//! plausibility and heater checks (a phase timeout or an over-temperature trip is the
+//! strategy's; `cargo xtask strategies` counts those) or does not end.
 
 use crate::strategies::parallel;
 use morphlink::bench::Noise;
@@ -41,8 +43,9 @@ pub const WATCH_S: u64 = 60;
 pub const REMORPH_ABORTS_S: [u64; 3] = [4, 10, 20];
 /// The second pass: delays between the ABORT and the next MORPH, s.
 pub const REMORPH_DELAYS_S: [u64; 4] = [0, 3, 10, 30];
-/// Longest a second morph is run for, s (the lock timeout's 600 s and some).
-pub const MORPH_MAX_S: u64 = 700;
+/// Longest a second morph is run for, s: past the longest the phase timeouts allow (60 s
+/// soften, 120 s bend, 600 s lock, 10 s release).
+pub const MORPH_MAX_S: u64 = 800;
 /// The lumped link's bead time constants tried, s (the ensemble draws 2–6 s; nominal 3 s).
 pub const LUMPED_BEAD_TAUS_S: [f64; 3] = [2.0, 3.0, 6.0];
 
@@ -87,7 +90,20 @@ trait RunOn {
     /// and runs it to its end: the first alarm of the supervisor's plausibility and heater
     /// checks, if any (a phase timeout or an over-temperature trip is the strategy's, not a
     /// false alarm; the ensemble charts count those).
-    fn rerun(&mut self, mode: &str, abort_s: u64, delay_s: u64) -> Option<String>;
+    fn rerun(&mut self, mode: &str, abort_s: u64, delay_s: u64) -> Rerun;
+}
+
+/// How a MORPH after an ABORT went.
+#[derive(Clone, Debug, PartialEq)]
+enum Rerun {
+    /// It ended without an alarm of the plausibility and heater checks.
+    Quiet,
+    /// The first such alarm, before or during it.
+    Alarm(String),
+    /// It was refused (the reply): the first morph had latched a fault of its own.
+    NotRun(String),
+    /// Still busy after [`MORPH_MAX_S`].
+    Unfinished,
 }
 
 impl<P: Plant> RunOn for Rig<P> {
@@ -146,7 +162,7 @@ impl<P: Plant> RunOn for Rig<P> {
         }
         r
     }
-    fn rerun(&mut self, mode: &str, abort_s: u64, delay_s: u64) -> Option<String> {
+    fn rerun(&mut self, mode: &str, abort_s: u64, delay_s: u64) -> Rerun {
         let mut alarm = None;
         let run = |rig: &mut Rig<P>, ticks: u64, alarm: &mut Option<String>| {
             for _ in 0..ticks {
@@ -167,14 +183,20 @@ impl<P: Plant> RunOn for Rig<P> {
         run(self, abort_s * TICKS_PER_S, &mut alarm);
         self.handle_line("ABORT", &mut |_| {});
         run(self, delay_s * TICKS_PER_S, &mut alarm);
-        self.handle_line(&morph, &mut |_| {});
+        let mut reply = String::new();
+        self.handle_line(&morph, &mut |l| reply = l.to_string());
+        if reply != "ok" {
+            // The first morph latched a fault of its own (a strategy's over-temperature trip):
+            // there is no second morph to judge.
+            return Rerun::NotRun(reply);
+        }
         for _ in 0..MORPH_MAX_S {
             run(self, TICKS_PER_S, &mut alarm);
             if !self.ctrl.busy() {
-                break;
+                return alarm.map_or(Rerun::Quiet, Rerun::Alarm);
             }
         }
-        alarm
+        Rerun::Unfinished
     }
 }
 
@@ -286,30 +308,35 @@ pub fn run(args: &Args) -> Result<(), String> {
         |&(l, mode, a, d)| (links[l].plant)().rerun(mode, a, d),
     )?;
     println!("\nMORPH again 0, 3, 10 or 30 s after an ABORT 4, 10 or 20 s into a morph:\n");
-    println!("| links | runs | alarms of the plausibility and heater checks |");
-    println!("| --- | --- | --- |");
+    println!("| links | runs | alarms of the plausibility and heater checks | not run (the first morph latched a fault) |");
+    println!("| --- | --- | --- | --- |");
     for family in ["lumped nominal", "hifi nominal", "hifi draws"] {
         let rows: Vec<_> = rejobs
             .iter()
             .zip(&realarms)
             .filter(|((l, ..), _)| links[*l].family == family)
             .collect();
+        let count = |f: fn(&Rerun) -> bool| rows.iter().filter(|(_, r)| f(r)).count();
         println!(
-            "| {family} | {} | {} |",
+            "| {family} | {} | {} | {} |",
             rows.len(),
-            rows.iter().filter(|(_, a)| a.is_some()).count()
+            count(|r| matches!(r, Rerun::Alarm(_) | Rerun::Unfinished)),
+            count(|r| matches!(r, Rerun::NotRun(_)))
         );
     }
     let mut failed: Vec<String> = rejobs
         .iter()
         .zip(&realarms)
-        .filter_map(|((l, mode, a, d), alarm)| {
-            alarm.as_ref().map(|al| {
-                format!(
-                    "{} {mode} ABORT {a} s, MORPH {d} s later: {al}",
-                    links[*l].name
-                )
-            })
+        .filter_map(|((l, mode, a, d), r)| {
+            let what = match r {
+                Rerun::Alarm(al) => al.clone(),
+                Rerun::Unfinished => format!("still running after {MORPH_MAX_S} s"),
+                Rerun::Quiet | Rerun::NotRun(_) => return None,
+            };
+            Some(format!(
+                "{} {mode} ABORT {a} s, MORPH {d} s later: {what}",
+                links[*l].name
+            ))
         })
         .collect();
     failed.extend(
