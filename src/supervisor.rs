@@ -623,15 +623,9 @@ impl Supervisor {
         let m = self.measurements();
         for heater in Heater::ALL {
             let own_w = cmd.of(heater);
-            let other_w = match heater {
-                Heater::Pla => cmd.tca_w,
-                Heater::Tca => cmd.pla_w,
-            };
+            let other_w = cmd.of(heater.other());
             let temp_c = m.of(heater.sensor());
-            let (r_self, cap_w) = match heater {
-                Heater::Pla => (R_PP_K_PER_W, HeaterConfig::PLA.max_power_w),
-                Heater::Tca => (R_TT_K_PER_W, HeaterConfig::TCA.max_power_w),
-            };
+            let (r_self, cap_w) = (own_r_k_per_w(heater), heater_cap_w(heater));
             let w = &mut self.watch[heater.index()];
             // A new phase re-arms the watch, unless the heater stays on at no less power: its
             // window then runs on (closed's phases can each be shorter than one window).
@@ -660,10 +654,8 @@ impl Supervisor {
             let own_rise_k = r_self * own_w;
             // The other heater's share counts only as far as its own sensor shows its heat (a
             // dead other heater gives this sensor nothing).
-            let (other_rise_k, r_other) = match heater {
-                Heater::Pla => (m.t_tca_c - m.t_amb_c, R_TT_K_PER_W),
-                Heater::Tca => (m.t_pla_c - m.t_amb_c, R_PP_K_PER_W),
-            };
+            let other_rise_k = m.of(heater.other().sensor()) - m.t_amb_c;
+            let r_other = own_r_k_per_w(heater.other());
             let shown_w = (other_rise_k / r_other).max(0.0);
             let cross_rise_k = R_TP_K_PER_W * other_w.min(shown_w);
             let in_band = temp_c - m.t_amb_c - cross_rise_k >= HEATING_BAND_K;
@@ -832,10 +824,7 @@ impl Supervisor {
         for heater in Heater::ALL {
             let temp_c = self.live_c[heater.sensor().index()];
             let own_w = cmd.of(heater);
-            let (r_own, other_w) = match heater {
-                Heater::Pla => (R_PP_K_PER_W, cmd.tca_w),
-                Heater::Tca => (R_TT_K_PER_W, cmd.pla_w),
-            };
+            let (r_own, other_w) = (own_r_k_per_w(heater), cmd.of(heater.other()));
             let w = &mut self.hold[heater.index()];
             let relax = |x: &mut f32, now: f32, k: f32| *x = now.max(toward(*x, now, k));
             // The recent powers are followed whether judged or not: a heater switched on in a
@@ -963,10 +952,7 @@ impl Supervisor {
         for heater in Heater::ALL {
             let rise_k = self.live_c[heater.sensor().index()] - amb_c;
             let w = &mut self.low[heater.index()];
-            let other_on = match heater {
-                Heater::Pla => cmd.tca_w > 0.0,
-                Heater::Tca => cmd.pla_w > 0.0,
-            };
+            let other_on = cmd.of(heater.other()) > 0.0;
             let low = !(cmd.of(heater) >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater));
             // A trip holds RESET off while the sensor stays risen above the trip's lowest
             // reading, whatever the heaters are commanded now (a stuck MOSFET heats on).
@@ -1090,10 +1076,7 @@ impl Supervisor {
                 *e = Expectation::default();
                 continue;
             }
-            let (r_own, other_w) = match heater {
-                Heater::Pla => (R_PP_K_PER_W, cmd.tca_w),
-                Heater::Tca => (R_TT_K_PER_W, cmd.pla_w),
-            };
+            let (r_own, other_w) = (own_r_k_per_w(heater), cmd.of(heater.other()));
             let own_k = r_own * cmd.of(heater);
             let steady_k = own_k + R_TP_K_PER_W * other_w;
             let Some(mut off_k) = e.update(dt_s, own_k, steady_k, rise_k) else {
@@ -1127,10 +1110,7 @@ impl Supervisor {
 /// `R_TP_K_PER_W` times that power): the still-air reach of that heat, so it cannot be rising
 /// in any medium.
 fn must_cool(heater: Heater, cmd: Powers, rise_k: f32) -> bool {
-    let (r_own, other_w) = match heater {
-        Heater::Pla => (R_PP_K_PER_W, cmd.tca_w),
-        Heater::Tca => (R_TT_K_PER_W, cmd.pla_w),
-    };
+    let (r_own, other_w) = (own_r_k_per_w(heater), cmd.of(heater.other()));
     let steady_k = r_own * cmd.of(heater).max(0.0) + R_TP_K_PER_W * other_w.max(0.0);
     rise_k > PLAUS_HIGH_GAIN * steady_k + MUST_COOL_MARGIN_K
 }
@@ -1140,6 +1120,15 @@ fn must_cool(heater: Heater, cmd: Powers, rise_k: f32) -> bool {
 /// heat in [`Supervisor::check_held`].
 fn held_share() -> f32 {
     R_TP_K_PER_W / R_PP_K_PER_W
+}
+
+/// The model's steady rise of `heater`'s own sensor per watt of its own heater, K/W
+/// (`R_PP_K_PER_W`, `R_TT_K_PER_W`).
+fn own_r_k_per_w(heater: Heater) -> f32 {
+    match heater {
+        Heater::Pla => R_PP_K_PER_W,
+        Heater::Tca => R_TT_K_PER_W,
+    }
 }
 
 /// The power cap of `heater`, W.
