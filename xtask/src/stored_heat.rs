@@ -109,28 +109,20 @@ enum Rerun {
 impl<P: Plant> RunOn for Rig<P> {
     fn run(&mut self, mode: &str, abort_s: u64) -> Rises {
         let mut r = Rises::default();
-        let events = |rig: &mut Rig<P>, r: &mut Rises| {
-            rig.drain_events(&mut |l| {
-                if classify(l) == LineKind::Alarm && r.alarm.is_none() {
-                    r.alarm = Some(l.to_string());
-                }
-            });
+        let mut first_alarm = |l: &str| {
+            if classify(l) == LineKind::Alarm && r.alarm.is_none() {
+                r.alarm = Some(l.to_string());
+            }
         };
-        for _ in 0..20 {
-            self.tick();
-        }
-        self.handle_line(&format!("MORPH {TARGET_MM} {mode}"), &mut |_| {});
-        let ticks = |s: u64| s * TICKS_PER_S;
-        for _ in 0..ticks(abort_s) {
-            self.tick();
-            events(self, &mut r);
-        }
+        let morph = format!("MORPH {TARGET_MM} {mode}");
+        run_for(self, 20, &mut first_alarm);
+        self.handle_line(&morph, &mut |_| {});
+        run_for(self, abort_s * TICKS_PER_S, &mut first_alarm);
         self.handle_line("ABORT", &mut |_| {});
         let mut min_k: [Option<f32>; 2] = [None; 2];
         let mut min_after_k: [Option<f32>; 2] = [None; 2];
-        for tick in 0..ticks(WATCH_S) {
-            self.tick();
-            events(self, &mut r);
+        for tick in 0..WATCH_S * TICKS_PER_S {
+            run_for(self, 1, &mut first_alarm);
             let mut temps = None;
             self.handle_line("STATUS", &mut |l: &str| {
                 temps = Status::parse(l).map(|s| s.temps_c);
@@ -164,25 +156,20 @@ impl<P: Plant> RunOn for Rig<P> {
     }
     fn rerun(&mut self, mode: &str, abort_s: u64, delay_s: u64) -> Rerun {
         let mut alarm = None;
-        let run = |rig: &mut Rig<P>, ticks: u64, alarm: &mut Option<String>| {
-            for _ in 0..ticks {
-                rig.tick();
-                rig.drain_events(&mut |l| {
-                    let code = l.strip_prefix("alarm: ").and_then(|r| r.split(' ').next());
-                    let false_alarm =
-                        code.is_some_and(|c| !["phase-timeout", "over-temperature"].contains(&c));
-                    if false_alarm && alarm.is_none() {
-                        *alarm = Some(l.to_string());
-                    }
-                });
+        let mut checks_alarm = |l: &str| {
+            let code = l.strip_prefix("alarm: ").and_then(|r| r.split(' ').next());
+            let false_alarm =
+                code.is_some_and(|c| !["phase-timeout", "over-temperature"].contains(&c));
+            if false_alarm && alarm.is_none() {
+                alarm = Some(l.to_string());
             }
         };
         let morph = format!("MORPH {TARGET_MM} {mode}");
-        run(self, 20, &mut alarm);
+        run_for(self, 20, &mut checks_alarm);
         self.handle_line(&morph, &mut |_| {});
-        run(self, abort_s * TICKS_PER_S, &mut alarm);
+        run_for(self, abort_s * TICKS_PER_S, &mut checks_alarm);
         self.handle_line("ABORT", &mut |_| {});
-        run(self, delay_s * TICKS_PER_S, &mut alarm);
+        run_for(self, delay_s * TICKS_PER_S, &mut checks_alarm);
         let mut reply = String::new();
         self.handle_line(&morph, &mut |l| reply = l.to_string());
         if reply != "ok" {
@@ -191,12 +178,20 @@ impl<P: Plant> RunOn for Rig<P> {
             return Rerun::NotRun(reply);
         }
         for _ in 0..MORPH_MAX_S {
-            run(self, TICKS_PER_S, &mut alarm);
+            run_for(self, TICKS_PER_S, &mut checks_alarm);
             if !self.ctrl.busy() {
                 return alarm.map_or(Rerun::Quiet, Rerun::Alarm);
             }
         }
         Rerun::Unfinished
+    }
+}
+
+/// Ticks `rig` `ticks` times, handing every event and alarm line to `seen`.
+fn run_for<P: Plant>(rig: &mut Rig<P>, ticks: u64, seen: &mut impl FnMut(&str)) {
+    for _ in 0..ticks {
+        rig.tick();
+        rig.drain_events(seen);
     }
 }
 
