@@ -67,7 +67,8 @@ const _: () = assert!(CLOSED_PLA_COLD_K > CLOSED_PLA_AGREE_K);
 /// [`CLOSED_LOCK_STALL_MAX_C`], in cool surroundings ([`CLOSED_LEAD_AMBIENT_MARGIN_K`], so the rod
 /// keeps cooling after release; a bath too warm for the rod to turn rigid still ends in the lock
 /// timeout). In still air the TCA's hold keeps the rod warm (at 34 mm the nominal links settle at
-/// 52.6 °C lumped and 54 °C hifi, above [`CLOSED_RIGID_COOL_C`]), and waiting for a temperature
+/// 52.6 °C lumped and 54 °C hifi, above [`CLOSED_RIGID_COOL_C`]: `SIM MEDIUM air`, `MORPH 34`,
+/// `STATUS` in lock with `morph-sim --plant lumped|hifi`), and waiting for a temperature
 /// the link will not reach kept the TCA on until the 600 s lock timeout. 0.03 K/s is within a
 /// few kelvin of the settled value at the still-air cooling time of minutes; under water the rod
 /// passes these temperatures at several K/s, so no water morph of the ensemble changed (`cargo
