@@ -4,6 +4,10 @@
 use morphlink_model::{file, table, thermal};
 use std::{env, fmt::Write as _, fs, path::PathBuf};
 
+/// Rim convection a calibration may set, W/(m² K): 10 is half the model's still air, 200
+/// about twice still water (a gently stirred bath).
+const CONVECTION_RANGE_W_M2K: (f32, f32) = (10.0, 200.0);
+
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("OUT_DIR"));
     if let Some(memory) = board_memory_x() {
@@ -50,6 +54,38 @@ fn main() {
     writeln!(s, "pub const R_PP_K_PER_W: f32 = {:?};", r.r_pp as f32).unwrap();
     writeln!(s, "/// Rise of either heater per watt in the other, K/W.").unwrap();
     writeln!(s, "pub const R_TP_K_PER_W: f32 = {:?};", r.r_tp as f32).unwrap();
+    // The same rises at the ends of the convection range a calibration may set (still air to
+    // a stirred bath): the calibration's rise fields are ranged over it.
+    let (h_min, h_max) = CONVECTION_RANGE_W_M2K;
+    writeln!(
+        s,
+        "/// Rim convection a calibration may set, W/(m² K): from half still air's {} to about \
+         twice still water's.",
+        morphlink_model::params::H_AIR_W_M2K
+    )
+    .unwrap();
+    writeln!(
+        s,
+        "pub const CONVECTION_RANGE_W_M2K: (f32, f32) = ({h_min:?}, {h_max:?});"
+    )
+    .unwrap();
+    for (name, h) in [("LOWEST", h_min), ("HIGHEST", h_max)] {
+        let mut q = p;
+        q.surroundings.h_w_m2k = h as f64;
+        let r = thermal::resistance_matrix(&q);
+        writeln!(
+            s,
+            "/// `[R_TT, R_PP, R_TP]` at the {} convection of [`CONVECTION_RANGE_W_M2K`], K/W.",
+            name.to_lowercase()
+        )
+        .unwrap();
+        writeln!(
+            s,
+            "pub const R_AT_{name}_CONVECTION_K_PER_W: [f32; 3] = [{:?}, {:?}, {:?}];",
+            r.r_tt as f32, r.r_pp as f32, r.r_tp as f32
+        )
+        .unwrap();
+    }
     writeln!(s, "/// PLA power that keeps the rod soft while bending, W.").unwrap();
     writeln!(
         s,

@@ -24,7 +24,11 @@
 //!   refused and says why ([`ReportRejection`]). After a `paper`/`gated` morph the report
 //!   scales the table's power instead ([`Calibration::power_scale`]).
 
-use crate::link::{R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W};
+use crate::link::{
+    CONVECTION_RANGE_W_M2K, LINK, R_AT_HIGHEST_CONVECTION_K_PER_W, R_AT_LOWEST_CONVECTION_K_PER_W,
+    R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W,
+};
+use morphlink_model::thermal::{resistance_matrix, ResistanceMatrix};
 
 /// One calibration field's description: its name (the settings key), unit and allowed range.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -96,37 +100,47 @@ pub const MAP_SLOPE_RANGE: (f32, f32) = (0.5, 2.0);
 /// nominal resistance is outside any link the table was made for).
 pub const POWER_SCALE_RANGE: (f32, f32) = (0.5, 2.0);
 
+/// The calibration's layout version: 2 added [`Calibration::convection_w_m2k`], against
+/// which the rises are read.
+pub const LAYOUT_VERSION: f32 = 2.0;
+
+// The link file's convection is a value the range allows.
+const _: () = assert!(
+    LINK.surroundings.h_w_m2k as f32 >= CONVECTION_RANGE_W_M2K.0
+        && LINK.surroundings.h_w_m2k as f32 <= CONVECTION_RANGE_W_M2K.1
+);
+
 /// Number of fields.
-pub const FIELD_COUNT: usize = 14;
+pub const FIELD_COUNT: usize = 15;
 
 /// Every field, in index order (the order of [`Calibration::get`] / [`Calibration::set`]).
 pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
     FieldInfo {
         name: "pla_rise_k_per_w",
         unit: "K/W",
-        min: RISE_MIN_SHARE * R_PP_K_PER_W,
-        max: RISE_MAX_SHARE * R_PP_K_PER_W,
+        min: RISE_MIN_SHARE * R_AT_HIGHEST_CONVECTION_K_PER_W[1],
+        max: RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[1],
         doc: "steady PLA thermistor rise per PLA watt (TUNE)",
     },
     FieldInfo {
         name: "tca_rise_k_per_w",
         unit: "K/W",
-        min: RISE_MIN_SHARE * R_TT_K_PER_W,
-        max: RISE_MAX_SHARE * R_TT_K_PER_W,
+        min: RISE_MIN_SHARE * R_AT_HIGHEST_CONVECTION_K_PER_W[0],
+        max: RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[0],
         doc: "steady TCA thermistor rise per TCA watt (TUNE)",
     },
     FieldInfo {
         name: "pla_to_tca_k_per_w",
         unit: "K/W",
         min: 0.0,
-        max: RISE_MAX_SHARE * R_TP_K_PER_W * 2.0,
+        max: RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[2] * 2.0,
         doc: "steady TCA thermistor rise per PLA watt (TUNE)",
     },
     FieldInfo {
         name: "tca_to_pla_k_per_w",
         unit: "K/W",
         min: 0.0,
-        max: RISE_MAX_SHARE * R_TP_K_PER_W * 2.0,
+        max: RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[2] * 2.0,
         doc: "steady PLA thermistor rise per TCA watt (TUNE)",
     },
     FieldInfo {
@@ -193,10 +207,17 @@ pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
         doc: "sum of power needed over table power",
     },
     FieldInfo {
+        name: "convection_w_m2k",
+        unit: "W/m2K",
+        min: CONVECTION_RANGE_W_M2K.0,
+        max: CONVECTION_RANGE_W_M2K.1,
+        doc: "rim convection of the thermal model (TUNE: water or still air)",
+    },
+    FieldInfo {
         name: "version",
         unit: "1",
-        min: 1.0,
-        max: 1.0,
+        min: LAYOUT_VERSION,
+        max: LAYOUT_VERSION,
         doc: "calibration layout version",
     },
 ];
@@ -231,7 +252,12 @@ pub struct Calibration {
     pub power_count: f32,
     /// Sum of the reported power ratios (power the radius needed / the table's power).
     pub power_sum_ratio: f32,
-    /// Layout version (1): a stored calibration of another layout is not this one.
+    /// Convection at the link's rim the thermal model assumes, W/(m² K): the link file's (still
+    /// water) unless `TUNE` found still air ([`crate::tune`]). The rises above are this link's
+    /// thermistors' at it; the model's own rises at it are [`Calibration::model_resistances`].
+    pub convection_w_m2k: f32,
+    /// Layout version ([`LAYOUT_VERSION`]): a stored calibration of another layout is not this
+    /// one.
     pub version: f32,
 }
 
@@ -286,7 +312,8 @@ impl Calibration {
         map_sum_xy_k2: 0.0,
         power_count: 0.0,
         power_sum_ratio: 0.0,
-        version: 1.0,
+        convection_w_m2k: LINK.surroundings.h_w_m2k as f32,
+        version: LAYOUT_VERSION,
     };
 
     fn slot(&mut self, index: usize) -> Option<&mut f32> {
@@ -304,7 +331,8 @@ impl Calibration {
             10 => &mut self.map_sum_xy_k2,
             11 => &mut self.power_count,
             12 => &mut self.power_sum_ratio,
-            13 => &mut self.version,
+            13 => &mut self.convection_w_m2k,
+            14 => &mut self.version,
             _ => return None,
         })
     }
@@ -331,7 +359,8 @@ impl Calibration {
             10 => self.map_sum_xy_k2,
             11 => self.power_count,
             12 => self.power_sum_ratio,
-            13 => self.version,
+            13 => self.convection_w_m2k,
+            14 => self.version,
             _ => f32::NAN,
         }
     }
@@ -353,13 +382,34 @@ impl Calibration {
         self.first_invalid().is_none()
     }
 
+    /// The convection the model runs at, W/(m² K): [`Calibration::convection_w_m2k`], or the
+    /// link file's where that is not a number in range (a calibration is range-checked when
+    /// set; this keeps the model finite whatever it is handed).
+    pub fn model_convection_w_m2k(&self) -> f32 {
+        let h = self.convection_w_m2k;
+        if h >= CONVECTION_RANGE_W_M2K.0 && h <= CONVECTION_RANGE_W_M2K.1 {
+            h
+        } else {
+            LINK.surroundings.h_w_m2k as f32
+        }
+    }
+
+    /// The model's steady rises per watt at [`Calibration::model_convection_w_m2k`], K/W: what
+    /// the rises of a thermistor that reads its whole node are.
+    pub fn model_resistances(&self) -> ResistanceMatrix {
+        let mut p = LINK;
+        p.surroundings.h_w_m2k = self.model_convection_w_m2k() as f64;
+        resistance_matrix(&p)
+    }
+
     /// Share of its node's rise the thermistor of `heater` reads (its fitted rise per watt over
     /// the model's), clamped to the accepted range: what the observer multiplies its modelled
     /// rise by before comparing it with the reading.
     pub fn sensor_gain(&self, heater: crate::vocab::Heater) -> f32 {
+        let r = self.model_resistances();
         let (fit, model) = match heater {
-            crate::vocab::Heater::Pla => (self.pla_rise_k_per_w, R_PP_K_PER_W),
-            crate::vocab::Heater::Tca => (self.tca_rise_k_per_w, R_TT_K_PER_W),
+            crate::vocab::Heater::Pla => (self.pla_rise_k_per_w, r.r_pp as f32),
+            crate::vocab::Heater::Tca => (self.tca_rise_k_per_w, r.r_tt as f32),
         };
         let g = fit / model;
         if g.is_finite() {
@@ -376,7 +426,7 @@ impl Calibration {
             crate::vocab::Heater::Pla => self.tca_to_pla_k_per_w,
             crate::vocab::Heater::Tca => self.pla_to_tca_k_per_w,
         };
-        let g = fit / R_TP_K_PER_W;
+        let g = fit / self.model_resistances().r_tp as f32;
         if g.is_finite() {
             g.clamp(0.0, 3.0)
         } else {

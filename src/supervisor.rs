@@ -258,7 +258,11 @@ pub const OFF_STORED_MAX_RISE_K: f32 = 12.0;
 /// `paper`'s or `gated`'s long soften at 4 W, warms the TCA's bead by up to 15.6 K over a
 /// minute: without this rule 214 of 3 360 such healthy ABORTed morphs tripped (`cargo xtask
 /// stored-heat`). A stuck heater soon lifts its own sensor above the other's (no row of `cargo
-/// xtask faults` moved). The margin covers the PLA bead reading below its rod.
+/// xtask faults` moved). The margin covers the PLA bead reading below its rod. The same rule
+/// holds for a heater turned down while the other is on: the TCA holding a tight radius in still
+/// air at 84 °C warms the cooling PLA 3 K over a minute of lock (six lumped still-air links at
+/// 32.92 mm tripped `heating-while-off pla` once the still-air model let the PLA cool below
+/// it; `cargo xtask calibration`), and no row of `cargo xtask faults` moved.
 pub const OFF_NEIGHBOUR_MARGIN_K: f32 = 3.0;
 /// Heating-while-off: the most a sensor may rise since both heaters were cut and still count as
 /// warmed by the other ([`OFF_NEIGHBOUR_MARGIN_K`]), K. The largest such rise over 7 200
@@ -741,20 +745,10 @@ impl Supervisor {
             let above = |min_k: f32| rise_k - min_k.max(0.0);
             let since_off_k = above(min_since_cut_k);
             let after_k = after_grace_k.map_or(0.0, above);
-            // Heat flows from hot to cold: a sensor below the other heated one may be warmed by
-            // it, up to a ceiling. Judged on the last good readings, so one glitch changes
-            // nothing; a sensor whose range check stands tripped has failed and explains nothing.
-            let other = heater.other().sensor();
-            let own_c = m.of(heater.sensor());
-            let other_c = if self.range[other.index()].tripped() {
-                f32::NAN
-            } else {
-                m.of(other)
-            };
-            let warmed_by_other =
-                own_c < other_c + OFF_NEIGHBOUR_MARGIN_K && since_off_k <= OFF_NEIGHBOUR_MAX_RISE_K;
-            w.heating = !warmed_by_other
-                && (after_k > OFF_MAX_RISE_K || since_off_k > OFF_STORED_MAX_RISE_K);
+            let warmed = warmed_by_other(&self.range, &m, heater, since_off_k);
+            let w = &mut self.off[heater.index()];
+            w.heating =
+                !warmed && (after_k > OFF_MAX_RISE_K || since_off_k > OFF_STORED_MAX_RISE_K);
             if w.heating {
                 return Err(Fault {
                     code: FaultCode::HeatingWhileOff,
@@ -949,6 +943,7 @@ impl Supervisor {
     /// controller turns it down (a stuck MOSFET during a morph).
     fn check_low(&mut self, now_ms: u64, cmd: Powers) -> Result<(), Fault> {
         let amb_c = self.live_c[Sensor::Amb.index()];
+        let m = self.measurements();
         for heater in Heater::ALL {
             let rise_k = self.live_c[heater.sensor().index()] - amb_c;
             let w = &mut self.low[heater.index()];
@@ -976,7 +971,12 @@ impl Supervisor {
             else {
                 continue;
             };
-            if rise_k - min_k > OFF_MAX_RISE_K {
+            // The other heater, on, may be what warms it (a hot TCA holding a tight radius
+            // warms the cooling PLA in still air), as with both off.
+            if rise_k - min_k > OFF_MAX_RISE_K
+                && !warmed_by_other(&self.range, &m, heater, rise_k - min_k)
+            {
+                let w = &mut self.low[heater.index()];
                 w.tripped_min_k = Some(min_k);
                 return Err(Fault {
                     code: FaultCode::HeatingWhileOff,
@@ -1102,6 +1102,26 @@ impl Supervisor {
         }
         Ok(())
     }
+}
+
+/// Whether `heater`'s sensor, risen `since_k` (K) since its watch began, may be warmed by the
+/// other heater's part of the link: heat flows from hot to cold, so a sensor reading less than
+/// [`OFF_NEIGHBOUR_MARGIN_K`] above the other heated sensor is not judged, up to
+/// [`OFF_NEIGHBOUR_MAX_RISE_K`]. Judged on the last good readings `m`, so one glitch changes
+/// nothing; a sensor whose range check stands tripped has failed and explains nothing.
+fn warmed_by_other(
+    range: &[RangeCheck; 3],
+    m: &Measurements,
+    heater: Heater,
+    since_k: f32,
+) -> bool {
+    let other = heater.other().sensor();
+    let other_c = if range[other.index()].tripped() {
+        f32::NAN
+    } else {
+        m.of(other)
+    };
+    m.of(heater.sensor()) < other_c + OFF_NEIGHBOUR_MARGIN_K && since_k <= OFF_NEIGHBOUR_MAX_RISE_K
 }
 
 /// Whether `heater`'s sensor, reading `rise_k` above ambient, must cool with its own heater low:
@@ -2114,7 +2134,7 @@ mod tests {
             }
             let mut faults = Faults::new();
             sup.check_all(ms, &fr, off(t_s), Phase::Idle, &mut faults);
-            if let Some(f) = faults.iter().find(|f| heating(f)) {
+            if faults.iter().any(heating) {
                 found = Some(t_s);
                 break;
             }

@@ -24,7 +24,7 @@ fn listing(b: &mut Bench) -> Vec<String> {
     let r = b.send("CONFIG");
     assert_eq!(
         r.last().map(String::as_str),
-        Some("ok settings=20"),
+        Some("ok settings=21"),
         "{r:?}"
     );
     r[..r.len() - 1].to_vec()
@@ -41,7 +41,7 @@ fn flash_holding(bytes: &[u8]) -> SimFlash {
 fn config_lists_every_setting_with_unit_value_and_range() {
     let mut b = Bench::new();
     let rows = listing(&mut b);
-    assert_eq!(rows.len(), 20);
+    assert_eq!(rows.len(), 21);
     for r in &rows {
         assert!(r.starts_with("data: "), "{r}");
         assert!(r.contains("default="), "{r}");
@@ -165,7 +165,7 @@ fn settings_cannot_change_or_be_saved_while_a_morph_runs() {
     assert_eq!(b.rig.saves(), 0);
     assert_eq!(*b.rig.ctrl.settings(), Settings::DEFAULT);
     // CONFIG (read-only) still answers.
-    assert_eq!(listing(&mut b).len(), 20);
+    assert_eq!(listing(&mut b).len(), 21);
     assert_eq!(b.send("ABORT"), ["ok"]);
     assert_eq!(
         b.send("CONFIG SET lock_timeout_s 300"),
@@ -221,7 +221,7 @@ fn saved_settings_survive_a_reboot_and_unsaved_ones_do_not() {
     b.send("CONFIG SET soften_timeout_s 45");
     b.send("CONFIG SET auto_mode boost");
     let r = b.send("SAVE");
-    assert_eq!(r, ["ok saved bytes=86 erases=0"]);
+    assert_eq!(r, ["ok saved bytes=90 erases=0"]);
     b.send("CONFIG SET bend_timeout_s 200");
     let flash = b.rig.flash().unwrap().clone();
 
@@ -229,7 +229,7 @@ fn saved_settings_survive_a_reboot_and_unsaved_ones_do_not() {
     assert!(
         again
             .lines
-            .contains(&"event: config loaded settings=20".to_string()),
+            .contains(&"event: config loaded settings=21".to_string()),
         "{:?}",
         again.lines
     );
@@ -319,7 +319,7 @@ fn bad_stored_settings_boot_as_the_defaults_with_the_reason_and_never_heat() {
         assert!(
             again
                 .lines
-                .contains(&"event: config loaded settings=20".to_string()),
+                .contains(&"event: config loaded settings=21".to_string()),
             "{what}: {:?}",
             again.lines
         );

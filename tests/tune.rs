@@ -18,6 +18,7 @@ const ZERO: Outputs = Outputs {
 
 on_both_links!(
     a_healthy_link_tunes_within_bounds_and_raises_no_alarm,
+    in_still_air_tune_sets_the_still_air_model_and_water_sets_it_back,
     abort_in_every_step_ends_the_tune_with_heaters_off,
     a_heater_that_does_not_heat_trips_and_keeps_the_calibration,
     a_thermistor_that_opens_trips_and_keeps_the_calibration,
@@ -70,6 +71,45 @@ fn a_healthy_link_tunes_within_bounds_and_raises_no_alarm(link: Link) {
     b.run_for(60.0);
     b.morph(38.0, "auto");
     assert_eq!(b.alarms(), Vec::<String>::new());
+}
+
+fn in_still_air_tune_sets_the_still_air_model_and_water_sets_it_back(link: Link) {
+    let mut b = Bench::on(link);
+    assert_eq!(b.send("SIM MEDIUM air"), ["ok medium=air"]);
+    b.run_for(2.0);
+    let t0 = b.rig.now_ms();
+    let end = tune(&mut b);
+    let took_s = (b.rig.now_ms() - t0) as f64 / 1000.0;
+    println!("{link:?}: {end} ({took_s} s)");
+    assert!(
+        b.lines.iter().any(|l| l.starts_with("event: tune still-air pla rose")),
+        "{:?}",
+        b.lines
+    );
+    assert!(end.starts_with("event: tune done") && end.ends_with("convection_w_m2k=20.0"), "{end}");
+    assert!(took_s <= TUNE_TOTAL_S as f64, "{took_s} s");
+    assert_eq!(b.alarms(), Vec::<String>::new());
+    assert_eq!(b.rig.ctrl.outputs(), ZERO);
+    let cal = b.rig.ctrl.calibration();
+    assert_eq!(cal.convection_w_m2k, morphlink::tune::TUNE_STILL_AIR_W_M2K);
+    // The model's own rises at still air: its thermistors read their nodes.
+    for h in [morphlink::vocab::Heater::Pla, morphlink::vocab::Heater::Tca] {
+        assert!((cal.sensor_gain(h) - 1.0).abs() < 1e-4, "{cal:?}");
+        assert!((cal.cross_gain(h) - 1.0).abs() < 1e-4, "{cal:?}");
+    }
+    // A morph in still air on it finishes with no alarm.
+    b.run_for(120.0);
+    b.morph(42.0, "auto");
+    assert_eq!(b.alarms(), Vec::<String>::new());
+    // Back under water, at rest, a tune sets the link file's convection back.
+    assert_eq!(b.send("SIM MEDIUM water"), ["ok medium=water"]);
+    b.run_for(300.0);
+    let end = tune(&mut b);
+    assert!(end.starts_with("event: tune done"), "{end}");
+    assert_eq!(
+        b.rig.ctrl.calibration().convection_w_m2k,
+        Calibration::DEFAULT.convection_w_m2k
+    );
 }
 
 fn abort_in_every_step_ends_the_tune_with_heaters_off(link: Link) {

@@ -709,7 +709,7 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
     let save_wall = t0.elapsed();
     check!(
         emu,
-        saved.last().unwrap().starts_with("ok saved bytes=86 "),
+        saved.last().unwrap().starts_with("ok saved bytes=90 "),
         "{saved:?}"
     );
     println!("emulated SAVE round trip: {save_wall:?} wall time");
@@ -720,7 +720,7 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
     let again = emu.wait_for("event: config ", REPLY).unwrap();
     check!(
         emu,
-        again.last().unwrap() == "event: config loaded settings=20",
+        again.last().unwrap() == "event: config loaded settings=21",
         "{again:?}"
     );
     emu.wait_ready(REPLY).unwrap();

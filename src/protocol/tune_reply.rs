@@ -213,13 +213,14 @@ fn fitted_values(l: &mut OutLine, c: &Calibration) {
     let _ = write!(
         l,
         "pla_rise_k_per_w={} tca_rise_k_per_w={} pla_to_tca_k_per_w={} tca_to_pla_k_per_w={} \
-         pla_tau_s={} tca_tau_s={}",
+         pla_tau_s={} tca_tau_s={} convection_w_m2k={}",
         Fixed(c.pla_rise_k_per_w, 2),
         Fixed(c.tca_rise_k_per_w, 2),
         Fixed(c.pla_to_tca_k_per_w, 2),
         Fixed(c.tca_to_pla_k_per_w, 2),
         Fixed(c.pla_tau_s, 1),
-        Fixed(c.tca_tau_s, 1)
+        Fixed(c.tca_tau_s, 1),
+        Fixed(c.convection_w_m2k, 1)
     );
 }
 
@@ -249,6 +250,16 @@ pub fn tune_event(l: &mut OutLine, e: &TuneEvent) {
                 Fixed(*rise_k_per_w, 2),
                 Fixed(*tau_s, 1),
                 method.as_str()
+            );
+        }
+        TuneEvent::StillAir { rise_k, t_s } => {
+            let _ = write!(
+                l,
+                "still-air pla rose {} K in {} s, far faster than in water: the still-air model \
+                 is used (convection_w_m2k={})",
+                Fixed(*rise_k, 1),
+                Fixed(*t_s, 1),
+                Fixed(crate::tune::TUNE_STILL_AIR_W_M2K, 1)
             );
         }
         TuneEvent::Kept { what, why } => {

@@ -11,19 +11,35 @@
 //! heater trips it as in a morph, and ABORT or any trip ends the tune with both heaters off and
 //! the calibration as it was.
 //!
+//! **Still air.** The PLA's step rising to its cap before [`TUNE_EARLY_CAP_SHARE`] of its
+//! length is still air: the same watt rises about five times as far, over minutes. The tune
+//! then ends `done` with the model at its still-air convection ([`TUNE_STILL_AIR_W_M2K`]) and
+//! the still-air model's own rises and couplings (`event: tune still-air ...`): records capped
+//! within seconds of a response minutes long say how fast the heaters warm, not how far, and
+//! shares fitted to them made the high-fidelity still-air links worse after calibration than
+//! the model's own (`docs/calibration.md`). The time constants stay as they were. A tune
+//! whose steps end as under water sets the link file's convection (still water) back.
+//!
 //! Every fitted value is checked for sign and bounds before use (Marlin #27181: a negative
-//! constant ran a heater away): the ranges of [`crate::calibration::FIELDS`]. The asymptotic
+//! constant ran a heater away): its share of the model's own rise at the convection it is
+//! read against ([`crate::calibration::RISE_MIN_SHARE`]..[`crate::calibration::RISE_MAX_SHARE`],
+//! a coupling up to twice the top share), inside the ranges of
+//! [`crate::calibration::FIELDS`]. The asymptotic
 //! fit comes first; where it fails or is out of bounds the least-squares fit is tried
 //! ([`fit`]); where both fail the tune fails, says why and keeps the old values. Only the
 //! coupling may fail alone: it is then kept and the tune still ends `done`.
 
 pub mod fit;
 
-use crate::calibration::{Calibration, FieldInfo, FIELDS, TAU_RANGE_S};
+use crate::calibration::{
+    Calibration, FieldInfo, FIELDS, RISE_MAX_SHARE, RISE_MIN_SHARE, TAU_RANGE_S,
+};
 use crate::heater::HeaterConfig;
+use crate::link::{CONVECTION_RANGE_W_M2K, LINK};
 use crate::supervisor::HEATING_MIN_POWER_FRACTION;
 use crate::vocab::{Heater, Measurements, Powers};
 use fit::{Method, StepFit};
+use morphlink_model::thermal::ResistanceMatrix;
 
 /// Heaters off before the first step, s: the baseline is the mean over it.
 pub const TUNE_SETTLE_S: f32 = 5.0;
@@ -60,6 +76,13 @@ pub const TUNE_START_MAX_RISE_K: f32 = 3.0;
 /// own records end at 85 % or more of their rise under water, well inside the bound.
 pub const TUNE_MAX_EXTRAPOLATION: f32 = 1.6;
 const _: () = assert!(TUNE_MAX_EXTRAPOLATION > 1.0 && TUNE_MAX_EXTRAPOLATION <= 2.0);
+/// Rim convection a tune that finds still air sets, W/(m² K): the model's still-air value
+/// (`morphlink_model::params::H_AIR_W_M2K`).
+pub const TUNE_STILL_AIR_W_M2K: f32 = morphlink_model::params::H_AIR_W_M2K as f32;
+const _: () = assert!(
+    TUNE_STILL_AIR_W_M2K >= CONVECTION_RANGE_W_M2K.0
+        && TUNE_STILL_AIR_W_M2K <= CONVECTION_RANGE_W_M2K.1
+);
 /// Samples at the end of a record whose mean is the rise it ended at.
 pub const TUNE_END_SAMPLES: usize = 3;
 const _: () = assert!(TUNE_END_SAMPLES >= 1 && TUNE_END_SAMPLES <= fit::MIN_SAMPLES);
@@ -187,6 +210,14 @@ pub enum TuneEvent {
         /// The heated heater's power, W (0 for settle and cool).
         power_w: f32,
     },
+    /// The PLA's step rose `rise_k` in `t_s`, far faster than in water: still air, whose
+    /// model is used from now on.
+    StillAir {
+        /// The PLA thermistor's rise when its step was cut, K.
+        rise_k: f32,
+        /// Into the step, s.
+        t_s: f32,
+    },
     /// A value was fitted and passed its checks.
     Fit {
         /// What.
@@ -243,6 +274,9 @@ pub struct Tune {
     tca_fit: Option<StepFit>,
     tca_end_rise_k: f32,
     tca_off_ms: u64,
+    /// The TCA fit's rejection when its record was too short for its time constant: final
+    /// unless the PLA step finds still air.
+    tca_deferred: Option<Rejection>,
     /// The calibration being built (the old one until each value passes).
     cal: Calibration,
 }
@@ -267,14 +301,49 @@ fn bounded(info: FieldInfo, v: f32) -> Result<f32, Rejection> {
     }
 }
 
-/// Fits a record of `power_w` into (rise per watt, tau) within the named fields' ranges: the
-/// asymptotic method first, least squares where it fails or is out of bounds.
+/// The rise field of `what`, with the range a tune judges it by against the model's rises
+/// `r` (K/W): a thermistor's own rise [`RISE_MIN_SHARE`]..[`RISE_MAX_SHARE`] of the model's,
+/// a coupling up to twice the top share; never wider than the field's own range.
+fn judged(what: Fitted, r: &ResistanceMatrix) -> FieldInfo {
+    let (name, lo, hi) = match what {
+        Fitted::Own(Heater::Pla) => ("pla_rise_k_per_w", RISE_MIN_SHARE, RISE_MAX_SHARE),
+        Fitted::Own(Heater::Tca) => ("tca_rise_k_per_w", RISE_MIN_SHARE, RISE_MAX_SHARE),
+        Fitted::PlaToTca => ("pla_to_tca_k_per_w", 0.0, 2.0 * RISE_MAX_SHARE),
+        Fitted::TcaToPla => ("tca_to_pla_k_per_w", 0.0, 2.0 * RISE_MAX_SHARE),
+    };
+    let model = match what {
+        Fitted::Own(Heater::Pla) => r.r_pp,
+        Fitted::Own(Heater::Tca) => r.r_tt,
+        Fitted::PlaToTca | Fitted::TcaToPla => r.r_tp,
+    } as f32;
+    let f = field(name);
+    FieldInfo {
+        min: (lo * model).max(f.min),
+        max: (hi * model).min(f.max),
+        ..f
+    }
+}
+
+/// The model's rises at the link file's convection (still water), K/W.
+fn water() -> ResistanceMatrix {
+    Calibration::DEFAULT.model_resistances()
+}
+
+/// Fits a record of `power_w` into (rise per watt, tau) within the range [`judged`] gives
+/// `what` against the model's rises `r` (and, for a heater's own thermistor, its time
+/// constant's field): the asymptotic method first, least squares where it fails or is out of
+/// bounds.
 fn fit_checked(
     y: &[f32],
     power_w: f32,
-    rise_field: &str,
-    tau_field: Option<&str>,
+    what: Fitted,
+    r: &ResistanceMatrix,
 ) -> Result<(f32, f32, Method), Rejection> {
+    let tau_field = match what {
+        Fitted::Own(Heater::Pla) => Some("pla_tau_s"),
+        Fitted::Own(Heater::Tca) => Some("tca_tau_s"),
+        _ => None,
+    };
     let end_k = if y.len() >= TUNE_END_SAMPLES {
         let tail = &y[y.len() - TUNE_END_SAMPLES..];
         tail.iter().sum::<f32>() / TUNE_END_SAMPLES as f32
@@ -289,7 +358,7 @@ fn fit_checked(
         if !(f.rise_k <= TUNE_MAX_EXTRAPOLATION * end_k) {
             return Err(Rejection::Extrapolated(f.rise_k, end_k));
         }
-        let r = bounded(field(rise_field), f.rise_k / power_w)?;
+        let r = bounded(judged(what, r), f.rise_k / power_w)?;
         let t = match tau_field {
             Some(name) => bounded(field(name), f.tau_s)?,
             None => f.tau_s,
@@ -329,6 +398,7 @@ impl Tune {
             tca_fit: None,
             tca_end_rise_k: 0.0,
             tca_off_ms: now_ms,
+            tca_deferred: None,
             cal,
         };
         emit(TuneEvent::Step {
@@ -414,12 +484,13 @@ impl Tune {
             _ => false,
         };
         if capped && in_step_s < TUNE_EARLY_CAP_SHARE * self.step.length_s() {
-            let (h, rise) = if self.step == TuneStep::Tca {
-                (Heater::Tca, tca - self.base_c[1])
-            } else {
-                (Heater::Pla, pla - self.base_c[0])
-            };
-            return self.fail(TuneFailure::TooFast(h, rise), emit);
+            if self.step == TuneStep::Pla {
+                return self.finish_still_air(pla - self.base_c[0], in_step_s, emit);
+            }
+            return self.fail(
+                TuneFailure::TooFast(Heater::Tca, tca - self.base_c[1]),
+                emit,
+            );
         }
         if in_step_s + 1e-3 >= self.step.length_s() || capped || self.n >= TUNE_MAX_SAMPLES {
             match self.step {
@@ -430,7 +501,7 @@ impl Tune {
                 }
                 TuneStep::Tca => {
                     let y = &self.rec[0][..self.n];
-                    match fit_checked(y, TUNE_TCA_W, "tca_rise_k_per_w", Some("tca_tau_s")) {
+                    match fit_checked(y, TUNE_TCA_W, Fitted::Own(Heater::Tca), &water()) {
                         Ok((r, tau, method)) => {
                             self.cal.tca_rise_k_per_w = r;
                             self.cal.tca_tau_s = tau;
@@ -448,12 +519,14 @@ impl Tune {
                                 method,
                             });
                         }
+                        // Too short for its time constant: still air, if the PLA's step shows it.
+                        Err(why @ Rejection::Extrapolated(..)) => self.tca_deferred = Some(why),
                         Err(why) => {
                             return self.fail(TuneFailure::Fit(Fitted::Own(Heater::Tca), why), emit)
                         }
                     }
                     let c = &self.rec[1][..self.n];
-                    match fit_checked(c, TUNE_TCA_W, "tca_to_pla_k_per_w", None) {
+                    match fit_checked(c, TUNE_TCA_W, Fitted::TcaToPla, &water()) {
                         Ok((r, tau, method)) => {
                             self.cal.tca_to_pla_k_per_w = r;
                             emit(TuneEvent::Fit {
@@ -483,8 +556,12 @@ impl Tune {
     }
 
     fn finish(&mut self, emit: &mut impl FnMut(TuneEvent)) -> TuneTick {
+        if let Some(why) = self.tca_deferred {
+            return self.fail(TuneFailure::Fit(Fitted::Own(Heater::Tca), why), emit);
+        }
+        self.cal.convection_w_m2k = LINK.surroundings.h_w_m2k as f32;
         let y = &self.rec[0][..self.n];
-        match fit_checked(y, TUNE_PLA_W, "pla_rise_k_per_w", Some("pla_tau_s")) {
+        match fit_checked(y, TUNE_PLA_W, Fitted::Own(Heater::Pla), &water()) {
             Ok((r, tau, method)) => {
                 self.cal.pla_rise_k_per_w = r;
                 self.cal.pla_tau_s = tau;
@@ -498,7 +575,7 @@ impl Tune {
             Err(why) => return self.fail(TuneFailure::Fit(Fitted::Own(Heater::Pla), why), emit),
         }
         let c = &self.rec[1][..self.n];
-        match fit_checked(c, TUNE_PLA_W, "pla_to_tca_k_per_w", None) {
+        match fit_checked(c, TUNE_PLA_W, Fitted::PlaToTca, &water()) {
             Ok((r, tau, method)) => {
                 self.cal.pla_to_tca_k_per_w = r;
                 emit(TuneEvent::Fit {
@@ -513,6 +590,28 @@ impl Tune {
                 why,
             }),
         }
+        emit(TuneEvent::Done(self.cal));
+        TuneTick::Done(self.cal)
+    }
+
+    /// The PLA's step reached its cap early (`rise_k` above its baseline, `t_s` into the
+    /// step): still air. The model's still-air convection and its own rises and couplings at
+    /// it replace whatever the TCA step fitted.
+    fn finish_still_air(
+        &mut self,
+        rise_k: f32,
+        t_s: f32,
+        emit: &mut impl FnMut(TuneEvent),
+    ) -> TuneTick {
+        let mut cal = self.cal;
+        cal.convection_w_m2k = TUNE_STILL_AIR_W_M2K;
+        let r = cal.model_resistances();
+        cal.pla_rise_k_per_w = r.r_pp as f32;
+        cal.tca_rise_k_per_w = r.r_tt as f32;
+        cal.pla_to_tca_k_per_w = r.r_tp as f32;
+        cal.tca_to_pla_k_per_w = r.r_tp as f32;
+        self.cal = cal;
+        emit(TuneEvent::StillAir { rise_k, t_s });
         emit(TuneEvent::Done(self.cal));
         TuneTick::Done(self.cal)
     }
@@ -535,7 +634,7 @@ mod tests {
     fn a_record_longer_than_its_time_constant_is_fitted() {
         // 45 s of a 13 s coupling: 97 % of the way.
         let y = record(4.8, 13.0, 45);
-        let (r, tau, _) = fit_checked(&y[..45], TUNE_TCA_W, "tca_to_pla_k_per_w", None).unwrap();
+        let (r, tau, _) = fit_checked(&y[..45], TUNE_TCA_W, Fitted::TcaToPla, &water()).unwrap();
         assert!(
             (r - 8.0).abs() < 0.3 && (tau - 13.0).abs() < 1.5,
             "{r} {tau}"
@@ -546,7 +645,7 @@ mod tests {
     fn a_record_far_shorter_than_its_time_constant_is_an_extrapolation() {
         // 45 s of a 120 s coupling ends at 31 % of its rise: both methods would triple it.
         let y = record(12.0, 120.0, 45);
-        match fit_checked(&y[..45], TUNE_TCA_W, "tca_to_pla_k_per_w", None) {
+        match fit_checked(&y[..45], TUNE_TCA_W, Fitted::TcaToPla, &water()) {
             Err(Rejection::Extrapolated(fit_k, seen_k)) => {
                 assert!(fit_k > TUNE_MAX_EXTRAPOLATION * seen_k, "{fit_k} {seen_k}");
                 assert!((seen_k - y[44]).abs() < 0.2, "{seen_k}");
@@ -554,7 +653,7 @@ mod tests {
             other => panic!("{other:?}"),
         }
         // A falling or empty record has nothing to extrapolate from.
-        assert!(fit_checked(&[0.0; 20], TUNE_TCA_W, "tca_to_pla_k_per_w", None).is_err());
-        assert!(fit_checked(&[], TUNE_TCA_W, "tca_to_pla_k_per_w", None).is_err());
+        assert!(fit_checked(&[0.0; 20], TUNE_TCA_W, Fitted::TcaToPla, &water()).is_err());
+        assert!(fit_checked(&[], TUNE_TCA_W, Fitted::TcaToPla, &water()).is_err());
     }
 }

@@ -109,6 +109,8 @@ struct Eval {
     error_pct: f64,
     /// Seconds since MORPH at which bend, lock and release began (NaN if never).
     phase_s: [f64; 3],
+    /// How it ended: `done`, the fault's code or `unfinished`.
+    end: &'static str,
 }
 
 /// What one link gave.
@@ -127,6 +129,13 @@ struct MorphRun {
     time_s: f64,
     final_mm: f64,
     phase_s: [f64; 3],
+    /// `done`, the fault's code (a phase timeout or an alarm) or `unfinished`.
+    end: &'static str,
+}
+
+/// An end that is a safety alarm (not `done`, a phase timeout, or a morph still running).
+fn is_alarm(end: &str) -> bool {
+    !matches!(end, "done" | "phase-timeout" | "unfinished")
 }
 
 /// Which of [`MorphRun::phase_s`] a phase event fills.
@@ -167,6 +176,7 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> MorphRun {
             time_s: f64::NAN,
             final_mm: f64::NAN,
             phase_s,
+            end: rig.ctrl.fault().map_or("unfinished", |f| f.code.as_str()),
         };
     }
     let time_s = (rig.now_ms() - t0) as f64 / 1000.0;
@@ -175,10 +185,20 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> MorphRun {
         rig.tick();
         while rig.ctrl.pop_event().is_some() {}
     }
+    // An alarm in the minute after `done` is still this morph's.
+    if let Some(f) = rig.ctrl.fault() {
+        return MorphRun {
+            time_s: f64::NAN,
+            final_mm: f64::NAN,
+            phase_s,
+            end: f.code.as_str(),
+        };
+    }
     MorphRun {
         time_s,
         final_mm: rig.radius_mm(),
         phase_s,
+        end: "done",
     }
 }
 
@@ -199,6 +219,7 @@ fn evaluate(
                 time_s: m.time_s,
                 error_pct: (m.final_mm - t as f64) / t as f64 * 100.0,
                 phase_s: m.phase_s,
+                end: m.end,
             }
         })
         .collect()
@@ -280,8 +301,8 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[rank.clamp(1, sorted.len()) - 1]
 }
 
-/// (runs, failed, |error| p50, p95, time p50) over evaluations.
-fn stats<'a>(evals: impl Iterator<Item = &'a Eval>) -> (usize, usize, f64, f64, f64) {
+/// (runs, failed, of which alarms, |error| p50, p95, time p50) over evaluations.
+fn stats<'a>(evals: impl Iterator<Item = &'a Eval>) -> (usize, usize, usize, f64, f64, f64) {
     let all: Vec<&Eval> = evals.collect();
     let done: Vec<&&Eval> = all.iter().filter(|e| e.error_pct.is_finite()).collect();
     let mut e: Vec<f64> = done.iter().map(|e| e.error_pct.abs()).collect();
@@ -291,6 +312,7 @@ fn stats<'a>(evals: impl Iterator<Item = &'a Eval>) -> (usize, usize, f64, f64, 
     (
         all.len(),
         all.len() - done.len(),
+        all.iter().filter(|e| is_alarm(e.end)).count(),
         percentile(&e, 50.0),
         percentile(&e, 95.0),
         percentile(&t, 50.0),
@@ -437,7 +459,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
         .collect::<Result<_, _>>()?;
     // CSV: one row per evaluated morph.
     let mut csv = String::from(
-        "plant,draw,air,stage,measured,target_mm,time_s,error_pct,bend_s,lock_s,release_s,tune\n",
+        "plant,draw,air,stage,measured,target_mm,time_s,error_pct,bend_s,lock_s,release_s,end,tune\n",
     );
     for r in &results {
         for (k, e) in r.evals.iter().enumerate() {
@@ -445,7 +467,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
             let tune_line = if k == 0 { r.tune_line.as_str() } else { "" };
             let _ = writeln!(
                 csv,
-                "{},{},{},{},{},{:.2},{:.1},{:.3},{:.1},{:.1},{:.1},\"{}\"",
+                "{},{},{},{},{},{:.2},{:.1},{:.3},{:.1},{:.1},{:.1},{},\"{}\"",
                 r.plant,
                 r.draw,
                 r.air,
@@ -457,6 +479,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                 e.phase_s[0],
                 e.phase_s[1],
                 e.phase_s[2],
+                e.end,
                 tune_line.replace('"', "'")
             );
         }
@@ -478,13 +501,13 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
             sel.len()
         );
         println!(
-            "| stage | medium | runs | failed | time p50 | \\|error\\| p50 | \\|error\\| p95 |"
+            "| stage | medium | runs | failed | of which alarms | time p50 | \\|error\\| p50 | \\|error\\| p95 |"
         );
-        println!("| --- | --- | --- | --- | --- | --- | --- |");
+        println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
         let mut pts = Vec::new();
         for (si, stage) in STAGES.iter().enumerate() {
             for air in [false, true] {
-                let (n, failed, p50, p95, t50) = stats(
+                let (n, failed, alarms, p50, p95, t50) = stats(
                     sel.iter()
                         .filter(|r| r.air == air)
                         .flat_map(|r| r.evals.iter())
@@ -494,7 +517,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                     continue;
                 }
                 println!(
-                    "| {} | {} | {n} | {failed} | {t50:.1} s | {p50:.2} % | {p95:.2} % |",
+                    "| {} | {} | {n} | {failed} | {alarms} | {t50:.1} s | {p50:.2} % | {p95:.2} % |",
                     stage_name(*stage),
                     if air { "air" } else { "water" },
                 );
@@ -516,7 +539,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                     .flat_map(|r| r.evals.iter())
                     .filter(move |e| e.measured == Some(3) && e.target_mm == t)
             };
-            let (_, failed, p50, p95, t50) = stats(at());
+            let (_, failed, _, p50, p95, t50) = stats(at());
             // Phase lengths of the finished morphs: soften to bend, bend to lock, lock to
             // release.
             let span = |from: Option<usize>, to: usize| {
