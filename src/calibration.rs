@@ -764,4 +764,33 @@ mod tests {
         assert!((c.power_scale() - 1.2).abs() < 0.02);
         assert!(c.valid());
     }
+
+    #[test]
+    fn the_rises_are_read_against_the_model_at_the_calibrated_convection() {
+        use crate::vocab::Heater;
+        let water = Calibration::DEFAULT;
+        for h in [Heater::Pla, Heater::Tca] {
+            assert!((water.sensor_gain(h) - 1.0).abs() < 1e-4);
+            assert!((water.cross_gain(h) - 1.0).abs() < 1e-4);
+        }
+        // Still air: the model rises further per watt, so the water rises read as a bead that
+        // sees a share of its node, and the air model's own as 1.
+        let mut air = water;
+        air.set(13, 20.0).unwrap();
+        let r = air.model_resistances();
+        assert!(r.r_pp > 1.5 * R_PP_K_PER_W as f64 && r.r_tp > 3.0 * R_TP_K_PER_W as f64);
+        assert!(
+            air.sensor_gain(Heater::Pla) < 0.7,
+            "{}",
+            air.sensor_gain(Heater::Pla)
+        );
+        air.pla_rise_k_per_w = r.r_pp as f32;
+        assert!((air.sensor_gain(Heater::Pla) - 1.0).abs() < 1e-4);
+        // Outside its range the field is refused; a value that got in anyway runs the water model.
+        assert!(air.set(13, 5.0).is_err());
+        let mut bad = water;
+        bad.convection_w_m2k = f32::NAN;
+        assert_eq!(bad.model_convection_w_m2k(), water.convection_w_m2k);
+        assert_eq!(FIELDS[13].name, "convection_w_m2k");
+    }
 }

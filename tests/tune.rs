@@ -82,11 +82,16 @@ fn in_still_air_tune_sets_the_still_air_model_and_water_sets_it_back(link: Link)
     let took_s = (b.rig.now_ms() - t0) as f64 / 1000.0;
     println!("{link:?}: {end} ({took_s} s)");
     assert!(
-        b.lines.iter().any(|l| l.starts_with("event: tune still-air pla rose")),
+        b.lines
+            .iter()
+            .any(|l| l.starts_with("event: tune still-air pla rose")),
         "{:?}",
         b.lines
     );
-    assert!(end.starts_with("event: tune done") && end.ends_with("convection_w_m2k=20.0"), "{end}");
+    assert!(
+        end.starts_with("event: tune done") && end.ends_with("convection_w_m2k=20.0"),
+        "{end}"
+    );
     assert!(took_s <= TUNE_TOTAL_S as f64, "{took_s} s");
     assert_eq!(b.alarms(), Vec::<String>::new());
     assert_eq!(b.rig.ctrl.outputs(), ZERO);
