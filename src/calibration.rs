@@ -29,6 +29,7 @@ use crate::link::{
     R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W,
 };
 use morphlink_model::thermal::{resistance_matrix, ResistanceMatrix};
+use morphlink_model::LinkParams;
 
 /// One calibration field's description: its name (the settings key), unit and allowed range.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -109,6 +110,14 @@ const _: () = assert!(
     LINK.surroundings.h_w_m2k as f32 >= CONVECTION_RANGE_W_M2K.0
         && LINK.surroundings.h_w_m2k as f32 <= CONVECTION_RANGE_W_M2K.1
 );
+
+/// The model's rises at the link file's convection (still water), K/W: the build's
+/// `R_TT_K_PER_W`, `R_PP_K_PER_W`, `R_TP_K_PER_W`.
+pub const WATER_RESISTANCES: ResistanceMatrix = ResistanceMatrix {
+    r_tt: R_TT_K_PER_W as f64,
+    r_pp: R_PP_K_PER_W as f64,
+    r_tp: R_TP_K_PER_W as f64,
+};
 
 /// Number of fields.
 pub const FIELD_COUNT: usize = 15;
@@ -394,11 +403,25 @@ impl Calibration {
         }
     }
 
-    /// The model's steady rises per watt at [`Calibration::model_convection_w_m2k`], K/W: what
-    /// the rises of a thermistor that reads its whole node are.
-    pub fn model_resistances(&self) -> ResistanceMatrix {
+    /// The link's parameters as the model runs them: the link file's, at
+    /// [`Calibration::model_convection_w_m2k`] (untouched at the link file's own convection).
+    pub fn model_params(&self) -> LinkParams {
         let mut p = LINK;
-        p.surroundings.h_w_m2k = self.model_convection_w_m2k() as f64;
+        let h = self.model_convection_w_m2k();
+        if h != LINK.surroundings.h_w_m2k as f32 {
+            p.surroundings.h_w_m2k = h as f64;
+        }
+        p
+    }
+
+    /// The model's steady rises per watt at [`Calibration::model_convection_w_m2k`], K/W: what
+    /// the rises of a thermistor that reads its whole node are ([`WATER_RESISTANCES`], built
+    /// in, at the link file's convection).
+    pub fn model_resistances(&self) -> ResistanceMatrix {
+        let p = self.model_params();
+        if p.surroundings.h_w_m2k == LINK.surroundings.h_w_m2k {
+            return WATER_RESISTANCES;
+        }
         resistance_matrix(&p)
     }
 

@@ -283,11 +283,10 @@ pub fn tune_event(l: &mut OutLine, e: &TuneEvent) {
                     let _ = write!(l, "{} fit: ", what.as_str());
                     rejection(l, why);
                 }
-                TuneFailure::TooFast(h, rise_k) => {
+                TuneFailure::TcaTooFast(rise_k) => {
                     let _ = write!(
                         l,
-                        "{} rose {} K, far faster than in water (still air?)",
-                        h.as_str(),
+                        "tca rose {} K, far faster than in water or still air (is its bead on it?)",
                         Fixed(*rise_k, 1)
                     );
                 }

@@ -193,9 +193,10 @@ pub enum TuneFailure {
     Tripped,
     /// A fit failed on both methods.
     Fit(Fitted, Rejection),
-    /// A heated step reached [`TUNE_MAX_RISE_K`] before [`TUNE_EARLY_CAP_SHARE`] of its
-    /// length: far faster than in water (still air?); the heater and its rise in kelvin.
-    TooFast(Heater, f32),
+    /// The TCA's step reached [`TUNE_MAX_RISE_K`] before [`TUNE_EARLY_CAP_SHARE`] of its
+    /// length (its rise, K): far faster than in water, and in still air the TCA rises slower
+    /// still (a PLA step that does so is still air, [`TuneEvent::StillAir`]).
+    TcaTooFast(f32),
 }
 
 /// Progress of a tune, for `event: tune ...` lines.
@@ -305,18 +306,13 @@ fn bounded(info: FieldInfo, v: f32) -> Result<f32, Rejection> {
 /// `r` (K/W): a thermistor's own rise [`RISE_MIN_SHARE`]..[`RISE_MAX_SHARE`] of the model's,
 /// a coupling up to twice the top share; never wider than the field's own range.
 fn judged(what: Fitted, r: &ResistanceMatrix) -> FieldInfo {
-    let (name, lo, hi) = match what {
-        Fitted::Own(Heater::Pla) => ("pla_rise_k_per_w", RISE_MIN_SHARE, RISE_MAX_SHARE),
-        Fitted::Own(Heater::Tca) => ("tca_rise_k_per_w", RISE_MIN_SHARE, RISE_MAX_SHARE),
-        Fitted::PlaToTca => ("pla_to_tca_k_per_w", 0.0, 2.0 * RISE_MAX_SHARE),
-        Fitted::TcaToPla => ("tca_to_pla_k_per_w", 0.0, 2.0 * RISE_MAX_SHARE),
+    let (name, model, lo, hi) = match what {
+        Fitted::Own(Heater::Pla) => ("pla_rise_k_per_w", r.r_pp, RISE_MIN_SHARE, RISE_MAX_SHARE),
+        Fitted::Own(Heater::Tca) => ("tca_rise_k_per_w", r.r_tt, RISE_MIN_SHARE, RISE_MAX_SHARE),
+        Fitted::PlaToTca => ("pla_to_tca_k_per_w", r.r_tp, 0.0, 2.0 * RISE_MAX_SHARE),
+        Fitted::TcaToPla => ("tca_to_pla_k_per_w", r.r_tp, 0.0, 2.0 * RISE_MAX_SHARE),
     };
-    let model = match what {
-        Fitted::Own(Heater::Pla) => r.r_pp,
-        Fitted::Own(Heater::Tca) => r.r_tt,
-        Fitted::PlaToTca | Fitted::TcaToPla => r.r_tp,
-    } as f32;
-    let f = field(name);
+    let (model, f) = (model as f32, field(name));
     FieldInfo {
         min: (lo * model).max(f.min),
         max: (hi * model).min(f.max),
@@ -326,7 +322,7 @@ fn judged(what: Fitted, r: &ResistanceMatrix) -> FieldInfo {
 
 /// The model's rises at the link file's convection (still water), K/W.
 fn water() -> ResistanceMatrix {
-    Calibration::DEFAULT.model_resistances()
+    crate::calibration::WATER_RESISTANCES
 }
 
 /// Fits a record of `power_w` into (rise per watt, tau) within the range [`judged`] gives
@@ -487,10 +483,7 @@ impl Tune {
             if self.step == TuneStep::Pla {
                 return self.finish_still_air(pla - self.base_c[0], in_step_s, emit);
             }
-            return self.fail(
-                TuneFailure::TooFast(Heater::Tca, tca - self.base_c[1]),
-                emit,
-            );
+            return self.fail(TuneFailure::TcaTooFast(tca - self.base_c[1]), emit);
         }
         if in_step_s + 1e-3 >= self.step.length_s() || capped || self.n >= TUNE_MAX_SAMPLES {
             match self.step {

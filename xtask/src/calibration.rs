@@ -171,34 +171,26 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> MorphRun {
             }
         }
     }
-    if rig.ctrl.busy() || rig.ctrl.fault().is_some() {
-        return MorphRun {
-            time_s: f64::NAN,
-            final_mm: f64::NAN,
-            phase_s,
-            end: rig.ctrl.fault().map_or("unfinished", |f| f.code.as_str()),
-        };
-    }
     let time_s = (rig.now_ms() - t0) as f64 / 1000.0;
-    let settle = (SETTLE_AFTER_DONE_S * 1000.0) as u64 / TICK_MS;
-    for _ in 0..settle {
-        rig.tick();
-        while rig.ctrl.pop_event().is_some() {}
+    if !rig.ctrl.busy() && rig.ctrl.fault().is_none() {
+        let settle = (SETTLE_AFTER_DONE_S * 1000.0) as u64 / TICK_MS;
+        for _ in 0..settle {
+            rig.tick();
+            while rig.ctrl.pop_event().is_some() {}
+        }
     }
-    // An alarm in the minute after `done` is still this morph's.
-    if let Some(f) = rig.ctrl.fault() {
-        return MorphRun {
-            time_s: f64::NAN,
-            final_mm: f64::NAN,
-            phase_s,
-            end: f.code.as_str(),
-        };
-    }
+    // Unfinished, faulted, or an alarm in the minute after `done` (still this morph's).
+    let end = match rig.ctrl.fault() {
+        Some(f) => f.code.as_str(),
+        None if rig.ctrl.busy() => "unfinished",
+        None => "done",
+    };
+    let done = end == "done";
     MorphRun {
-        time_s,
-        final_mm: rig.radius_mm(),
+        time_s: if done { time_s } else { f64::NAN },
+        final_mm: if done { rig.radius_mm() } else { f64::NAN },
         phase_s,
-        end: "done",
+        end,
     }
 }
 

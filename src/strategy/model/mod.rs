@@ -132,7 +132,7 @@ impl ModelDrive {
                     s.cal.cross_gain(HeatedNode::Pla),
                     s.cal.cross_gain(HeatedNode::Tca),
                 ],
-                s.cal.model_convection_w_m2k(),
+                s.cal.model_params(),
             ),
             tca_target_c,
             last_ms: s.now_ms,

@@ -95,18 +95,14 @@ impl Observer {
 
     /// A model at rest at `ambient_c` (°C) with the built-in link parameters.
     pub fn new(ambient_c: f32) -> Self {
-        Self::with_convection(ambient_c, LINK.surroundings.h_w_m2k as f32)
+        Self::with_params(ambient_c, LINK)
     }
 
-    /// As [`Observer::new`], with the rim convection `convection_w_m2k` (W/(m² K); the link
-    /// file's if it is not a positive number): the model of a link in still air rises about
-    /// five times as far per watt as under water, and over minutes rather than seconds.
-    pub fn with_convection(ambient_c: f32, convection_w_m2k: f32) -> Self {
-        let mut p = LINK;
+    /// As [`Observer::new`], with the link's parameters `p` (the calibration's
+    /// [`crate::calibration::Calibration::model_params`]: in still air the model rises about
+    /// five times as far per watt as under water, and over minutes rather than seconds).
+    pub fn with_params(ambient_c: f32, mut p: morphlink_model::LinkParams) -> Self {
         p.surroundings.ambient_c = ambient_c as f64;
-        if convection_w_m2k.is_finite() && convection_w_m2k > 0.0 {
-            p.surroundings.h_w_m2k = convection_w_m2k as f64;
-        }
         let net = Network::new(&p);
         Observer {
             net,
@@ -124,23 +120,22 @@ impl Observer {
     /// `t_pla_c`, the TCA's side at `t_tca_c`, the bulk at their mean. Used at MORPH, when the
     /// link may still be warm from a previous morph.
     pub fn from_measured(t_pla_c: f32, t_tca_c: f32, t_amb_c: f32) -> Self {
-        let h = LINK.surroundings.h_w_m2k as f32;
-        Self::from_measured_with_gains(t_pla_c, t_tca_c, t_amb_c, [1.0, 1.0], [1.0, 1.0], h)
+        Self::from_measured_with_gains(t_pla_c, t_tca_c, t_amb_c, [1.0, 1.0], [1.0, 1.0], LINK)
     }
 
     /// As [`Observer::from_measured`], for thermistors that read `gains` (PLA, TCA) of their
     /// own heater's part of their node's rise above the surroundings and `cross` of the other
-    /// heater's, with the model at the rim convection `convection_w_m2k` (W/(m² K),
-    /// [`Observer::with_convection`]): the nodes start at the rise the readings imply.
+    /// heater's, with the model of the link's parameters `params` ([`Observer::with_params`]):
+    /// the nodes start at the rise the readings imply.
     pub fn from_measured_with_gains(
         t_pla_c: f32,
         t_tca_c: f32,
         t_amb_c: f32,
         gains: [f32; 2],
         cross: [f32; 2],
-        convection_w_m2k: f32,
+        params: morphlink_model::LinkParams,
     ) -> Self {
-        let mut o = Observer::with_convection(t_amb_c, convection_w_m2k);
+        let mut o = Observer::with_params(t_amb_c, params);
         let g = gains.map(|g| {
             if g.is_finite() && g > 0.1 {
                 g as f64
