@@ -7,6 +7,7 @@
 
 use crate::calibration::{Calibration, CalibrationError, ReportRejection};
 use crate::heater::HeaterConfig;
+use crate::part_limit::{limit_shares, CEILING_MARGIN_K};
 use crate::protocol::{self, reply, tune_reply, Command, Mode, OutLine, SimCommand};
 use crate::pulse::Pulse;
 use crate::sequencer::{SeqEvent, Sequencer};
@@ -14,11 +15,12 @@ use crate::settings::codec::{self, Blob, LoadError};
 use crate::settings::store::{SaveReport, StoreError};
 use crate::settings::{SetError, Settings, Spec};
 use crate::stats::LoopTiming;
+use crate::strategy::model::MODEL_KEEP_ALIVE_W;
 use crate::supervisor::{Fault, FaultCode, Faults, Frame, Subject, Supervisor};
 use crate::table;
 use crate::thermistor::ThermistorConfig;
 use crate::tune::{Tune, TuneEvent, TuneFailure, TuneTick};
-use crate::vocab::{Heater, Phase, Powers};
+use crate::vocab::{Heater, Measurements, Phase, Powers};
 use heapless::Deque;
 
 /// Control rate, Hz. The fastest thermal part (the TCA, about 1 s) is sampled ten times per
@@ -264,6 +266,11 @@ impl Controller {
         self.outputs
     }
 
+    /// The last good temperatures the supervisor read, °C (what the controller acts on).
+    pub fn measurements(&self) -> Measurements {
+        self.sup.measurements()
+    }
+
     /// Powers commanded in the last tick, W.
     pub fn powers(&self) -> Powers {
         self.powers
@@ -342,6 +349,36 @@ impl Controller {
         self.push(Event::Alarm(fault));
     }
 
+    /// Commands `p` (W) at the measured supply `supply_v` (V): each heater's power held at
+    /// [`MODEL_KEEP_ALIVE_W`] at most while its part's estimate is above its ceiling
+    /// ([`crate::part_limit`]), whatever the activity asks, then turned into duties.
+    fn apply(&mut self, p: Powers, supply_v: f32) {
+        let parts_c = self.sup.parts_c();
+        let capped = |h: Heater, w: f32| {
+            let ceiling_c = crate::supervisor::limits(h.sensor()).max_c - CEILING_MARGIN_K;
+            if parts_c[h.index()] > ceiling_c {
+                w.min(MODEL_KEEP_ALIVE_W)
+            } else {
+                w
+            }
+        };
+        let p = Powers {
+            pla_w: capped(Heater::Pla, p.pla_w),
+            tca_w: capped(Heater::Tca, p.tca_w),
+        };
+        self.powers = p;
+        self.outputs = Outputs {
+            pla_duty: self.cfg.pla_heater.duty(p.pla_w, supply_v),
+            tca_duty: self.cfg.tca_heater.duty(p.tca_w, supply_v),
+        };
+    }
+
+    /// Hands the supervisor what it needs of the calibration (the beads' shares): after every
+    /// change of the settings.
+    fn sync_limits(&mut self) {
+        self.sup.set_shares(limit_shares(&self.settings.cal));
+    }
+
     /// One control tick at `now_ms` with this tick's inputs; returns the duties to apply.
     /// The supervisor runs every tick, a latched fault included: STATUS stays live and a new
     /// fault alarms too (the first one found stays latched).
@@ -382,16 +419,12 @@ impl Controller {
                 }
                 TuneTick::Done(cal) => {
                     self.settings.cal = cal;
+                    self.sync_limits();
                     Powers::default()
                 }
                 TuneTick::Failed(_) => Powers::default(),
             };
-            self.powers = p;
-            let v = frame.supply_v;
-            self.outputs = Outputs {
-                pla_duty: self.cfg.pla_heater.duty(p.pla_w, v),
-                tca_duty: self.cfg.tca_heater.duty(p.tca_w, v),
-            };
+            self.apply(p, frame.supply_v);
             return self.outputs;
         }
         let mut seq_events: heapless::Vec<SeqEvent, 4> = heapless::Vec::new();
@@ -414,14 +447,7 @@ impl Controller {
             }
         });
         match result {
-            Ok(p) => {
-                self.powers = p;
-                let v = frame.supply_v;
-                self.outputs = Outputs {
-                    pla_duty: self.cfg.pla_heater.duty(p.pla_w, v),
-                    tca_duty: self.cfg.tca_heater.duty(p.tca_w, v),
-                };
-            }
+            Ok(p) => self.apply(p, frame.supply_v),
             // The sequencer has latched the timeout; report it and turn the heaters off.
             Err(_) => {
                 if let Some(f) = self.seq.fault() {
@@ -520,6 +546,7 @@ impl Controller {
             Command::Tune => self.start_tune(now_ms, out),
             Command::Measured { radius_mm } => self.measured(radius_mm, out),
         }
+        self.sync_limits();
     }
 
     /// `HEAT`: refused during a morph, with a fault latched or before the first reading; a
@@ -713,6 +740,7 @@ impl Controller {
                 ConfigEvent::Defaults(why)
             }
         };
+        self.sync_limits();
         self.push(Event::Config(e));
     }
 
@@ -819,6 +847,7 @@ impl Controller {
             }
         }
         self.settings.cal = cal;
+        self.sync_limits();
         Ok(())
     }
 

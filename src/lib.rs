@@ -18,6 +18,7 @@ pub mod fixed;
 pub mod heater;
 pub mod link;
 pub mod mathf;
+pub mod part_limit;
 pub mod protocol;
 pub mod pulse;
 pub mod sequencer;

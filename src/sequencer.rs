@@ -216,6 +216,7 @@ impl Sequencer {
             tca_power_w,
             m,
             cal,
+            pla_target_c: self.thresholds.pla_soft_target_c,
         };
         let strategy = self.strategy.insert(AnyStrategy::new(mode, &start));
         self.at.target_mm = radius_mm;

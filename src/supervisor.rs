@@ -10,6 +10,7 @@
 
 use crate::heater::HeaterConfig;
 use crate::link::{R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W};
+use crate::part_limit::{estimate_c, UNTUNED_BEAD_SHARE};
 use crate::thermistor::{RangeCheck, Reading};
 use crate::vocab::{Heater, Measurements, Phase, Powers, Sensor};
 
@@ -103,6 +104,12 @@ impl Fault {
                     Sensor::Tca => "TCA_LIMITS, LIMIT_CONSECUTIVE",
                     Sensor::Amb => "AMB_LIMITS, LIMIT_CONSECUTIVE",
                 }
+            }
+            (FaultCode::OverTemperature, Subject::Heater(Heater::Pla)) => {
+                "PLA_LIMITS, UNTUNED_BEAD_SHARE"
+            }
+            (FaultCode::OverTemperature, Subject::Heater(Heater::Tca)) => {
+                "TCA_LIMITS, UNTUNED_BEAD_SHARE"
             }
             (FaultCode::UnderTemperature | FaultCode::OverTemperature, _) => {
                 "PLA_LIMITS, TCA_LIMITS, AMB_LIMITS"
@@ -428,6 +435,13 @@ pub struct Supervisor {
     ramp: RampWatch,
     amb_slow_c: Option<f32>,
     last_ms: Option<u64>,
+    /// The share of its part's rise each heated bead is taken to read (PLA, TCA), 1
+    /// ([`crate::part_limit::limit_shares`]).
+    shares: [f32; 2],
+    /// This tick's estimates of the PLA rod and the TCA, °C (NaN before a reading).
+    parts_c: [f32; 2],
+    /// Leaky counts of estimates over their part's limit (as `limit_count`).
+    part_count: [u8; 2],
 }
 
 impl Default for Supervisor {
@@ -456,6 +470,44 @@ impl Supervisor {
             ramp: RampWatch::new(),
             amb_slow_c: None,
             last_ms: None,
+            shares: [UNTUNED_BEAD_SHARE; 2],
+            parts_c: [f32::NAN; 2],
+            part_count: [0; 2],
+        }
+    }
+
+    /// Sets the share of its part's rise each heated bead is taken to read (PLA, TCA), 1: the
+    /// controller's [`crate::part_limit::limit_shares`] of its calibration.
+    pub fn set_shares(&mut self, shares: [f32; 2]) {
+        self.shares = shares;
+    }
+
+    /// This tick's estimates of the heated parts (PLA rod, TCA), °C: each bead's last good
+    /// reading lifted by its share ([`crate::part_limit::estimate_c`]); NaN before a reading.
+    pub fn parts_c(&self) -> [f32; 2] {
+        self.parts_c
+    }
+
+    /// Over-temperature of a part: its estimate above its sensor's limit, counted as the
+    /// readings are ([`LIMIT_CONSECUTIVE`]). The bead's own limit stays judged as well.
+    fn check_parts(&mut self, found: &mut impl FnMut(Fault)) {
+        let amb_c = self.last_c[Sensor::Amb.index()];
+        for h in Heater::ALL {
+            let i = h.index();
+            let est = estimate_c(self.last_c[h.sensor().index()], amb_c, self.shares[i]);
+            self.parts_c[i] = est;
+            if est > limits(h.sensor()).max_c {
+                self.part_count[i] = (self.part_count[i] + 1).min(LIMIT_CONSECUTIVE);
+                if self.part_count[i] >= LIMIT_CONSECUTIVE {
+                    found(Fault {
+                        code: FaultCode::OverTemperature,
+                        subject: Subject::Heater(h),
+                        value: est,
+                    });
+                }
+            } else {
+                self.part_count[i] = self.part_count[i].saturating_sub(1);
+            }
         }
     }
 
@@ -534,6 +586,7 @@ impl Supervisor {
                 }
             }
         }
+        self.check_parts(&mut found);
         if let Err(f) = supply_ok(frame) {
             found(f);
         }
@@ -770,6 +823,14 @@ impl Supervisor {
             }
         }
         for heater in Heater::ALL {
+            let est = self.parts_c[heater.index()];
+            if est > limits(heater.sensor()).max_c {
+                return Err(Fault {
+                    code: FaultCode::OverTemperature,
+                    subject: Subject::Heater(heater),
+                    value: est,
+                });
+            }
             if self.off[heater.index()].heating || self.low[heater.index()].tripped_min_k.is_some()
             {
                 return Err(Fault {
@@ -791,6 +852,7 @@ impl Supervisor {
     pub fn rearm(&mut self) {
         self.range = [RangeCheck::new(RangeCheck::DEFAULT_CONSECUTIVE); 3];
         self.limit_count = [0; 3];
+        self.part_count = [0; 2];
         self.watch = [HeatWatch::default(); 2];
         self.off = [OffWatch::default(); 2];
         self.frozen = [FrozenWatch::default(); 2];

@@ -517,6 +517,10 @@ impl fmt::Display for FaultText<'_> {
             FaultCode::UnderTemperature => {
                 write!(l, "under-temperature {s} reads {v} C, below its minimum")
             }
+            FaultCode::OverTemperature if matches!(f.subject, Subject::Heater(_)) => write!(
+                l,
+                "over-temperature {s} part estimated {v} C from its thermistor, above its maximum"
+            ),
             FaultCode::OverTemperature => {
                 write!(l, "over-temperature {s} reads {v} C, above its maximum")
             }
@@ -815,11 +819,12 @@ mod alarm_tests {
         let sensors = Sensor::ALL.map(Subject::Sensor);
         let phases = [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release].map(Subject::Phase);
         let heaters = Heater::ALL.map(Subject::Heater);
-        let cases: [(FaultCode, &[Subject]); 12] = [
+        let cases: [(FaultCode, &[Subject]); 13] = [
             (FaultCode::ThermistorOpen, &sensors),
             (FaultCode::ThermistorShort, &sensors),
             (FaultCode::UnderTemperature, &sensors),
             (FaultCode::OverTemperature, &sensors),
+            (FaultCode::OverTemperature, &heaters),
             (FaultCode::HeaterNotHeating, &heaters),
             (FaultCode::HeatingWhileOff, &heaters),
             (FaultCode::StaleSensor, &[Subject::Frame]),

@@ -16,6 +16,8 @@ pub mod ram_flash;
 pub mod store;
 
 use crate::calibration::{Calibration, FIELDS, FIELD_COUNT};
+use crate::link::LINK;
+use crate::part_limit::{CEILING_MARGIN_K, UNTUNED_BEAD_SHARE};
 use crate::protocol::Mode;
 use crate::sequencer::{PhaseTimeouts, BEND_TIMEOUT_S, LOCK_TIMEOUT_S, SOFTEN_TIMEOUT_S};
 use crate::strategy::closed::CLOSED_RIGID_COOL_C;
@@ -122,11 +124,20 @@ pub const SOFT_THRESHOLD_RANGE_C: (f32, f32) = (64.0, 70.0);
 /// a warm bath.
 pub const RIGID_THRESHOLD_RANGE_C: (f32, f32) = (35.0, CLOSED_RIGID_COOL_C);
 /// Allowed PLA target of the model strategies, °C: at least 5 K above the highest soft
-/// threshold, and with its guard at least 10 K below the PLA's hard limit.
-pub const PLA_SOFT_TARGET_RANGE_C: (f32, f32) = (
-    SOFT_THRESHOLD_RANGE_C.1 + 5.0,
-    PLA_LIMITS.max_c - MODEL_GUARD_K - 10.0,
-);
+/// threshold, and at most the reading whose rod estimate is at the rod's ceiling in the link
+/// file's bath ([`crate::part_limit`]: a bead at `ambient + share × (ceiling − ambient)`); above
+/// it the ceiling would hold the heater down before the target, so no such target can be
+/// reached (what the range guarantees, and on which links: docs/settings.md).
+pub const PLA_SOFT_TARGET_RANGE_C: (f32, f32) = (SOFT_THRESHOLD_RANGE_C.1 + 5.0, PLA_TARGET_MAX_C);
+/// The top of [`PLA_SOFT_TARGET_RANGE_C`], °C: `22 + 0.7 × (115 − 22)`, rounded down to the
+/// tenth `CONFIG` prints.
+const PLA_TARGET_MAX_C: f32 = {
+    let amb = LINK.surroundings.ambient_c as f32;
+    let ceiling = PLA_LIMITS.max_c - CEILING_MARGIN_K;
+    let t = amb + UNTUNED_BEAD_SHARE * (ceiling - amb);
+    (t * 10.0) as i32 as f32 / 10.0
+};
+const _: () = assert!(PLA_TARGET_MAX_C > SOFT_THRESHOLD_RANGE_C.1 + 5.0);
 
 // The hard limits bound every range: no setting can reach a trip limit or widen it.
 const _: () = assert!(PLA_SOFT_TARGET_RANGE_C.1 + MODEL_GUARD_K + 10.0 <= PLA_LIMITS.max_c);

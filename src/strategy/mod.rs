@@ -139,6 +139,9 @@ pub struct Start<'a> {
     pub m: &'a Measurements,
     /// This link's calibration (TUNE's thermistor gains, MEASURED's TCA map).
     pub cal: &'a crate::calibration::Calibration,
+    /// The PLA temperature the model strategies hold in soften and bend, °C (the live
+    /// `pla_soft_target_c`).
+    pub pla_target_c: f32,
 }
 
 /// The strategy a morph runs, one of the four: the single place that dispatches on it.

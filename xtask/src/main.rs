@@ -11,6 +11,7 @@ mod calibration;
 mod emulate;
 mod faults;
 mod flash;
+mod limits;
 mod stored_heat;
 mod strategies;
 use morphlink_host::workspace::Workspace;
@@ -39,6 +40,8 @@ enum Task {
     StoredHeat(stored_heat::Args),
     /// TUNE and MEASURED over a mismatch ensemble: docs/calibration.csv, .svg, .png.
     Calibration(calibration::Args),
+    /// Every strategy on every link at each corner of the settings: true peaks against limits.
+    Limits(limits::Args),
     /// Build a board's firmware (its feature) and flash it with probe-rs (its chip).
     Flash(flash::Args),
     /// Build a board's firmware, flash and run it, printing the defmt log (probe-rs run).
@@ -58,6 +61,7 @@ fn main() -> ExitCode {
         Task::Faults(a) => faults::run(&a),
         Task::StoredHeat(a) => stored_heat::run(&a),
         Task::Calibration(a) => calibration::run(&a, &ws.root),
+        Task::Limits(a) => limits::run(&a),
         Task::Flash(a) => flash::run(flash::Action::Flash, &a, &ws),
         Task::Run(a) => flash::run(flash::Action::Run, &a, &ws),
     });

@@ -108,6 +108,8 @@ pub(crate) struct PlaView {
 pub struct ModelDrive {
     observer: Observer,
     tca_target_c: f32,
+    /// The PLA target of soften and bend, °C ([`Start::pla_target_c`]).
+    pla_target_c: f32,
     last_ms: u64,
     applied: Powers,
     settled_since_ms: Option<u64>,
@@ -135,6 +137,7 @@ impl ModelDrive {
                 s.cal.model_params(),
             ),
             tca_target_c,
+            pla_target_c: s.pla_target_c,
             last_ms: s.now_ms,
             applied: Powers::default(),
             settled_since_ms: None,
@@ -153,12 +156,12 @@ impl ModelDrive {
         self.tca_target_c
     }
 
-    /// The temperatures [`ModelDrive::powers`] drives to in `phase`: the PLA at
-    /// [`PLA_SOFT_TARGET_C`] in soften and bend, the TCA at its target in soften, bend and lock.
+    /// The temperatures [`ModelDrive::powers`] drives to in `phase`: the PLA at the morph's
+    /// PLA target in soften and bend, the TCA at its target in soften, bend and lock.
     pub(crate) fn targets_c(&self, phase: Phase) -> TargetTemps {
         let (pla_on, tca_on) = driven(phase);
         TargetTemps {
-            pla_c: if pla_on { PLA_SOFT_TARGET_C } else { f32::NAN },
+            pla_c: if pla_on { self.pla_target_c } else { f32::NAN },
             tca_c: if tca_on { self.tca_target_c } else { f32::NAN },
         }
     }
@@ -239,11 +242,7 @@ impl ModelDrive {
         let m = t.m;
         let (pla_on, tca_on) = driven(phase);
         let pla_w = if pla_on {
-            o.power_to_reach_w(
-                HeatedNode::Pla,
-                t.th.pla_soft_target_c - d_pla,
-                PLA_BOOST_MAX_W,
-            )
+            o.power_to_reach_w(HeatedNode::Pla, self.pla_target_c - d_pla, PLA_BOOST_MAX_W)
         } else {
             0.0
         };
@@ -263,11 +262,7 @@ impl ModelDrive {
                 w.max(MODEL_KEEP_ALIVE_W)
             }
         };
-        let pla_w = keep(
-            pla_on,
-            pla_w,
-            m.t_pla_c > t.th.pla_soft_target_c + MODEL_GUARD_K,
-        );
+        let pla_w = keep(pla_on, pla_w, m.t_pla_c > self.pla_target_c + MODEL_GUARD_K);
         let tca_w = keep(tca_on, tca_w, m.t_tca_c > self.tca_target_c + MODEL_GUARD_K);
         let p = Powers { pla_w, tca_w };
         self.applied = Powers {

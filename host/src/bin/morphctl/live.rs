@@ -168,6 +168,7 @@ pub fn phase_timeout_s(mode: &str, phase: &str) -> Option<f64> {
         tca_power_w: 0.5,
         m: &m,
         cal: &morphlink::calibration::Calibration::DEFAULT,
+        pla_target_c: morphlink::strategy::model::PLA_SOFT_TARGET_C,
     };
     let own = AnyStrategy::new(mode, &start).get().timeout_s(phase);
     use morphlink::sequencer::{
