@@ -191,21 +191,28 @@ impl<S: NorFlash> SettingsStore<S> {
     /// one; the tests store damaged blobs with it).
     pub async fn save_bytes(&mut self, bytes: &[u8]) -> Result<SaveReport, StoreError> {
         let mut buf = Buffer([0; BUFFER_BYTES]);
+        // The blob a load finds now: the one it would fall back to were this SAVE's damaged.
+        let replaced = match self.newest {
+            Newest::Known(t) => t,
+            // Through the plain flash, as `load` does: the same map code, no more on the target.
+            Newest::Unknown => {
+                let config =
+                    MapConfig::try_new(self.area.clone()).map_err(|_| StoreError::BadArea)?;
+                let mut map =
+                    MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
+                match map.fetch_item::<&[u8]>(&mut buf.0, &SETTINGS_KEY).await {
+                    Ok(found) => found.map(tag),
+                    Err(_) => None,
+                }
+            }
+        };
+        self.newest = Newest::Unknown;
         let config = MapConfig::try_new(self.area.clone()).map_err(|_| StoreError::BadArea)?;
         let mut counting = Counting {
             flash: &mut self.flash,
             erases: 0,
         };
         let mut map = MapStorage::<u8, _, _>::new(&mut counting, config, Cache::new_uncached());
-        // The blob a load finds now: the one it would fall back to were this SAVE's damaged.
-        let replaced = match self.newest {
-            Newest::Known(t) => t,
-            Newest::Unknown => match map.fetch_item::<&[u8]>(&mut buf.0, &SETTINGS_KEY).await {
-                Ok(found) => found.map(tag),
-                Err(_) => None,
-            },
-        };
-        self.newest = Newest::Unknown;
         let mut record = [0; RECORD_MAX];
         let record = SaveRecord {
             saved: tag(bytes),
