@@ -453,14 +453,16 @@ mod tests {
         let old = with("bend_timeout_s", "200");
         let mut flash = Flash::new();
         let mut buf = Buffer([0; BUFFER_BYTES]);
-        let mut map = MapStorage::<u8, _, _>::new(
-            &mut flash,
-            MapConfig::try_new(0..4096).unwrap(),
-            Cache::new_uncached(),
-        );
         let bytes = codec::encode(&old);
-        block_on_ready(map.store_item(&mut buf.0, &SETTINGS_KEY, &bytes.as_bytes())).unwrap();
-        drop(map);
+        block_on_ready(
+            MapStorage::<u8, _, _>::new(
+                &mut flash,
+                MapConfig::try_new(0..4096).unwrap(),
+                Cache::new_uncached(),
+            )
+            .store_item(&mut buf.0, &SETTINGS_KEY, &bytes.as_bytes()),
+        )
+        .unwrap();
         let mut st = SettingsStore::new(flash, 0..4096).unwrap();
         assert_eq!(block_on_ready(st.load()), newest(old));
         // A SAVE over it records it as the blob it replaced: its own damage is then reported.
