@@ -12,7 +12,7 @@ use crate::protocol::{self, reply, tune_reply, Command, Mode, OutLine, SimComman
 use crate::pulse::Pulse;
 use crate::sequencer::{SeqEvent, Sequencer};
 use crate::settings::codec::{self, Blob, LoadError};
-use crate::settings::store::{SaveReport, StoreError};
+use crate::settings::store::{Loaded, SaveReport, StoreError};
 use crate::settings::{SetError, Settings, Spec};
 use crate::stats::LoopTiming;
 use crate::strategy::model::MODEL_KEEP_ALIVE_W;
@@ -139,8 +139,12 @@ pub enum Event {
 /// What the boot did with the stored settings ([`Controller::load_settings`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ConfigEvent {
-    /// The stored settings are in force.
-    Loaded,
+    /// The stored settings are in force: the newest SAVE's, or (`newest_skipped` says why the
+    /// newest could not be used) an older one's.
+    Loaded {
+        /// Why the newest SAVE was skipped, if the settings are an older one's.
+        newest_skipped: Option<LoadError>,
+    },
     /// The defaults are in force, and why.
     Defaults(LoadError),
 }
@@ -697,9 +701,11 @@ impl Controller {
                 reply::done_event(&mut l, t_s, radius_mm)
             }
             Event::Alarm(f) => reply::alarm(&mut l, &f),
-            Event::Config(ConfigEvent::Loaded) => {
-                reply::config_loaded_event(&mut l, self.settings.count())
-            }
+            Event::Config(ConfigEvent::Loaded { newest_skipped }) => reply::config_loaded_event(
+                &mut l,
+                self.settings.count(),
+                newest_skipped.map(|why| why.as_str()),
+            ),
             Event::Config(ConfigEvent::Defaults(why)) => {
                 let setting = match why {
                     LoadError::OutOfRange(name) => Some(name),
@@ -727,13 +733,16 @@ impl Controller {
     }
 
     /// Puts the settings loaded at boot in force (or the defaults, if `loaded` says why not)
-    /// and queues `event: config loaded` or `event: config defaults reason=<why>`. Never
-    /// heats: it only changes what the next morph runs with.
-    pub fn load_settings(&mut self, loaded: Result<Settings, LoadError>) {
+    /// and queues `event: config loaded` (with the reason, if they are an older SAVE's because
+    /// the newest is damaged) or `event: config defaults reason=<why>`. Never heats: it only
+    /// changes what the next morph runs with.
+    pub fn load_settings(&mut self, loaded: Result<Loaded, LoadError>) {
         let e = match loaded {
-            Ok(s) => {
-                self.settings = s;
-                ConfigEvent::Loaded
+            Ok(found) => {
+                self.settings = found.settings;
+                ConfigEvent::Loaded {
+                    newest_skipped: found.newest_skipped,
+                }
             }
             Err(why) => {
                 self.settings = Settings::DEFAULT;

@@ -328,6 +328,117 @@ fn bad_stored_settings_boot_as_the_defaults_with_the_reason_and_never_heat() {
     assert_eq!(codec::decode(&good[..20]), Err(LoadError::Truncated));
 }
 
+/// The boot's `event: config ...` line, after booting `flash`, and the settings it put in force.
+fn boot_event(flash: SimFlash) -> (String, Settings) {
+    let b = with_flash(Some(flash));
+    let ev: Vec<_> = b
+        .lines
+        .iter()
+        .filter(|l| l.starts_with("event: config"))
+        .cloned()
+        .collect();
+    assert_eq!(ev.len(), 1, "{ev:?}");
+    (ev[0].clone(), *b.rig.ctrl.settings())
+}
+
+/// sequential-storage's item header, bytes: data CRC, length, length CRC.
+const ITEM_HEADER_BYTES: usize = 8;
+
+/// `CONFIG SET <set>` and a SAVE on `b`; the flash image before and after it.
+fn save_on(b: &mut Bench, set: &str) -> (Vec<u8>, Vec<u8>) {
+    let before = b.rig.flash().unwrap().image().to_vec();
+    assert!(b.send(&format!("CONFIG SET {set}"))[0].starts_with("ok"));
+    assert!(b.send("SAVE")[0].starts_with("ok saved"));
+    (before, b.rig.flash().unwrap().image().to_vec())
+}
+
+/// What a SAVE turned `before` into `after` wrote after the settings blob's item header:
+/// the item's first byte, the end of its header, key and blob (what the map's CRCs cover),
+/// and the end of all the SAVE wrote (its save record too). The item is the first written
+/// word whose header's length field is the key (1 byte) and the 90-byte blob.
+fn newest_item(before: &[u8], after: &[u8]) -> (usize, usize, usize) {
+    let blob_len = codec::encode(&Settings::DEFAULT).as_bytes().len();
+    let len = ((1 + blob_len) as u16).to_le_bytes();
+    let written = |i: &usize| before[*i] == 0xFF && after[*i] != 0xFF;
+    let end = (0..after.len()).rev().find(written).unwrap() + 1;
+    let start = (0..after.len())
+        .step_by(8)
+        .filter(written)
+        .find(|&i| after[i + 4..i + 6] == len)
+        .unwrap();
+    (start, start + ITEM_HEADER_BYTES + 1 + blob_len, end)
+}
+
+/// Byte flips tried at each position: one low bit, every bit.
+const FLIPS: [u8; 2] = [0x01, 0xFF];
+
+#[test]
+fn a_damaged_newest_save_never_boots_the_older_values_silently() {
+    let mut older = Settings::DEFAULT;
+    older.set_text("lock_timeout_s", "300").unwrap();
+    let mut newer = older;
+    newer.set_text("lock_timeout_s", "400").unwrap();
+    let mut b = with_flash(Some(SimFlash::new()));
+    save_on(&mut b, "lock_timeout_s 300");
+    let (before, after) = save_on(&mut b, "lock_timeout_s 400");
+    let (start, checked_end, end) = newest_item(&before, &after);
+    let mut previous = 0;
+    for at in start..end {
+        for flip in FLIPS {
+            let mut image = after.clone();
+            image[at] ^= flip;
+            let (event, settings) = boot_event(SimFlash::from_image(&image).unwrap());
+            if settings == newer {
+                // The flip missed what the map checks (word padding, the record): newest.
+                assert_eq!(event, "event: config loaded settings=21", "byte {at}");
+            } else {
+                assert_eq!(settings, older, "byte {at} ^ {flip:#x}: {event}");
+                assert_eq!(
+                    event, "event: config loaded settings=21 save=previous reason=crc-mismatch",
+                    "byte {at} ^ {flip:#x}"
+                );
+                previous += 1;
+            }
+            if at < checked_end {
+                assert_eq!(settings, older, "byte {at} ^ {flip:#x} of the newest blob");
+            }
+        }
+    }
+    assert!(previous >= (checked_end - start) * FLIPS.len());
+}
+
+#[test]
+fn a_damaged_only_save_boots_the_defaults_as_crc_mismatch_not_absent() {
+    let mut saved = Settings::DEFAULT;
+    saved.set_text("bend_timeout_s", "200").unwrap();
+    let mut b = with_flash(Some(SimFlash::new()));
+    let (before, after) = save_on(&mut b, "bend_timeout_s 200");
+    let (start, checked_end, end) = newest_item(&before, &after);
+    for at in start..end {
+        for flip in FLIPS {
+            let mut image = after.clone();
+            image[at] ^= flip;
+            let (event, settings) = boot_event(SimFlash::from_image(&image).unwrap());
+            assert_ne!(event, "event: config defaults reason=absent", "byte {at}");
+            if at < checked_end || settings != saved {
+                assert_eq!(
+                    (event.as_str(), settings),
+                    (
+                        "event: config defaults reason=crc-mismatch",
+                        Settings::DEFAULT
+                    ),
+                    "byte {at} ^ {flip:#x}"
+                );
+            } else {
+                assert_eq!(event, "event: config loaded settings=21", "byte {at}");
+            }
+        }
+    }
+    // `absent` is what an area that never held a SAVE boots as.
+    let (event, _) = boot_event(SimFlash::from_image(&before).unwrap());
+    assert_eq!(event, "event: config defaults reason=absent");
+}
+
 /// Bend's start, s after MORPH, from the `event: phase bend` line.
 fn bend_start_s(b: &Bench, from: usize) -> f64 {
     b.lines[from..]

@@ -1,11 +1,13 @@
 //! Host-side library of the morphlink tools: running the emulated firmware image, locating the
 //! workspace and its target directory at run time, the charts' shared plotting, the
-//! reference-model study of `morph-model charts`, and the plants of `morph-sim` and
-//! `morph-plant` (in process, or another process over the plant protocol).
+//! reference-model study of `morph-model charts`, the plants of `morph-sim` and
+//! `morph-plant` (in process, or another process over the plant protocol), and `morph-sim`'s
+//! flash file.
 #![deny(missing_docs)]
 
 pub mod charts;
 pub mod emulator;
+pub mod flash_file;
 pub mod plants;
 pub mod plot;
 pub mod remote_plant;

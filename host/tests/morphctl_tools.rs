@@ -49,6 +49,37 @@ fn a_plot_morphctl_cannot_write_is_refused_before_the_device_is_started() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+#[test]
+fn a_sim_flash_file_that_is_a_fifo_is_refused_before_the_device_is_started() {
+    // morph-sim refuses it too, but morphctl does not show the simulator's stderr.
+    let dir = scratch("fifo");
+    let started = dir.join("started");
+    let device = script(
+        &dir,
+        "device.sh",
+        &format!("touch '{}'; cat >/dev/null", started.display()),
+    );
+    let fifo = dir.join("link.flash");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let out = morphctl(&[
+        "--sim",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "--sim-flash-file",
+        fifo.to_str().unwrap(),
+        "config",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("link.flash: it is a FIFO"), "{err}");
+    assert!(!started.exists(), "the device was started");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 const MORPH_SIM: &str = env!("CARGO_BIN_EXE_morph-sim");
 
 /// morph-sim that counts its starts in `starts` and records every line to it in

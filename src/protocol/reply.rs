@@ -1075,9 +1075,15 @@ pub const ERR_SAVE_UNSUPPORTED: ProtoError = ProtoError {
     text: "SAVE needs settings storage and this build has none (morph-sim: --flash-file PATH)",
 };
 
-/// At boot, the stored settings were loaded: `event: config loaded settings=<n>`.
-pub fn config_loaded_event(l: &mut OutLine, count: usize) {
+/// At boot, the stored settings were loaded: `event: config loaded settings=<n>`, or, when
+/// they are the previous SAVE's because the newest is damaged (`skipped` is why),
+/// `event: config loaded settings=<n> save=previous reason=<why>`: the user learns that the
+/// last SAVE did not hold, rather than running older values unawares.
+pub fn config_loaded_event(l: &mut OutLine, count: usize, skipped: Option<&str>) {
     let _ = write!(l, "{EVENT_TAG} config loaded settings={count}");
+    if let Some(why) = skipped {
+        let _ = write!(l, " save=previous reason={why}");
+    }
 }
 
 /// At boot, the defaults are in force: `event: config defaults reason=<why>[ setting=<name>]`
@@ -1142,6 +1148,14 @@ mod settings_tests {
         assert_eq!(
             line(|l| config_malformed(l, &MODE)),
             "error: bad-argument auto_mode takes one of paper|gated|boost|closed (docs/settings.md)"
+        );
+        assert_eq!(
+            line(|l| config_loaded_event(l, 21, None)),
+            "event: config loaded settings=21"
+        );
+        assert_eq!(
+            line(|l| config_loaded_event(l, 21, Some("crc-mismatch"))),
+            "event: config loaded settings=21 save=previous reason=crc-mismatch"
         );
         assert_eq!(
             line(|l| config_defaults_event(l, "out-of-range", Some("lock_timeout_s"))),

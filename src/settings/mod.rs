@@ -13,6 +13,7 @@
 
 pub mod codec;
 pub mod ram_flash;
+pub mod save_record;
 pub mod store;
 
 use crate::calibration::{Calibration, FIELDS, FIELD_COUNT};

@@ -7,15 +7,21 @@
 //! area is full, so a SAVE costs no erase most of the time; an item is valid only once wholly
 //! written (its header's CRC), so a SAVE cut by a power loss leaves the previous blob in force.
 //! The blob's own CRC ([`codec`](super::codec)) checks it again after load.
+//!
+//! The map skips a damaged item silently, falling back to the one before it; after each blob a
+//! SAVE writes a [`SaveRecord`] under its own key, so a load can tell a damaged newest blob
+//! (the older settings load, and [`Loaded::newest_skipped`] says why) and a damaged only blob
+//! (the defaults, `crc-mismatch`, not `absent`) from a SAVE that never happened.
 
 use super::codec::{self, Blob, LoadError, BLOB_MAX};
+use super::save_record::{tag, SaveRecord, RECORD_MAX, SAVE_RECORD_KEY};
 use super::Settings;
 use core::future::Future;
 use core::ops::Range;
 use core::pin::pin;
 use core::task::{Context, Poll, Waker};
 use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
-use sequential_storage::cache::Cache;
+use sequential_storage::cache::{Cache, CacheImpl};
 use sequential_storage::map::{MapConfig, MapStorage};
 
 /// The map key the settings blob is stored under.
@@ -51,6 +57,16 @@ pub struct SaveReport {
     pub bytes: u32,
     /// Pages erased by this SAVE.
     pub erases: u32,
+}
+
+/// The settings a load found in flash.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Loaded {
+    /// The settings to put in force.
+    pub settings: Settings,
+    /// `None` if they are the newest SAVE's; otherwise they are an older SAVE's and this is why
+    /// the newest could not be used (its item is damaged: [`LoadError::Corrupt`]).
+    pub newest_skipped: Option<LoadError>,
 }
 
 /// A flash that counts its erases (what a SAVE costs in wear).
@@ -93,6 +109,18 @@ impl<S: NorFlash> NorFlash for Counting<'_, S> {
 pub struct SettingsStore<S> {
     flash: S,
     area: Range<u32>,
+    newest: Newest,
+}
+
+/// What the store knows of the blob a load would find now: a SAVE's record names it as the
+/// one it replaces, and knowing it spares each SAVE a search of the whole area (on the F401's
+/// 128 KiB sectors, a thousand items).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Newest {
+    /// Not looked for yet, or a SAVE failed part-way: the next SAVE looks.
+    Unknown,
+    /// The blob with this tag, or none.
+    Known(Option<u32>),
 }
 
 /// A word-aligned work buffer (some flash drivers want aligned RAM).
@@ -104,7 +132,11 @@ impl<S: NorFlash> SettingsStore<S> {
     /// whole erase pages.
     pub fn new(flash: S, area: Range<u32>) -> Result<Self, StoreError> {
         MapConfig::<S>::try_new(area.clone()).map_err(|_| StoreError::BadArea)?;
-        Ok(SettingsStore { flash, area })
+        Ok(SettingsStore {
+            flash,
+            area,
+            newest: Newest::Unknown,
+        })
     }
 
     /// The flash, e.g. to write a file-backed one back to its file.
@@ -112,21 +144,42 @@ impl<S: NorFlash> SettingsStore<S> {
         &self.flash
     }
 
-    /// The flash, mutable (tests cut its power).
+    /// The flash, mutable (tests cut its power). The store forgets which blob it holds.
     pub fn flash_mut(&mut self) -> &mut S {
+        self.newest = Newest::Unknown;
         &mut self.flash
     }
 
-    /// The stored settings, or why the defaults must be used instead.
-    pub async fn load(&mut self) -> Result<Settings, LoadError> {
+    /// The stored settings (and whether they are the newest SAVE's), or why the defaults must
+    /// be used instead: [`LoadError::Absent`] only if nothing was ever saved (or the area was
+    /// erased), [`LoadError::Corrupt`] if a SAVE's record is there but its blob is damaged.
+    pub async fn load(&mut self) -> Result<Loaded, LoadError> {
+        self.newest = Newest::Unknown;
         let mut buf = Buffer([0; BUFFER_BYTES]);
         let config = MapConfig::try_new(self.area.clone()).map_err(|_| LoadError::Flash)?;
         let mut map = MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
+        let record: Option<&[u8]> = map
+            .fetch_item(&mut buf.0, &SAVE_RECORD_KEY)
+            .await
+            .map_err(|_| LoadError::Flash)?;
+        let record = record.and_then(SaveRecord::decode);
         let found: Option<&[u8]> = map
             .fetch_item(&mut buf.0, &SETTINGS_KEY)
             .await
             .map_err(|_| LoadError::Flash)?;
-        codec::decode(found.ok_or(LoadError::Absent)?)
+        self.newest = Newest::Known(found.map(tag));
+        let Some(bytes) = found else {
+            return Err(match record {
+                Some(_) => LoadError::Corrupt,
+                None => LoadError::Absent,
+            });
+        };
+        let settings = codec::decode(bytes)?;
+        let skipped = record.is_some_and(|r| r.skipped(tag(bytes)));
+        Ok(Loaded {
+            settings,
+            newest_skipped: skipped.then_some(LoadError::Corrupt),
+        })
     }
 
     /// Writes `blob` as the settings in force from now on.
@@ -138,13 +191,35 @@ impl<S: NorFlash> SettingsStore<S> {
     /// one; the tests store damaged blobs with it).
     pub async fn save_bytes(&mut self, bytes: &[u8]) -> Result<SaveReport, StoreError> {
         let mut buf = Buffer([0; BUFFER_BYTES]);
+        // The blob a load finds now: the one it would fall back to were this SAVE's damaged.
+        let replaced = match self.newest {
+            Newest::Known(t) => t,
+            // Through the plain flash, as `load` does: the same map code, no more on the target.
+            Newest::Unknown => {
+                let config =
+                    MapConfig::try_new(self.area.clone()).map_err(|_| StoreError::BadArea)?;
+                let mut map =
+                    MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
+                match map.fetch_item::<&[u8]>(&mut buf.0, &SETTINGS_KEY).await {
+                    Ok(found) => found.map(tag),
+                    Err(_) => None,
+                }
+            }
+        };
+        self.newest = Newest::Unknown;
         let config = MapConfig::try_new(self.area.clone()).map_err(|_| StoreError::BadArea)?;
         let mut counting = Counting {
             flash: &mut self.flash,
             erases: 0,
         };
         let mut map = MapStorage::<u8, _, _>::new(&mut counting, config, Cache::new_uncached());
-        match map.store_item(&mut buf.0, &SETTINGS_KEY, &bytes).await {
+        let mut record = [0; RECORD_MAX];
+        let record = SaveRecord {
+            saved: tag(bytes),
+            replaced,
+        }
+        .encode(&mut record);
+        match store_blob_and_record(&mut map, &mut buf.0, bytes, record).await {
             Ok(()) => {}
             // An area the map cannot make sense of (never formatted, written by something
             // else), or one a power cut left with a half-programmed word the map then tries to
@@ -152,14 +227,15 @@ impl<S: NorFlash> SettingsStore<S> {
             // at boot and are what the user is replacing, so start the area afresh, once. A cut
             // between the erase and the write boots with `reason=absent`: defaults, never
             // garbage (`power_lost_at_any_byte_...` below).
-            Err(_) => {
+            Err(()) => {
                 map.erase_all().await.map_err(|_| StoreError::Flash)?;
-                map.store_item(&mut buf.0, &SETTINGS_KEY, &bytes)
+                store_blob_and_record(&mut map, &mut buf.0, bytes, record)
                     .await
-                    .map_err(|_| StoreError::Flash)?;
+                    .map_err(|()| StoreError::Flash)?;
             }
         }
         drop(map);
+        self.newest = Newest::Known(Some(tag(bytes)));
         Ok(SaveReport {
             bytes: bytes.len() as u32,
             erases: counting.erases,
@@ -168,11 +244,28 @@ impl<S: NorFlash> SettingsStore<S> {
 
     /// Erases the whole settings area (the next boot then has no settings).
     pub async fn erase_all(&mut self) -> Result<(), StoreError> {
+        self.newest = Newest::Unknown;
         self.flash
             .erase(self.area.start, self.area.end)
             .await
             .map_err(|_| StoreError::Flash)
     }
+}
+
+/// Stores a SAVE: the blob, then its record (a cut between them leaves the blob without a
+/// record naming it, which loads as the newest: see [`SaveRecord::skipped`]).
+async fn store_blob_and_record<S: NorFlash, C: CacheImpl<u8>>(
+    map: &mut MapStorage<u8, S, C>,
+    buf: &mut [u8],
+    blob: &[u8],
+    record: &[u8],
+) -> Result<(), ()> {
+    map.store_item(buf, &SETTINGS_KEY, &blob)
+        .await
+        .map_err(|_| ())?;
+    map.store_item(buf, &SAVE_RECORD_KEY, &record)
+        .await
+        .map_err(|_| ())
 }
 
 /// Runs `f` to completion by polling it; for flash whose operations never wait (RAM, a file
@@ -207,6 +300,14 @@ mod tests {
         s
     }
 
+    /// A load that found `s` as the newest SAVE.
+    fn newest(s: Settings) -> Result<Loaded, LoadError> {
+        Ok(Loaded {
+            settings: s,
+            newest_skipped: None,
+        })
+    }
+
     #[test]
     fn an_empty_area_loads_as_absent_and_a_save_loads_back() {
         let mut st = store();
@@ -214,11 +315,11 @@ mod tests {
         let s = with("lock_timeout_s", "300");
         let r = block_on_ready(st.save(&codec::encode(&s))).unwrap();
         assert_eq!(r.bytes, 90);
-        assert_eq!(block_on_ready(st.load()), Ok(s));
+        assert_eq!(block_on_ready(st.load()), newest(s));
         // A second SAVE replaces the first.
         let s2 = with("bend_timeout_s", "200");
         block_on_ready(st.save(&codec::encode(&s2))).unwrap();
-        assert_eq!(block_on_ready(st.load()), Ok(s2));
+        assert_eq!(block_on_ready(st.load()), newest(s2));
     }
 
     #[test]
@@ -243,7 +344,7 @@ mod tests {
         for i in 0..saves {
             let s = with("lock_timeout_s", &std::format!("{}", 100 + i % 500));
             erases += block_on_ready(st.save(&codec::encode(&s))).unwrap().erases;
-            assert_eq!(block_on_ready(st.load()), Ok(s));
+            assert_eq!(block_on_ready(st.load()), newest(s));
         }
         assert_eq!(st.flash().erases, erases);
         let per_save = erases as f32 / saves as f32;
@@ -254,6 +355,131 @@ mod tests {
         );
         // Each 2 KiB page holds dozens of 86-byte items: well under one erase per SAVE.
         assert!(per_save < 0.1, "{per_save}");
+    }
+
+    /// sequential-storage's item header: data CRC (4 bytes), length (2), length CRC (2).
+    const ITEM_HEADER_BYTES: usize = 8;
+
+    /// Byte flips tried at each position: one low bit, one high bit, every bit.
+    const FLIPS: [u8; 3] = [0x01, 0x80, 0xFF];
+
+    /// Where the item holding a blob of `blob_len` bytes starts in what a SAVE turned from
+    /// `before` into `after`: the first written word whose header's length field is the key
+    /// and the blob; and the end of what the SAVE wrote (its record included).
+    fn blob_item(before: &[u8], after: &[u8], blob_len: usize) -> (usize, usize) {
+        let len = ((1 + blob_len) as u16).to_le_bytes();
+        let written = |i: &usize| before[*i] == 0xFF && after[*i] != 0xFF;
+        let end = (0..after.len()).rev().find(written).unwrap() + 1;
+        let start = (0..after.len())
+            .step_by(8)
+            .filter(written)
+            .find(|&i| after[i + 4..i + 6] == len)
+            .unwrap();
+        (start, end)
+    }
+
+    /// A board booting from `image`.
+    fn boot(image: &[u8]) -> Result<Loaded, LoadError> {
+        let mut st = SettingsStore::new(Flash::from_image(image).unwrap(), 0..4096).unwrap();
+        block_on_ready(st.load())
+    }
+
+    #[test]
+    fn a_damaged_newest_blob_loads_the_previous_one_and_says_so_never_silently() {
+        let old = with("soften_timeout_s", "30");
+        let new = with("soften_timeout_s", "90");
+        let mut st = store();
+        block_on_ready(st.save(&codec::encode(&old))).unwrap();
+        let before = st.flash().image().to_vec();
+        let blob = codec::encode(&new);
+        block_on_ready(st.save(&blob)).unwrap();
+        let after = st.flash().image().to_vec();
+        let (start, end) = blob_item(&before, &after, blob.as_bytes().len());
+        // The bytes the map's item CRCs cover: header, key, blob (not the word padding).
+        let checked = start..start + ITEM_HEADER_BYTES + 1 + blob.as_bytes().len();
+        let previous = Ok(Loaded {
+            settings: old,
+            newest_skipped: Some(LoadError::Corrupt),
+        });
+        for at in start..end {
+            for flip in FLIPS {
+                let mut image = after.clone();
+                image[at] ^= flip;
+                let got = boot(&image);
+                assert!(
+                    got == newest(new) || got == previous,
+                    "byte {at} ^ {flip:#x}: {got:?}"
+                );
+                if checked.contains(&at) {
+                    assert_eq!(got, previous, "byte {at} ^ {flip:#x} of the newest blob");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_damaged_only_blob_loads_as_crc_mismatch_not_absent() {
+        let s = with("lock_timeout_s", "300");
+        let mut st = store();
+        let before = st.flash().image().to_vec();
+        let blob = codec::encode(&s);
+        block_on_ready(st.save(&blob)).unwrap();
+        let after = st.flash().image().to_vec();
+        let (start, end) = blob_item(&before, &after, blob.as_bytes().len());
+        let checked = start..start + ITEM_HEADER_BYTES + 1 + blob.as_bytes().len();
+        for at in start..end {
+            for flip in FLIPS {
+                let mut image = after.clone();
+                image[at] ^= flip;
+                let got = boot(&image);
+                assert!(
+                    got == newest(s) || got == Err(LoadError::Corrupt),
+                    "byte {at} ^ {flip:#x}: {got:?}"
+                );
+                if checked.contains(&at) {
+                    assert_eq!(got, Err(LoadError::Corrupt), "byte {at} ^ {flip:#x}");
+                }
+            }
+        }
+        // Absent stays for an area that never held a SAVE, or was erased.
+        assert_eq!(boot(&before), Err(LoadError::Absent));
+        block_on_ready(st.erase_all()).unwrap();
+        assert_eq!(block_on_ready(st.load()), Err(LoadError::Absent));
+    }
+
+    #[test]
+    fn an_area_saved_without_records_still_loads_and_a_save_adds_them() {
+        // Before save records, an area held the blob alone.
+        let old = with("bend_timeout_s", "200");
+        let mut flash = Flash::new();
+        let mut buf = Buffer([0; BUFFER_BYTES]);
+        let bytes = codec::encode(&old);
+        block_on_ready(
+            MapStorage::<u8, _, _>::new(
+                &mut flash,
+                MapConfig::try_new(0..4096).unwrap(),
+                Cache::new_uncached(),
+            )
+            .store_item(&mut buf.0, &SETTINGS_KEY, &bytes.as_bytes()),
+        )
+        .unwrap();
+        let mut st = SettingsStore::new(flash, 0..4096).unwrap();
+        assert_eq!(block_on_ready(st.load()), newest(old));
+        // A SAVE over it records it as the blob it replaced: its own damage is then reported.
+        let new = with("bend_timeout_s", "250");
+        let before = st.flash().image().to_vec();
+        let blob = codec::encode(&new);
+        block_on_ready(st.save(&blob)).unwrap();
+        let mut image = st.flash().image().to_vec();
+        let (start, _) = blob_item(&before, &image, blob.as_bytes().len());
+        image[start + ITEM_HEADER_BYTES + 20] ^= 0x01;
+        assert_eq!(
+            boot(&image),
+            Ok(Loaded {
+                settings: old,
+                newest_skipped: Some(LoadError::Corrupt),
+            })
+        );
     }
 
     #[test]
@@ -277,18 +503,19 @@ mod tests {
                     SettingsStore::new(Flash::from_image(st.flash().image()).unwrap(), 0..4096)
                         .unwrap();
                 let got = block_on_ready(rebooted.load());
+                // A cut SAVE is not a damaged one: old or new, and nothing to report.
                 assert!(
-                    got == Ok(old) || got == Ok(new),
+                    got == newest(old) || got == newest(new),
                     "fill {fill}, power lost after {budget} bytes: {got:?}"
                 );
                 if done {
-                    assert_eq!(got, Ok(new), "fill {fill}: a finished SAVE must hold");
+                    assert_eq!(got, newest(new), "fill {fill}: a finished SAVE must hold");
                     break;
                 }
                 cuts += 1;
                 // The board saves again after the reboot, and that works.
                 block_on_ready(rebooted.save(&codec::encode(&new))).unwrap();
-                assert_eq!(block_on_ready(rebooted.load()), Ok(new));
+                assert_eq!(block_on_ready(rebooted.load()), newest(new));
             }
             assert!(cuts > 0);
         }
@@ -320,7 +547,11 @@ mod tests {
             }
         }
         assert_eq!(
-            block_on_ready(st.load()).unwrap().morph.lock_timeout_s,
+            block_on_ready(st.load())
+                .unwrap()
+                .settings
+                .morph
+                .lock_timeout_s,
             100.0 + (3999 % 500) as f32
         );
         let n = first_erase.expect("4000 SAVEs fill a 128 KiB sector");

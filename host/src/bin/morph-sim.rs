@@ -10,10 +10,10 @@ use morphlink::controller::TICK_MS;
 use morphlink::protocol::{
     format_error, reply, Assembled, LineAssembler, OutLine, ERR_INVALID_LINE, ERR_LINE_TOO_LONG,
 };
+use morphlink_host::flash_file;
 use morphlink_host::plants::{self, PlantKind};
 use morphlink_host::remote_plant::RemotePlant;
 use morphlink_plant::Plant;
-use morphlink_sim::rig::{SimFlash, SIM_FLASH_BYTES};
 use morphlink_sim::{LinkSetup, Rig};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -48,37 +48,11 @@ struct Cli {
           value_parser = parse_timeout)]
     plant_timeout_s: f64,
     /// Keep the simulated settings flash in this file (created at the first SAVE), so saved
-    /// settings survive a restart as on a board. Without it SAVE is unsupported.
+    /// settings survive a restart as on a board. Without it SAVE is unsupported. A FIFO, a
+    /// directory or a file that is read-only or cannot be opened for writing is refused
+    /// (exit code 2) before anything runs.
     #[arg(long, value_name = "PATH")]
     flash_file: Option<PathBuf>,
-}
-
-/// The settings flash kept in `path`: its image, or `None` (with a note on stderr) if the file
-/// is there but is no flash image; an absent file is an erased flash.
-fn read_flash_file(path: &Path) -> Option<SimFlash> {
-    match std::fs::read(path) {
-        Ok(image) => {
-            let flash = SimFlash::from_image(&image);
-            if flash.is_none() {
-                eprintln!(
-                    "morph-sim: {} is not a {SIM_FLASH_BYTES}-byte flash image ({} bytes); \
-                     defaults, and SAVE writes a new one",
-                    path.display(),
-                    image.len()
-                );
-            }
-            flash
-        }
-        Err(_) => Some(SimFlash::new()),
-    }
-}
-
-/// Writes the flash image to `path` (through a temporary file, so a crash mid-write leaves
-/// the old file).
-fn write_flash_file(path: &Path, flash: &SimFlash) -> std::io::Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, flash.image())?;
-    std::fs::rename(&tmp, path)
 }
 
 fn parse_timeout(s: &str) -> Result<f64, String> {
@@ -129,7 +103,7 @@ fn feed(
                 rig.handle_line(line, &mut |l: &str| replies.push(l.to_string()));
                 if rig.saves() != saves {
                     if let (Some(path), Some(flash)) = (flash_file, rig.flash()) {
-                        if let Err(e) = write_flash_file(path, flash) {
+                        if let Err(e) = flash_file::write(path, flash) {
                             eprintln!("morph-sim: cannot write {}: {e}", path.display());
                             let mut l = OutLine::new();
                             reply::save_failed(&mut l, "file-error");
@@ -164,6 +138,13 @@ fn plant(cli: &Cli, setup: &LinkSetup) -> Result<Box<dyn Plant>, Stop> {
 
 fn main() {
     let cli = Cli::parse();
+    // A flash file the run could not read or keep is refused before anything runs.
+    if let Some(path) = &cli.flash_file {
+        if let Err(why) = flash_file::check(path) {
+            eprintln!("morph-sim: --flash-file {}: {why}", path.display());
+            std::process::exit(2);
+        }
+    }
     match run(&cli) {
         Ok(()) => {}
         Err(Stop::Unavailable(why)) => {
@@ -193,7 +174,7 @@ fn run(cli: &Cli) -> Result<(), Stop> {
     };
     let mut rig: SimRig = Rig::with_plant(plant(cli, &setup)?, setup.noise());
     if let Some(path) = &cli.flash_file {
-        rig.boot_storage(read_flash_file(path));
+        rig.boot_storage(flash_file::read(path));
     }
 
     let (tx, rx) = mpsc::channel::<Vec<u8>>();

@@ -66,7 +66,8 @@ struct Cli {
     #[arg(long)]
     sim_program: Option<PathBuf>,
     /// Keep morph-sim's settings flash in this file (its `--flash-file`), so `config save`
-    /// survives a restart.
+    /// survives a restart. A path morph-sim would refuse (a FIFO, a directory, a read-only
+    /// file) is refused before the simulator starts.
     #[arg(long, requires = "sim")]
     sim_flash_file: Option<PathBuf>,
     #[command(subcommand)]
@@ -201,6 +202,11 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
     };
     morphlink_host::speed::check("--sim-speed", cli.sim_speed)?;
     morphlink_host::speed::check("--tcp-speed", cli.tcp_speed)?;
+    // morph-sim refuses such a file too, but its stderr is not shown here: say why first.
+    if let Some(f) = &cli.sim_flash_file {
+        morphlink_host::flash_file::check(f)
+            .map_err(|why| format!("--sim-flash-file {}: {why}", f.display()))?;
+    }
     let target = if cli.sim {
         Target::Sim {
             program: cli.sim_program.clone().unwrap_or_else(default_sim_program),
