@@ -86,20 +86,28 @@ pub const MAP_PRIOR_RISE_K: f32 = 35.0;
 /// scaled down), so a link that changes is followed. Eight reports at 0.3 mm each average the
 /// measuring error to about 0.1 mm.
 pub const MEASURED_MEMORY: f32 = 8.0;
-/// Largest correction of the map at any rise in [`MAP_SPAN_K`], K: 25 K is about 7 mm of
+/// Largest correction of the map's aim at any needed rise in [`MAP_SPAN_K`], K: 25 K is about 7 mm of
 /// radius in the middle of the range, four times the largest miss of the paper's model on its
 /// own link and above the 3.5 mm the most biased high-fidelity links miss by before
 /// calibration. A report that would need more is refused as a measuring mistake.
 pub const MAP_MAX_CORRECTION_K: f32 = 25.0;
-/// The TCA rises the map's correction is judged over, K: the table's span (12–63 K) with a
-/// margin.
+/// The needed TCA rises the map's correction is judged over, K: every rise the mechanics can
+/// ask of the map for a radius in the table (12–63 K) with a margin. The correction is judged
+/// on the aim the map gives for each (`x = (y − a) / b`), so no aim a morph can be given lies
+/// more than [`MAP_MAX_CORRECTION_K`] from what the mechanics need.
 pub const MAP_SPAN_K: (f32, f32) = (0.0, 70.0);
 /// Allowed range of the map's slope: a bead reads at least half and at most twice the rise
 /// the mechanics need.
 pub const MAP_SLOPE_RANGE: (f32, f32) = (0.5, 2.0);
-/// Allowed range of the table's power scale: ± a factor of 2 (a heater of twice or half the
-/// nominal resistance is outside any link the table was made for).
-pub const POWER_SCALE_RANGE: (f32, f32) = (0.5, 2.0);
+/// Allowed range of the table's power scale: down to half (a heater of twice the nominal
+/// resistance is outside any link the table was made for) and up to what keeps the scaled
+/// table's largest power within the TCA heater's cap (2 W / 1.5 W): past it the scale would
+/// only saturate the heater, and a report asking for more is a measuring mistake.
+pub const POWER_SCALE_RANGE: (f32, f32) = (
+    0.5,
+    crate::heater::HeaterConfig::TCA.max_power_w / crate::table::MAX_POWER_W,
+);
+const _: () = assert!(POWER_SCALE_RANGE.1 > 1.0 && POWER_SCALE_RANGE.1 <= 2.0);
 
 /// The calibration's layout version: 2 added [`Calibration::convection_w_m2k`], against
 /// which the rises are read.
@@ -119,116 +127,137 @@ pub const WATER_RESISTANCES: ResistanceMatrix = ResistanceMatrix {
     r_tp: R_TP_K_PER_W as f64,
 };
 
+/// Decimals a calibration range is kept to: `CONFIG` prints them with three, and a printed end
+/// must be a value the range accepts, so each end is rounded inwards ([`inward`]).
+pub const RANGE_DECIMALS_SCALE: f32 = 1000.0;
+
+/// `(min, max)` rounded inwards to [`RANGE_DECIMALS_SCALE`]: `min` up, `max` down.
+const fn inward(min: f32, max: f32) -> (f32, f32) {
+    const fn floor(x: f32) -> f32 {
+        let t = x as i64 as f32;
+        if t > x {
+            t - 1.0
+        } else {
+            t
+        }
+    }
+    let lo = -floor(-min * RANGE_DECIMALS_SCALE) / RANGE_DECIMALS_SCALE;
+    let hi = floor(max * RANGE_DECIMALS_SCALE) / RANGE_DECIMALS_SCALE;
+    (lo, hi)
+}
+
+/// A field of `name` with the range `(min, max)` rounded [`inward`].
+const fn field_info(
+    name: &'static str,
+    unit: &'static str,
+    (min, max): (f32, f32),
+    doc: &'static str,
+) -> FieldInfo {
+    let (min, max) = inward(min, max);
+    FieldInfo {
+        name,
+        unit,
+        min,
+        max,
+        doc,
+    }
+}
+
 /// Number of fields.
 pub const FIELD_COUNT: usize = 15;
 
 /// Every field, in index order (the order of [`Calibration::get`] / [`Calibration::set`]).
 pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
-    FieldInfo {
-        name: "pla_rise_k_per_w",
-        unit: "K/W",
-        min: RISE_MIN_SHARE * R_AT_HIGHEST_CONVECTION_K_PER_W[1],
-        max: RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[1],
-        doc: "steady PLA thermistor rise per PLA watt (TUNE)",
-    },
-    FieldInfo {
-        name: "tca_rise_k_per_w",
-        unit: "K/W",
-        min: RISE_MIN_SHARE * R_AT_HIGHEST_CONVECTION_K_PER_W[0],
-        max: RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[0],
-        doc: "steady TCA thermistor rise per TCA watt (TUNE)",
-    },
-    FieldInfo {
-        name: "pla_to_tca_k_per_w",
-        unit: "K/W",
-        min: 0.0,
-        max: RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[2] * 2.0,
-        doc: "steady TCA thermistor rise per PLA watt (TUNE)",
-    },
-    FieldInfo {
-        name: "tca_to_pla_k_per_w",
-        unit: "K/W",
-        min: 0.0,
-        max: RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[2] * 2.0,
-        doc: "steady PLA thermistor rise per TCA watt (TUNE)",
-    },
-    FieldInfo {
-        name: "pla_tau_s",
-        unit: "s",
-        min: TAU_RANGE_S.0,
-        max: TAU_RANGE_S.1,
-        doc: "PLA thermistor step-response time constant (TUNE)",
-    },
-    FieldInfo {
-        name: "tca_tau_s",
-        unit: "s",
-        min: TAU_RANGE_S.0,
-        max: TAU_RANGE_S.1,
-        doc: "TCA thermistor step-response time constant (TUNE)",
-    },
-    FieldInfo {
-        name: "map_count",
-        unit: "1",
-        min: 0.0,
-        max: MEASURED_MEMORY,
-        doc: "MEASURED reports in the TCA map (weight)",
-    },
-    FieldInfo {
-        name: "map_sum_x_k",
-        unit: "K",
-        min: -MEASURED_MEMORY * 110.0,
-        max: MEASURED_MEMORY * 110.0,
-        doc: "sum of estimated TCA rises at lock",
-    },
-    FieldInfo {
-        name: "map_sum_y_k",
-        unit: "K",
-        min: -MEASURED_MEMORY * 110.0,
-        max: MEASURED_MEMORY * 110.0,
-        doc: "sum of TCA rises the measured radii need",
-    },
-    FieldInfo {
-        name: "map_sum_xx_k2",
-        unit: "K2",
-        min: 0.0,
-        max: MEASURED_MEMORY * 110.0 * 110.0,
-        doc: "sum of squared estimated rises",
-    },
-    FieldInfo {
-        name: "map_sum_xy_k2",
-        unit: "K2",
-        min: -MEASURED_MEMORY * 110.0 * 110.0,
-        max: MEASURED_MEMORY * 110.0 * 110.0,
-        doc: "sum of estimated times needed rises",
-    },
-    FieldInfo {
-        name: "power_count",
-        unit: "1",
-        min: 0.0,
-        max: MEASURED_MEMORY,
-        doc: "MEASURED reports in the power scale (weight)",
-    },
-    FieldInfo {
-        name: "power_sum_ratio",
-        unit: "1",
-        min: 0.0,
-        max: MEASURED_MEMORY * POWER_SCALE_RANGE.1,
-        doc: "sum of power needed over table power",
-    },
-    FieldInfo {
-        name: "convection_w_m2k",
-        unit: "W/m2K",
-        min: CONVECTION_RANGE_W_M2K.0,
-        max: CONVECTION_RANGE_W_M2K.1,
-        doc: "rim convection of the thermal model (TUNE: water or still air)",
-    },
-    FieldInfo {
-        name: "version",
-        unit: "1",
-        min: LAYOUT_VERSION,
-        max: LAYOUT_VERSION,
-        doc: "calibration layout version",
-    },
+    field_info(
+        "pla_rise_k_per_w",
+        "K/W",
+        (RISE_MIN_SHARE * R_AT_HIGHEST_CONVECTION_K_PER_W[1], RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[1]),
+        "steady PLA thermistor rise per PLA watt (TUNE)",
+    ),
+    field_info(
+        "tca_rise_k_per_w",
+        "K/W",
+        (RISE_MIN_SHARE * R_AT_HIGHEST_CONVECTION_K_PER_W[0], RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[0]),
+        "steady TCA thermistor rise per TCA watt (TUNE)",
+    ),
+    field_info(
+        "pla_to_tca_k_per_w",
+        "K/W",
+        (0.0, RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[2] * 2.0),
+        "steady TCA thermistor rise per PLA watt (TUNE)",
+    ),
+    field_info(
+        "tca_to_pla_k_per_w",
+        "K/W",
+        (0.0, RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[2] * 2.0),
+        "steady PLA thermistor rise per TCA watt (TUNE)",
+    ),
+    field_info(
+        "pla_tau_s",
+        "s",
+        (TAU_RANGE_S.0, TAU_RANGE_S.1),
+        "PLA thermistor step-response time constant (TUNE)",
+    ),
+    field_info(
+        "tca_tau_s",
+        "s",
+        (TAU_RANGE_S.0, TAU_RANGE_S.1),
+        "TCA thermistor step-response time constant (TUNE)",
+    ),
+    field_info(
+        "map_count",
+        "1",
+        (0.0, MEASURED_MEMORY),
+        "MEASURED reports in the TCA map (weight)",
+    ),
+    field_info(
+        "map_sum_x_k",
+        "K",
+        (-MEASURED_MEMORY * 110.0, MEASURED_MEMORY * 110.0),
+        "sum of estimated TCA rises at lock",
+    ),
+    field_info(
+        "map_sum_y_k",
+        "K",
+        (-MEASURED_MEMORY * 110.0, MEASURED_MEMORY * 110.0),
+        "sum of TCA rises the measured radii need",
+    ),
+    field_info(
+        "map_sum_xx_k2",
+        "K2",
+        (0.0, MEASURED_MEMORY * 110.0 * 110.0),
+        "sum of squared estimated rises",
+    ),
+    field_info(
+        "map_sum_xy_k2",
+        "K2",
+        (-MEASURED_MEMORY * 110.0 * 110.0, MEASURED_MEMORY * 110.0 * 110.0),
+        "sum of estimated times needed rises",
+    ),
+    field_info(
+        "power_count",
+        "1",
+        (0.0, MEASURED_MEMORY),
+        "MEASURED reports in the power scale (weight)",
+    ),
+    field_info(
+        "power_sum_ratio",
+        "1",
+        (0.0, MEASURED_MEMORY * POWER_SCALE_RANGE.1),
+        "sum of power needed over table power",
+    ),
+    field_info(
+        "convection_w_m2k",
+        "W/m2K",
+        (CONVECTION_RANGE_W_M2K.0, CONVECTION_RANGE_W_M2K.1),
+        "rim convection of the thermal model (TUNE: water or still air)",
+    ),
+    field_info(
+        "version",
+        "1",
+        (LAYOUT_VERSION, LAYOUT_VERSION),
+        "calibration layout version",
+    ),
 ];
 
 /// This link's calibration (see the module docs). Plain fields with units in their names.
@@ -295,6 +324,29 @@ pub enum ReportRejection {
     /// A sum would leave its field's range (the field).
     Field(FieldInfo),
 }
+
+/// A calibration whose rises do not fit the model at its convection
+/// ([`Calibration::share_rule`]): the field, its share of the model's rise, and the shares
+/// allowed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Inconsistent {
+    /// The rise out of line.
+    pub field: FieldInfo,
+    /// Its share of the model's rise at [`Calibration::convection_w_m2k`], 1.
+    pub share: f32,
+    /// The shares allowed, 1.
+    pub allowed: (f32, f32),
+}
+
+/// The shares of the model's rise each rise field may have (field index, allowed shares): a
+/// thermistor's own [`RISE_MIN_SHARE`]..[`RISE_MAX_SHARE`], a coupling up to twice the top
+/// share. The one rule `TUNE` fits and `CONFIG SET` are both held to.
+pub const SHARE_RULE: [(usize, (f32, f32)); 4] = [
+    (0, (RISE_MIN_SHARE, RISE_MAX_SHARE)),
+    (1, (RISE_MIN_SHARE, RISE_MAX_SHARE)),
+    (2, (0.0, 2.0 * RISE_MAX_SHARE)),
+    (3, (0.0, 2.0 * RISE_MAX_SHARE)),
+];
 
 /// Why a value was refused by [`Calibration::set`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -423,6 +475,24 @@ impl Calibration {
             return WATER_RESISTANCES;
         }
         resistance_matrix(&p)
+    }
+
+    /// Whether every rise is the share [`SHARE_RULE`] allows of the model's own at
+    /// [`Calibration::convection_w_m2k`] (the first one that is not, if any).
+    pub fn share_rule(&self) -> Result<(), Inconsistent> {
+        let r = self.model_resistances();
+        let model = [r.r_pp, r.r_tt, r.r_tp, r.r_tp];
+        for (k, &(i, allowed)) in SHARE_RULE.iter().enumerate() {
+            let share = self.value(i) / model[k] as f32;
+            if !(share >= allowed.0 && share <= allowed.1) {
+                return Err(Inconsistent {
+                    field: FIELDS[i],
+                    share,
+                    allowed,
+                });
+            }
+        }
+        Ok(())
     }
 
     /// Share of its node's rise the thermistor of `heater` reads (its fitted rise per watt over
@@ -581,9 +651,10 @@ fn map_bounds(a: f32, b: f32) -> Result<(), ReportRejection> {
     if !(b >= MAP_SLOPE_RANGE.0 && b <= MAP_SLOPE_RANGE.1) {
         return Err(ReportRejection::Slope(b));
     }
+    // The aim for each needed rise y is (y − a) / b; linear in y, so its ends bound it.
     let worst = [MAP_SPAN_K.0, MAP_SPAN_K.1]
         .iter()
-        .map(|&x| (a + (b - 1.0) * x).abs())
+        .map(|&y| ((y - a) / b - y).abs())
         .fold(0.0f32, f32::max);
     if !(worst <= MAP_MAX_CORRECTION_K) {
         return Err(ReportRejection::Correction(worst));
@@ -728,7 +799,7 @@ mod tests {
         // A slope past its range is refused, not clamped into use.
         let mut s = Calibration::default();
         for x in [20.0f32, 40.0] {
-            s.fold_map(x, 0.6 * x).unwrap();
+            s.fold_map(x, 0.8 * x).unwrap();
         }
         let before = s;
         match s.fold_map(60.0, 0.2 * 60.0) {

@@ -7,13 +7,13 @@
 
 use crate::calibration::{Calibration, CalibrationError, ReportRejection};
 use crate::heater::HeaterConfig;
-use crate::part_limit::{limit_shares, CEILING_MARGIN_K};
+use crate::part_limit::{limit_shares, under_ceiling_w, CEILING_MARGIN_K};
 use crate::protocol::{self, reply, tune_reply, Command, Mode, OutLine, SimCommand};
 use crate::pulse::Pulse;
 use crate::sequencer::{SeqEvent, Sequencer};
 use crate::settings::codec::{self, Blob, LoadError};
 use crate::settings::store::{Loaded, SaveReport, StoreError};
-use crate::settings::{SetError, Settings, Spec};
+use crate::settings::{SetError, Settings, Spec, CALIBRATION_SPECS};
 use crate::stats::LoopTiming;
 use crate::strategy::model::MODEL_KEEP_ALIVE_W;
 use crate::supervisor::{Fault, FaultCode, Faults, Frame, Subject, Supervisor};
@@ -184,6 +184,12 @@ pub struct Controller {
     tune: Option<Tune>,
     /// The last morph started, for MEASURED.
     last: Option<LastMorph>,
+    /// Counts the calibration's replacements (TUNE done, CONFIG RESET, CONFIG SET of a
+    /// calibration value, settings loaded): a MEASURED report counts only for a morph of the
+    /// current epoch.
+    cal_epoch: u32,
+    /// Each heater's HEAT time over the last window ([`crate::pulse::HEAT_WINDOW_S`]).
+    heat_budget: crate::pulse::HeatBudget,
 }
 
 /// What MEASURED needs of the last morph.
@@ -199,6 +205,8 @@ struct LastMorph {
     map: (f32, f32),
     /// The radius `done` reported, mm (NaN until done).
     done_mm: f32,
+    /// The calibration's epoch at MORPH ([`Controller`]'s `cal_epoch`).
+    epoch: u32,
     /// A MEASURED report has been counted for it.
     counted: bool,
 }
@@ -238,6 +246,8 @@ impl Controller {
             pulse: None,
             tune: None,
             last: None,
+            cal_epoch: 0,
+            heat_budget: crate::pulse::HeatBudget::default(),
         }
     }
 
@@ -273,6 +283,11 @@ impl Controller {
     /// The last good temperatures the supervisor read, °C (what the controller acts on).
     pub fn measurements(&self) -> Measurements {
         self.sup.measurements()
+    }
+
+    /// This tick's estimates of the heated parts (PLA rod, TCA), °C ([`crate::part_limit`]).
+    pub fn parts_c(&self) -> [f32; 2] {
+        self.sup.parts_c()
     }
 
     /// Powers commanded in the last tick, W.
@@ -331,13 +346,15 @@ impl Controller {
 
     fn trip(&mut self, fault: Fault) {
         self.pulse = None;
-        if self.tune.take().is_some() {
-            self.push(Event::Tune(TuneEvent::Failed(TuneFailure::Tripped)));
-        }
+        let tuning = self.tune.take().is_some();
         self.seq.latch(fault);
         self.powers = Powers::default();
         self.outputs = Outputs::default();
+        // The alarm first: `tune failed safety trip (see the alarm)` points back at it.
         self.alarm_once(fault);
+        if tuning {
+            self.push(Event::Tune(TuneEvent::Failed(TuneFailure::Tripped)));
+        }
     }
 
     /// Raises `fault`'s alarm unless the same code and subject has alarmed since RESET.
@@ -353,18 +370,15 @@ impl Controller {
         self.push(Event::Alarm(fault));
     }
 
-    /// Commands `p` (W) at the measured supply `supply_v` (V): each heater's power held at
-    /// [`MODEL_KEEP_ALIVE_W`] at most while its part's estimate is above its ceiling
-    /// ([`crate::part_limit`]), whatever the activity asks, then turned into duties.
+    /// Commands `p` (W) at the measured supply `supply_v` (V): each heater's power scaled down
+    /// to [`MODEL_KEEP_ALIVE_W`] as its part's estimate nears its ceiling
+    /// ([`crate::part_limit::under_ceiling_w`]), whatever the activity asks, then turned into
+    /// duties.
     fn apply(&mut self, p: Powers, supply_v: f32) {
         let parts_c = self.sup.parts_c();
         let capped = |h: Heater, w: f32| {
             let ceiling_c = crate::supervisor::limits(h.sensor()).max_c - CEILING_MARGIN_K;
-            if parts_c[h.index()] > ceiling_c {
-                w.min(MODEL_KEEP_ALIVE_W)
-            } else {
-                w
-            }
+            under_ceiling_w(w, parts_c[h.index()], ceiling_c, MODEL_KEEP_ALIVE_W)
         };
         let p = Powers {
             pla_w: capped(Heater::Pla, p.pla_w),
@@ -423,6 +437,7 @@ impl Controller {
                 }
                 TuneTick::Done(cal) => {
                     self.settings.cal = cal;
+                    self.cal_epoch = self.cal_epoch.wrapping_add(1);
                     self.sync_limits();
                     Powers::default()
                 }
@@ -568,10 +583,16 @@ impl Controller {
             return out(&l);
         }
         match Pulse::new(now_ms, heater, power_w, duration_s) {
-            Ok(p) => {
-                self.pulse = Some(p);
-                out(protocol::OK);
-            }
+            Ok(p) => match self.heat_budget.take(heater, duration_s, now_ms) {
+                Ok(()) => {
+                    self.pulse = Some(p);
+                    out(protocol::OK);
+                }
+                Err(left_s) => {
+                    reply::heat_budget(&mut l, heater, left_s);
+                    out(&l);
+                }
+            },
             Err(_) => out(&protocol::format_error(&reply::ERR_HEAT_RANGE)),
         }
     }
@@ -629,6 +650,7 @@ impl Controller {
                     map: self.settings.cal.map(),
                     done_mm: f32::NAN,
                     counted: false,
+                    epoch: self.cal_epoch,
                 });
                 let cal = self.settings.cal;
                 self.seq
@@ -749,6 +771,7 @@ impl Controller {
                 ConfigEvent::Defaults(why)
             }
         };
+        self.cal_epoch = self.cal_epoch.wrapping_add(1);
         self.sync_limits();
         self.push(Event::Config(e));
     }
@@ -791,11 +814,17 @@ impl Controller {
             }
             ConfigCommand::Reset => {
                 self.settings = Settings::DEFAULT;
+                self.cal_epoch = self.cal_epoch.wrapping_add(1);
                 reply::config_reset(&mut l);
             }
             ConfigCommand::Set { name, value } => {
                 match self.settings.set_text(name.as_str(), value.as_str()) {
-                    Ok((spec, v)) => reply::config_set(&mut l, &row(&spec, v)),
+                    Ok((spec, v)) => {
+                        if CALIBRATION_SPECS.iter().any(|c| c.name == spec.name) {
+                            self.cal_epoch = self.cal_epoch.wrapping_add(1);
+                        }
+                        reply::config_set(&mut l, &row(&spec, v))
+                    }
                     Err(SetError::UnknownName) => reply::config_unknown(&mut l, name.as_str()),
                     Err(SetError::Malformed(spec)) => {
                         reply::config_malformed(&mut l, &row(&spec, spec.default))
@@ -803,6 +832,17 @@ impl Controller {
                     Err(SetError::OutOfRange(spec, v)) => {
                         reply::config_out_of_range(&mut l, &row(&spec, spec.default), v)
                     }
+                    Err(SetError::Inconsistent(spec, v, why)) => reply::config_inconsistent(
+                        &mut l,
+                        &row(&spec, spec.default),
+                        v,
+                        &why,
+                        if spec.name == "convection_w_m2k" {
+                            v
+                        } else {
+                            self.settings.cal.convection_w_m2k
+                        },
+                    ),
                 }
             }
         }
@@ -818,6 +858,11 @@ impl Controller {
         }
         if self.busy() {
             reply::config_busy(&mut l, self.phase());
+            return out(&l);
+        }
+        // What a tune or a morph learnt while a fault built up is not to be kept.
+        if let Some(f) = self.fault() {
+            reply::fault_latched(&mut l, f.code);
             return out(&l);
         }
         self.save_request = Some(codec::encode(&self.settings));
@@ -913,6 +958,10 @@ impl Controller {
             tune_reply::busy_tuning(&mut l);
             return out(&l);
         }
+        // The busy rule of CONFIG SET: the calibration is a setting.
+        if self.pulse.is_some() {
+            return out(&protocol::format_error(&reply::ERR_BUSY_HEATING));
+        }
         let (min_mm, max_mm) = table::range_mm();
         let (lo, hi) = (
             min_mm * (1.0 - MEASURED_RANGE_MARGIN),
@@ -928,6 +977,10 @@ impl Controller {
         };
         if last.counted {
             tune_reply::measured_twice(&mut l);
+            return out(&l);
+        }
+        if last.epoch != self.cal_epoch {
+            tune_reply::measured_stale(&mut l);
             return out(&l);
         }
         let amb = last.ambient_c;

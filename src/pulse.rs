@@ -19,6 +19,50 @@ const _: () = assert!(
     HEAT_MAX_FRACTION > 0.0 && HEAT_MAX_FRACTION <= crate::supervisor::HEATING_MIN_POWER_FRACTION
 );
 
+/// The window HEAT's time is counted over, s: a heater may be pulsed for at most
+/// [`HEAT_MAX_S`] in any such window ([`HeatBudget`]), so chained pulses average at most a
+/// fifth of the pulse power: 0.2 W into the PLA, whose steady rise even in still air (about
+/// 100 K/W) stays some 20 K, far below the glass transition. (Twelve chained one-minute pulses
+/// at 1 W took a still-air rod to 89 °C and the link out of its shape.)
+pub const HEAT_WINDOW_S: f32 = 300.0;
+const _: () = assert!(HEAT_WINDOW_S >= 2.0 * HEAT_MAX_S);
+
+/// Each heater's HEAT time in the last [`HEAT_WINDOW_S`], as a bucket that drains at
+/// `HEAT_MAX_S / HEAT_WINDOW_S` seconds per second: a pulse counts its whole length when it
+/// starts (an ABORTed one too) and is refused if the bucket would pass [`HEAT_MAX_S`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HeatBudget {
+    /// Seconds in each heater's bucket (PLA, TCA) as of `at_ms`.
+    used_s: [f32; 2],
+    at_ms: u64,
+}
+
+impl HeatBudget {
+    /// Seconds of pulse `heater` may still have at `now_ms`.
+    pub fn available_s(&self, heater: Heater, now_ms: u64) -> f32 {
+        HEAT_MAX_S - self.used_at(heater, now_ms)
+    }
+
+    fn used_at(&self, heater: Heater, now_ms: u64) -> f32 {
+        let drained_s = now_ms.saturating_sub(self.at_ms) as f32 / 1000.0 * HEAT_MAX_S
+            / HEAT_WINDOW_S;
+        (self.used_s[heater.index()] - drained_s).max(0.0)
+    }
+
+    /// Counts a pulse of `duration_s` of `heater` starting at `now_ms`; refused, counting
+    /// nothing, if it would pass the budget (the seconds still available).
+    pub fn take(&mut self, heater: Heater, duration_s: f32, now_ms: u64) -> Result<(), f32> {
+        let left_s = self.available_s(heater, now_ms);
+        if !(duration_s <= left_s + 1e-3) {
+            return Err(left_s);
+        }
+        self.used_s = Heater::ALL.map(|h| self.used_at(h, now_ms));
+        self.used_s[heater.index()] += duration_s;
+        self.at_ms = now_ms;
+        Ok(())
+    }
+}
+
 /// The highest pulse power of `heater`, W.
 pub fn max_power_w(heater: Heater) -> f32 {
     let cap = match heater {
@@ -120,5 +164,18 @@ mod tests {
             );
         }
         assert!(Pulse::new(0, Heater::Pla, 1.0, HEAT_MAX_S).is_ok());
+    }
+
+    #[test]
+    fn a_heaters_pulses_add_up_over_the_window_and_the_other_heater_keeps_its_own() {
+        let mut b = HeatBudget::default();
+        assert_eq!(b.take(Heater::Pla, HEAT_MAX_S, 0), Ok(()));
+        assert!(matches!(b.take(Heater::Pla, 1.0, 1_000), Err(l) if (l - 0.2).abs() < 1e-3));
+        assert_eq!(b.take(Heater::Tca, HEAT_MAX_S, 1_000), Ok(()));
+        // The bucket drains a fifth of a second per second: half of it after half the window.
+        let half_ms = (HEAT_WINDOW_S * 500.0) as u64;
+        assert!((b.available_s(Heater::Pla, half_ms) - HEAT_MAX_S / 2.0).abs() < 1e-3);
+        assert_eq!(b.take(Heater::Pla, HEAT_MAX_S, half_ms), Err(b.available_s(Heater::Pla, half_ms)));
+        assert_eq!(b.take(Heater::Pla, HEAT_MAX_S, (HEAT_WINDOW_S * 1000.0) as u64), Ok(()));
     }
 }

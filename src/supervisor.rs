@@ -10,7 +10,7 @@
 
 use crate::heater::HeaterConfig;
 use crate::link::{R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W};
-use crate::part_limit::{estimate_c, UNTUNED_BEAD_SHARE};
+use crate::part_limit::{estimate_c, CEILING_BAND_K, CEILING_MARGIN_K, UNTUNED_BEAD_SHARES};
 use crate::thermistor::{RangeCheck, Reading};
 use crate::vocab::{Heater, Measurements, Phase, Powers, Sensor};
 
@@ -106,10 +106,10 @@ impl Fault {
                 }
             }
             (FaultCode::OverTemperature, Subject::Heater(Heater::Pla)) => {
-                "PLA_LIMITS, UNTUNED_BEAD_SHARE"
+                "PLA_LIMITS, UNTUNED_BEAD_SHARES"
             }
             (FaultCode::OverTemperature, Subject::Heater(Heater::Tca)) => {
-                "TCA_LIMITS, UNTUNED_BEAD_SHARE"
+                "TCA_LIMITS, UNTUNED_BEAD_SHARES"
             }
             (FaultCode::UnderTemperature | FaultCode::OverTemperature, _) => {
                 "PLA_LIMITS, TCA_LIMITS, AMB_LIMITS"
@@ -470,7 +470,7 @@ impl Supervisor {
             ramp: RampWatch::new(),
             amb_slow_c: None,
             last_ms: None,
-            shares: [UNTUNED_BEAD_SHARE; 2],
+            shares: UNTUNED_BEAD_SHARES,
             parts_c: [f32::NAN; 2],
             part_count: [0; 2],
         }
@@ -978,8 +978,13 @@ impl Supervisor {
     /// cooled rod's bead, warmed by it, overtook its held one by 3 K (lumped draw 22 of `cargo
     /// xtask strategies`, 32.9 mm).
     fn check_cross(&mut self, cmd: Powers) -> Result<(), Fault> {
+        // A PLA held at its ceiling (`part_limit::under_ceiling_w`) is kept from rising: its
+        // own bead cannot lead then, whatever the wiring.
+        let held = self.parts_c[Heater::Pla.index()]
+            >= PLA_LIMITS.max_c - CEILING_MARGIN_K - CEILING_BAND_K;
         let judged = cmd.pla_w >= CROSS_MIN_POWER_FRACTION * heater_cap_w(Heater::Pla)
-            && !(cmd.tca_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(Heater::Tca));
+            && !(cmd.tca_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(Heater::Tca))
+            && !held;
         let [pla_c, tca_c, _] = self.live_c;
         if !judged || !pla_c.is_finite() || !tca_c.is_finite() {
             self.cross = None;

@@ -104,7 +104,7 @@ fn each_bad_config_set_is_refused_with_a_clear_error_and_changes_nothing() {
         ),
         (
             "CONFIG SET pla_soft_target_c 125",
-            "error: out-of-range pla_soft_target_c=125.0 C is outside 75.0..87.1 C",
+            "error: out-of-range pla_soft_target_c=125.0 C is outside 75.0..83.6 C",
         ),
         (
             "CONFIG SET auto_mode auto",

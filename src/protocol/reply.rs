@@ -12,7 +12,7 @@ use crate::fixed::Fixed;
 use crate::supervisor::{
     Fault, FaultCode, Subject, SAFETY_README_SECTION, SUPPLY_MAX_V, SUPPLY_MIN_V,
 };
-use crate::vocab::Phase;
+use crate::vocab::{Heater, Phase};
 use crate::vocab::ResetCause;
 use core::fmt::{self, Write};
 
@@ -565,6 +565,23 @@ pub const ERR_HEAT_RANGE: ProtoError = ProtoError {
     text: "HEAT power must be above 0 and at most 20 % of the heater's cap (pla 1 W, tca 0.4 W), for more than 0 and at most 60 s.",
 };
 
+/// HEAT refused because its heater has had its pulse time for the window:
+/// `error: busy <heater> has <s> s of HEAT left in this window ...`.
+pub fn heat_budget(l: &mut OutLine, heater: Heater, left_s: f32) {
+    error(
+        l,
+        ErrorCode::Busy,
+        format_args!(
+            "{} has {} s of HEAT left: at most {} s per heater in any {} s, the rest is back \
+             as it cools",
+            heater.as_str(),
+            Fixed(left_s.max(0.0), 1),
+            Fixed(crate::pulse::HEAT_MAX_S, 0),
+            Fixed(crate::pulse::HEAT_WINDOW_S, 0)
+        ),
+    );
+}
+
 /// MORPH refused while a HEAT pulse runs.
 pub const ERR_BUSY_HEATING: ProtoError = ProtoError {
     code: ErrorCode::Busy,
@@ -1037,6 +1054,33 @@ pub fn config_out_of_range(l: &mut OutLine, r: &SettingRow, v: f32) {
             Fixed(v, r.decimals.max(1)),
             r.unit,
             SettingRange(r)
+        ),
+    );
+}
+
+/// `CONFIG SET` of a calibration value that leaves a rise out of line with the model:
+/// `error: out-of-range <name>=<v> <unit> puts <field> at <share>x the model's rise at
+/// convection_w_m2k=<h>, outside <lo>..<hi>x (docs/settings.md)`.
+pub fn config_inconsistent(
+    l: &mut OutLine,
+    r: &SettingRow,
+    v: f32,
+    why: &crate::calibration::Inconsistent,
+    convection_w_m2k: f32,
+) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!(
+            "{}={} {} puts {} at {}x the model's rise at convection_w_m2k={}, outside {}..{}x ({SETTINGS_DOC})",
+            r.name,
+            Fixed(v, r.decimals.max(1)),
+            r.unit,
+            why.field.name,
+            Fixed(why.share, 2),
+            Fixed(convection_w_m2k, 1),
+            Fixed(why.allowed.0, 1),
+            Fixed(why.allowed.1, 1)
         ),
     );
 }

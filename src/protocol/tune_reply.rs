@@ -93,6 +93,19 @@ pub fn measured_twice(l: &mut OutLine) {
     );
 }
 
+/// MEASURED for a morph made under another calibration (a TUNE, `CONFIG RESET` or
+/// `CONFIG SET` of a calibration value since): its radius no longer says what this link does.
+pub fn measured_stale(l: &mut OutLine) {
+    error(
+        l,
+        ErrorCode::NoFinishedMorph,
+        format_args!(
+            "no finished morph under the current calibration (TUNE, CONFIG RESET or SET \
+             changed it since); MORPH again"
+        ),
+    );
+}
+
 /// MEASURED outside what the link can reach: `error: out-of-range measured radius must be
 /// <min>..<max> mm`.
 pub fn measured_out_of_range(l: &mut OutLine, min_mm: f32, max_mm: f32) {
@@ -194,6 +207,14 @@ fn rejection(l: &mut OutLine, why: &Rejection) {
                 Fixed(*seen_k, 1)
             );
         }
+        Rejection::Residual(res_k, allowed_k) => {
+            let _ = write!(
+                l,
+                "record strays {} K from its fitted step (allowed {} K): drifting bead?",
+                Fixed(*res_k, 2),
+                Fixed(*allowed_k, 2)
+            );
+        }
         Rejection::OutOfBounds(f, v) => {
             let _ = write!(
                 l,
@@ -242,14 +263,16 @@ pub fn tune_event(l: &mut OutLine, e: &TuneEvent) {
             rise_k_per_w,
             tau_s,
             method,
+            residual_k,
         } => {
             let _ = write!(
                 l,
-                "fit {} rise_k_per_w={} tau_s={} method={}",
+                "fit {} rise_k_per_w={} tau_s={} method={} residual_k={}",
                 what.as_str(),
                 Fixed(*rise_k_per_w, 2),
                 Fixed(*tau_s, 1),
-                method.as_str()
+                method.as_str(),
+                Fixed(*residual_k, 2)
             );
         }
         TuneEvent::StillAir { rise_k, t_s } => {
@@ -282,6 +305,21 @@ pub fn tune_event(l: &mut OutLine, e: &TuneEvent) {
                 TuneFailure::Fit(what, why) => {
                     let _ = write!(l, "{} fit: ", what.as_str());
                     rejection(l, why);
+                }
+                TuneFailure::PlaTooFast(t_s) => {
+                    let _ = write!(
+                        l,
+                        "pla reached its cap in {} s, faster than its power can heat it even in \
+                         still air (MOSFET stuck on?)",
+                        Fixed(*t_s, 1)
+                    );
+                }
+                TuneFailure::AmbientMoved(k) => {
+                    let _ = write!(
+                        l,
+                        "ambient moved {} K during the tune; tune in a still bath",
+                        Fixed(*k, 1)
+                    );
                 }
                 TuneFailure::TcaTooFast(rise_k) => {
                     let _ = write!(

@@ -18,7 +18,7 @@ pub mod store;
 
 use crate::calibration::{Calibration, FIELDS, FIELD_COUNT};
 use crate::link::LINK;
-use crate::part_limit::{CEILING_MARGIN_K, UNTUNED_BEAD_SHARE};
+use crate::part_limit::{CEILING_BAND_K, CEILING_MARGIN_K, UNTUNED_BEAD_SHARES};
 use crate::protocol::Mode;
 use crate::sequencer::{PhaseTimeouts, BEND_TIMEOUT_S, LOCK_TIMEOUT_S, SOFTEN_TIMEOUT_S};
 use crate::strategy::closed::CLOSED_RIGID_COOL_C;
@@ -125,17 +125,17 @@ pub const SOFT_THRESHOLD_RANGE_C: (f32, f32) = (64.0, 70.0);
 /// a warm bath.
 pub const RIGID_THRESHOLD_RANGE_C: (f32, f32) = (35.0, CLOSED_RIGID_COOL_C);
 /// Allowed PLA target of the model strategies, °C: at least 5 K above the highest soft
-/// threshold, and at most the reading whose rod estimate is at the rod's ceiling in the link
-/// file's bath ([`crate::part_limit`]: a bead at `ambient + share × (ceiling − ambient)`); above
-/// it the ceiling would hold the heater down before the target, so no such target can be
-/// reached (what the range guarantees, and on which links: docs/settings.md).
+/// threshold, and at most the reading whose rod estimate is where the rod's ceiling begins to
+/// scale its heater down, in the link file's bath ([`crate::part_limit::reachable_c`]); above it
+/// the ceiling would hold the heater down before the target, so no such target can be reached (what the range guarantees, and on which links: docs/settings.md).
 pub const PLA_SOFT_TARGET_RANGE_C: (f32, f32) = (SOFT_THRESHOLD_RANGE_C.1 + 5.0, PLA_TARGET_MAX_C);
-/// The top of [`PLA_SOFT_TARGET_RANGE_C`], °C: `22 + 0.7 × (115 − 22)`, rounded down to the
-/// tenth `CONFIG` prints.
+/// The top of [`PLA_SOFT_TARGET_RANGE_C`], °C: `22 + 0.7 × (130 − 15 − 5 − 22)`
+/// ([`crate::part_limit::reachable_c`] of an untuned link), rounded down to the tenth `CONFIG`
+/// prints.
 const PLA_TARGET_MAX_C: f32 = {
     let amb = LINK.surroundings.ambient_c as f32;
-    let ceiling = PLA_LIMITS.max_c - CEILING_MARGIN_K;
-    let t = amb + UNTUNED_BEAD_SHARE * (ceiling - amb);
+    let ceiling = PLA_LIMITS.max_c - CEILING_MARGIN_K - CEILING_BAND_K;
+    let t = amb + UNTUNED_BEAD_SHARES[0] * (ceiling - amb);
     (t * 10.0) as i32 as f32 / 10.0
 };
 const _: () = assert!(PLA_TARGET_MAX_C > SOFT_THRESHOLD_RANGE_C.1 + 5.0);
@@ -375,6 +375,9 @@ pub enum SetError {
     Malformed(Spec),
     /// The value is outside the setting's range.
     OutOfRange(Spec, f32),
+    /// The value is in range, but it leaves the calibration's rises out of line with the model
+    /// at its convection (the rule `TUNE` is held to).
+    Inconsistent(Spec, f32, crate::calibration::Inconsistent),
 }
 
 impl Default for Settings {
@@ -404,8 +407,33 @@ impl Settings {
     pub fn for_each(&self, mut f: impl FnMut(&Spec, f32)) {
         for g in self.groups() {
             for (i, spec) in g.specs().iter().enumerate() {
-                f(spec, g.get(i));
+                f(&self.live(*spec), g.get(i));
             }
+        }
+    }
+
+    /// `spec` with the range a value may have now: a calibration rise's range narrowed to the
+    /// shares [`crate::calibration::SHARE_RULE`] allows of the model's rise at the live
+    /// `convection_w_m2k` (rounded inwards to the decimals shown), so every value inside the
+    /// printed range is accepted and keeps the calibration consistent.
+    pub fn live(&self, spec: Spec) -> Spec {
+        use crate::calibration::SHARE_RULE;
+        let Some(k) = SHARE_RULE
+            .iter()
+            .position(|&(i, _)| FIELDS[i].name.as_bytes() == spec.name.as_bytes())
+        else {
+            return spec;
+        };
+        let r = self.cal.model_resistances();
+        let model = [r.r_pp, r.r_tt, r.r_tp, r.r_tp][k] as f32;
+        let (lo, hi) = SHARE_RULE[k].1;
+        let scale = 10f32.powi(spec.decimals as i32);
+        let min = ((lo * model * scale) as i64 + 1) as f32 / scale;
+        let max = ((hi * model * scale) as i64) as f32 / scale;
+        Spec {
+            min: spec.min.max(if lo == 0.0 { 0.0 } else { min }),
+            max: spec.max.min(max),
+            ..spec
         }
     }
 
@@ -419,7 +447,7 @@ impl Settings {
         for (group, g) in self.groups().iter().enumerate() {
             for (index, spec) in g.specs().iter().enumerate() {
                 if spec.name.eq_ignore_ascii_case(name) {
-                    return Some((SettingId { group, index }, *spec));
+                    return Some((SettingId { group, index }, self.live(*spec)));
                 }
             }
         }
@@ -451,7 +479,14 @@ impl Settings {
         if !spec.allows(v) {
             return Err(SetError::OutOfRange(spec, v));
         }
+        let before = self.cal;
         self.groups_mut()[id.group].set(id.index, v);
+        if self.cal != before {
+            if let Err(why) = self.cal.share_rule() {
+                self.cal = before;
+                return Err(SetError::Inconsistent(spec, v, why));
+            }
+        }
         Ok((spec, v))
     }
 }

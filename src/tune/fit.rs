@@ -125,6 +125,35 @@ pub fn least_squares(y: &[f32], dt_s: f32, tau_range_s: (f32, f32)) -> Option<St
     best.map(|(_, f)| f).filter(|f| f.rise_k > 0.0)
 }
 
+/// Root-mean-square residual of `fit` against the record's last two thirds, K (the part a
+/// first-order curve should follow: the bead's lag shapes the first third).
+pub fn residual_rms_k(y: &[f32], dt_s: f32, fit: &StepFit) -> f32 {
+    let from = y.len() / 3;
+    if y.len() <= from || !(fit.tau_s > 0.0) {
+        return f32::NAN;
+    }
+    let mut sse = 0.0f32;
+    for (i, &v) in y.iter().enumerate().skip(from) {
+        let f = 1.0 - exp(-((i + 1) as f32 * dt_s) / fit.tau_s);
+        let e = v - fit.rise_k * f;
+        sse += e * e;
+    }
+    libm_sqrt(sse / (y.len() - from) as f32)
+}
+
+/// `sqrt` without `std` (Newton's iteration from a bit-level first guess; 4 steps give f32
+/// precision for the residuals here).
+fn libm_sqrt(x: f32) -> f32 {
+    if !(x > 0.0) {
+        return if x == 0.0 { 0.0 } else { f32::NAN };
+    }
+    let mut r = f32::from_bits((x.to_bits() >> 1) + 0x1fc0_0000);
+    for _ in 0..4 {
+        r = 0.5 * (r + x / r);
+    }
+    r
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

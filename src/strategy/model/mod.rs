@@ -118,9 +118,17 @@ pub struct ModelDrive {
 }
 
 impl ModelDrive {
-    /// The model started from the temperatures at MORPH, aiming the TCA at `tca_target_c`.
+    /// The model started from the temperatures at MORPH, aiming the TCA at `tca_target_c` and
+    /// the PLA at the morph's target, each at most what its part's ceiling lets it reach
+    /// ([`crate::part_limit::reachable_c`]).
     pub fn new(s: &Start, tca_target_c: f32) -> Self {
         let m = s.m;
+        // Targets the parts' ceilings would not let the heaters reach are not targets.
+        let reachable = |h: HeatedNode, limit_c: f32| {
+            crate::part_limit::reachable_c(s.cal, h, m.t_amb_c, limit_c)
+        };
+        let tca_target_c = tca_target_c.min(reachable(HeatedNode::Tca, TCA_LIMITS.max_c));
+        let pla_target_c = s.pla_target_c.min(reachable(HeatedNode::Pla, PLA_LIMITS.max_c));
         ModelDrive {
             observer: Observer::from_measured_with_gains(
                 m.t_pla_c,
@@ -137,7 +145,7 @@ impl ModelDrive {
                 s.cal.model_params(),
             ),
             tca_target_c,
-            pla_target_c: s.pla_target_c,
+            pla_target_c,
             last_ms: s.now_ms,
             applied: Powers::default(),
             settled_since_ms: None,
