@@ -141,7 +141,8 @@ const fn inward(min: f32, max: f32) -> (f32, f32) {
             t
         }
     }
-    let lo = -floor(-min * RANGE_DECIMALS_SCALE) / RANGE_DECIMALS_SCALE;
+    // `+ 0.0` turns the −0 of a range that starts at 0 into +0.
+    let lo = -floor(-min * RANGE_DECIMALS_SCALE) / RANGE_DECIMALS_SCALE + 0.0;
     let hi = floor(max * RANGE_DECIMALS_SCALE) / RANGE_DECIMALS_SCALE;
     (lo, hi)
 }
@@ -171,25 +172,37 @@ pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
     field_info(
         "pla_rise_k_per_w",
         "K/W",
-        (RISE_MIN_SHARE * R_AT_HIGHEST_CONVECTION_K_PER_W[1], RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[1]),
+        (
+            RISE_MIN_SHARE * R_AT_HIGHEST_CONVECTION_K_PER_W[1],
+            RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[1],
+        ),
         "steady PLA thermistor rise per PLA watt (TUNE)",
     ),
     field_info(
         "tca_rise_k_per_w",
         "K/W",
-        (RISE_MIN_SHARE * R_AT_HIGHEST_CONVECTION_K_PER_W[0], RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[0]),
+        (
+            RISE_MIN_SHARE * R_AT_HIGHEST_CONVECTION_K_PER_W[0],
+            RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[0],
+        ),
         "steady TCA thermistor rise per TCA watt (TUNE)",
     ),
     field_info(
         "pla_to_tca_k_per_w",
         "K/W",
-        (0.0, RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[2] * 2.0),
+        (
+            0.0,
+            RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[2] * 2.0,
+        ),
         "steady TCA thermistor rise per PLA watt (TUNE)",
     ),
     field_info(
         "tca_to_pla_k_per_w",
         "K/W",
-        (0.0, RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[2] * 2.0),
+        (
+            0.0,
+            RISE_MAX_SHARE * R_AT_LOWEST_CONVECTION_K_PER_W[2] * 2.0,
+        ),
         "steady PLA thermistor rise per TCA watt (TUNE)",
     ),
     field_info(
@@ -231,7 +244,10 @@ pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
     field_info(
         "map_sum_xy_k2",
         "K2",
-        (-MEASURED_MEMORY * 110.0 * 110.0, MEASURED_MEMORY * 110.0 * 110.0),
+        (
+            -MEASURED_MEMORY * 110.0 * 110.0,
+            MEASURED_MEMORY * 110.0 * 110.0,
+        ),
         "sum of estimated times needed rises",
     ),
     field_info(
@@ -347,6 +363,10 @@ pub const SHARE_RULE: [(usize, (f32, f32)); 4] = [
     (2, (0.0, 2.0 * RISE_MAX_SHARE)),
     (3, (0.0, 2.0 * RISE_MAX_SHARE)),
 ];
+
+/// Index in [`FIELDS`] of [`Calibration::convection_w_m2k`]: the field the rises' shares are
+/// judged at, so its own range depends on them.
+pub const CONVECTION_FIELD: usize = 13;
 
 /// Why a value was refused by [`Calibration::set`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -885,6 +905,6 @@ mod tests {
         let mut bad = water;
         bad.convection_w_m2k = f32::NAN;
         assert_eq!(bad.model_convection_w_m2k(), water.convection_w_m2k);
-        assert_eq!(FIELDS[13].name, "convection_w_m2k");
+        assert_eq!(FIELDS[CONVECTION_FIELD].name, "convection_w_m2k");
     }
 }

@@ -134,10 +134,18 @@ mod tests {
     fn an_untuned_link_reaches_its_beads_share_of_the_ceiling() {
         let cal = Calibration::DEFAULT;
         let t = reachable_c(&cal, Heater::Pla, 22.0, 130.0);
-        assert!((t - (22.0 + UNTUNED_BEAD_SHARES[0] * (130.0 - CEILING_MARGIN_K - CEILING_BAND_K - 22.0))).abs() < 1e-3);
+        assert!(
+            (t - (22.0
+                + UNTUNED_BEAD_SHARES[0] * (130.0 - CEILING_MARGIN_K - CEILING_BAND_K - 22.0)))
+                .abs()
+                < 1e-3
+        );
         // A bead held there has an estimate the band below the ceiling: full power.
         let est = estimate_c(t, 22.0, limit_shares(&cal)[0]);
-        assert_eq!(under_ceiling_w(1.0, est - 1e-3, 130.0 - CEILING_MARGIN_K, 0.05), 1.0);
+        assert_eq!(
+            under_ceiling_w(1.0, est - 1e-3, 130.0 - CEILING_MARGIN_K, 0.05),
+            1.0
+        );
     }
 
     #[test]

@@ -44,8 +44,8 @@ impl HeatBudget {
     }
 
     fn used_at(&self, heater: Heater, now_ms: u64) -> f32 {
-        let drained_s = now_ms.saturating_sub(self.at_ms) as f32 / 1000.0 * HEAT_MAX_S
-            / HEAT_WINDOW_S;
+        let drained_s =
+            now_ms.saturating_sub(self.at_ms) as f32 / 1000.0 * HEAT_MAX_S / HEAT_WINDOW_S;
         (self.used_s[heater.index()] - drained_s).max(0.0)
     }
 
@@ -175,7 +175,13 @@ mod tests {
         // The bucket drains a fifth of a second per second: half of it after half the window.
         let half_ms = (HEAT_WINDOW_S * 500.0) as u64;
         assert!((b.available_s(Heater::Pla, half_ms) - HEAT_MAX_S / 2.0).abs() < 1e-3);
-        assert_eq!(b.take(Heater::Pla, HEAT_MAX_S, half_ms), Err(b.available_s(Heater::Pla, half_ms)));
-        assert_eq!(b.take(Heater::Pla, HEAT_MAX_S, (HEAT_WINDOW_S * 1000.0) as u64), Ok(()));
+        assert_eq!(
+            b.take(Heater::Pla, HEAT_MAX_S, half_ms),
+            Err(b.available_s(Heater::Pla, half_ms))
+        );
+        assert_eq!(
+            b.take(Heater::Pla, HEAT_MAX_S, (HEAT_WINDOW_S * 1000.0) as u64),
+            Ok(())
+        );
     }
 }

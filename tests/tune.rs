@@ -57,7 +57,8 @@ fn a_healthy_link_tunes_within_bounds_and_raises_no_alarm(link: Link) {
         }
     }
     assert!(end.starts_with("event: tune done"), "{end}");
-    assert!(took_s <= 180.0, "{took_s} s");
+    // Within the total TUNE announced, give or take the tick that saw it end.
+    assert!(took_s <= TUNE_TOTAL_S as f64 + 0.5, "{took_s} s");
     assert_eq!(b.alarms(), Vec::<String>::new());
     let cal = b.rig.ctrl.calibration();
     assert!(cal.valid(), "{cal:?}");

@@ -2,7 +2,8 @@
 //! lines, `step` with arbitrary ADC counts (and plausible ones) at arbitrary times. Whatever
 //! arrives: no panic; duties finite and in [0, 1], both 0 whenever `fault()` is Some; every
 //! reply and event line fits an `OutLine`; every command line gets exactly one final reply,
-//! last.
+//! last; and whatever CONFIG SET, TUNE and MEASURED did, the calibration keeps TUNE's share
+//! rule and its power scale inside its bounds.
 #![no_main]
 
 use arbitrary::Arbitrary;
@@ -13,7 +14,8 @@ use morphlink::protocol::{classify, parse_line, Command, LineKind, OutLine};
 
 /// Lines the fuzzer can pick by number, so it reaches morphs and faults quickly.
 const KNOWN: &[&str] = &[
-    "STATUS", "ABORT", "RESET", "VERSION", "RANGE", "TABLE", "HELP", "STATS", "MORPH",
+    "STATUS", "ABORT", "RESET", "VERSION", "RANGE", "TABLE", "HELP", "STATS", "MORPH", "TUNE",
+    "SAVE", "CONFIG", "CONFIG RESET", "HEAT pla 1 60", "HEAT tca 0.4 30", "MEASURED",
 ];
 const MODES: &[&str] = &["", " auto", " paper", " gated", " boost", " closed", " x"];
 
@@ -29,8 +31,28 @@ enum Op {
     Step { dt_ms: u16, thermistor_counts: [u32; 3], supply_counts: u32, sample_lag_ms: u16 },
     /// A tick after `dt_ms` with counts for these temperatures (°C) and supply (dV).
     Plausible { dt_ms: u16, temps_c: [i8; 3], supply_dv: u8, ticks: u8 },
+    /// `CONFIG SET <setting> <value>`, the setting by number, the value in thousandths.
+    ConfigSet { setting: u8, value_milli: i32 },
+    /// `MEASURED <radius>`, the radius in 0.01 mm.
+    Measured { radius_cmm: u16 },
     /// The clock jumps to any time (also backwards).
     Jump(u64),
+}
+
+/// The names of every setting, in `CONFIG`'s order.
+fn setting_names() -> Vec<&'static str> {
+    let mut v = Vec::new();
+    morphlink::settings::Settings::DEFAULT.for_each(|spec, _| v.push(spec.name));
+    v
+}
+
+/// What no command may break: the calibration's rises in line with the model (TUNE's rule,
+/// which CONFIG SET is held to) and the table's power scale within its bounds.
+fn check_calibration(c: &Controller) {
+    let cal = c.calibration();
+    assert!(cal.share_rule().is_ok(), "{:?}", cal.share_rule());
+    let (lo, hi) = morphlink::calibration::POWER_SCALE_RANGE;
+    assert!((lo..=hi).contains(&cal.power_scale()), "{}", cal.power_scale());
 }
 
 fn check_outputs(c: &Controller, o: Outputs) {
@@ -71,6 +93,7 @@ fuzz_target!(|ops: Vec<Op>| {
     let cfg = Config::DEFAULT;
     let mut c = Controller::new(cfg);
     let mut now_ms: u64 = 0;
+    let names = setting_names();
     for op in ops {
         match op {
             Op::Line(text) => line(&mut c, now_ms, &text),
@@ -102,8 +125,17 @@ fuzz_target!(|ops: Vec<Op>| {
                     check_outputs(&c, o);
                 }
             }
+            Op::ConfigSet { setting, value_milli } => {
+                let name = names[setting as usize % names.len()];
+                let v = value_milli as f64 / 1000.0;
+                line(&mut c, now_ms, &format!("CONFIG SET {name} {v}"));
+            }
+            Op::Measured { radius_cmm } => {
+                line(&mut c, now_ms, &format!("MEASURED {}", radius_cmm as f32 / 100.0));
+            }
             Op::Jump(t) => now_ms = t,
         }
+        check_calibration(&c);
         while let Some(l) = c.pop_event_line() {
             assert!(
                 matches!(classify(&l), LineKind::Event | LineKind::Done | LineKind::Alarm),

@@ -12,8 +12,8 @@ use crate::fixed::Fixed;
 use crate::supervisor::{
     Fault, FaultCode, Subject, SAFETY_README_SECTION, SUPPLY_MAX_V, SUPPLY_MIN_V,
 };
-use crate::vocab::{Heater, Phase};
 use crate::vocab::ResetCause;
+use crate::vocab::{Heater, Phase};
 use core::fmt::{self, Write};
 
 /// HELP text, one `data:` line each.

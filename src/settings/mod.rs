@@ -16,7 +16,7 @@ pub mod ram_flash;
 pub mod save_record;
 pub mod store;
 
-use crate::calibration::{Calibration, FIELDS, FIELD_COUNT};
+use crate::calibration::{Calibration, CONVECTION_FIELD, FIELDS, FIELD_COUNT};
 use crate::link::LINK;
 use crate::part_limit::{CEILING_BAND_K, CEILING_MARGIN_K, UNTUNED_BEAD_SHARES};
 use crate::protocol::Mode;
@@ -418,6 +418,9 @@ impl Settings {
     /// printed range is accepted and keeps the calibration consistent.
     pub fn live(&self, spec: Spec) -> Spec {
         use crate::calibration::SHARE_RULE;
+        if spec.name.as_bytes() == FIELDS[CONVECTION_FIELD].name.as_bytes() {
+            return self.live_convection(spec);
+        }
         let Some(k) = SHARE_RULE
             .iter()
             .position(|&(i, _)| FIELDS[i].name.as_bytes() == spec.name.as_bytes())
@@ -435,6 +438,54 @@ impl Settings {
             max: spec.max.min(max),
             ..spec
         }
+    }
+
+    /// `spec` (the convection's) narrowed to the convections at which the live rises keep
+    /// [`crate::calibration::SHARE_RULE`]: every share grows with the convection (the model's
+    /// rises fall), so the allowed values are one interval, found by bisection and rounded
+    /// inwards to the decimals shown.
+    fn live_convection(&self, spec: Spec) -> Spec {
+        let ok = |h: f32| {
+            let mut c = self.cal;
+            c.convection_w_m2k = h;
+            c.share_rule().is_ok()
+        };
+        let now = self.cal.convection_w_m2k;
+        if !ok(now) || !spec.allows(now) {
+            return spec;
+        }
+        let step = 1.0 / 10f32.powi(spec.decimals as i32);
+        // Bisects between an allowed `inside` and a refused `outside`.
+        let edge = |mut inside: f32, mut outside: f32| {
+            for _ in 0..40 {
+                let mid = 0.5 * (inside + outside);
+                if ok(mid) {
+                    inside = mid;
+                } else {
+                    outside = mid;
+                }
+            }
+            inside
+        };
+        let min = if ok(spec.min) {
+            spec.min
+        } else {
+            let mut m = round_to(edge(now, spec.min) + 0.5 * step, spec.decimals);
+            while !ok(m) && m < now {
+                m = round_to(m + step, spec.decimals);
+            }
+            m
+        };
+        let max = if ok(spec.max) {
+            spec.max
+        } else {
+            let mut m = round_to(edge(now, spec.max) - 0.5 * step, spec.decimals);
+            while !ok(m) && m > now {
+                m = round_to(m - step, spec.decimals);
+            }
+            m
+        };
+        Spec { min, max, ..spec }
     }
 
     /// How many settings there are.
@@ -514,10 +565,14 @@ mod tests {
     use std::collections::BTreeSet;
     use std::vec::Vec;
 
+    /// Every setting's spec as compiled in (the widest ranges; [`Settings::live`] narrows the
+    /// rises').
     fn all_specs() -> Vec<Spec> {
-        let mut v = Vec::new();
-        Settings::DEFAULT.for_each(|s, _| v.push(*s));
-        v
+        MORPH_SPECS
+            .iter()
+            .chain(CALIBRATION_SPECS.iter())
+            .copied()
+            .collect()
     }
 
     #[test]

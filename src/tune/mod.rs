@@ -113,8 +113,7 @@ pub const TUNE_SAMPLE_S: f32 = 1.0;
 /// Samples a step can hold (the longer step).
 pub const TUNE_MAX_SAMPLES: usize = 90;
 /// Whole test, s.
-pub const TUNE_TOTAL_S: f32 =
-    TUNE_SETTLE_S + TUNE_TCA_S + TUNE_COOL_S + TUNE_PLA_S + TUNE_VERIFY_S;
+pub const TUNE_TOTAL_S: f32 = TUNE_SETTLE_S + TUNE_TCA_S + TUNE_COOL_S + TUNE_PLA_S + TUNE_VERIFY_S;
 // About 3 minutes under water, and each step's record fits.
 const _: () = assert!(TUNE_TOTAL_S <= 200.0);
 const _: () = assert!(TUNE_PLA_S / TUNE_SAMPLE_S <= TUNE_MAX_SAMPLES as f32);

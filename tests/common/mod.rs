@@ -27,6 +27,7 @@ use std::sync::OnceLock;
 use morphlink::bench::Noise;
 use morphlink::controller::Outputs;
 use morphlink::protocol::{classify, LineKind};
+use morphlink::sequencer::{BEND_TIMEOUT_S, LOCK_TIMEOUT_S, RELEASE_TIMEOUT_S, SOFTEN_TIMEOUT_S};
 use morphlink::vocab::Phase;
 use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
 use morphlink_plant::Plant;
@@ -173,8 +174,10 @@ impl Bench {
         assert_eq!(r, ["ok"], "MORPH {radius_mm} {mode}");
         let t0 = self.rig.now_ms();
         let mut peak_c = [f64::NEG_INFINITY; 2];
+        // Every phase may run to its timeout (a still-air lock takes minutes).
+        let max_s = (SOFTEN_TIMEOUT_S + BEND_TIMEOUT_S + LOCK_TIMEOUT_S + RELEASE_TIMEOUT_S) as f64;
         assert!(
-            self.run_until(400.0, |b| {
+            self.run_until(max_s + 10.0, |b| {
                 let t = b.rig.plant().truth();
                 peak_c = [peak_c[0].max(t.pla_c), peak_c[1].max(t.tca_c)];
                 !b.rig.ctrl.busy()

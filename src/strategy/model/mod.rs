@@ -128,7 +128,9 @@ impl ModelDrive {
             crate::part_limit::reachable_c(s.cal, h, m.t_amb_c, limit_c)
         };
         let tca_target_c = tca_target_c.min(reachable(HeatedNode::Tca, TCA_LIMITS.max_c));
-        let pla_target_c = s.pla_target_c.min(reachable(HeatedNode::Pla, PLA_LIMITS.max_c));
+        let pla_target_c = s
+            .pla_target_c
+            .min(reachable(HeatedNode::Pla, PLA_LIMITS.max_c));
         ModelDrive {
             observer: Observer::from_measured_with_gains(
                 m.t_pla_c,
