@@ -13,7 +13,7 @@
 use crate::strategies::parallel;
 use morphlink::bench::Noise;
 use morphlink::protocol::{classify, client::Status, LineKind};
-use morphlink::settings::{CALIBRATION_SPECS, MORPH_SPECS};
+use morphlink::settings::Settings;
 use morphlink::supervisor::{PLA_LIMITS, TCA_LIMITS};
 use morphlink::table;
 use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
@@ -59,12 +59,12 @@ pub struct Corner {
     pub lines: Vec<String>,
 }
 
+/// The range `CONFIG` prints for `name` at the defaults (a calibration field's narrowed to
+/// what the other fields allow, [`Settings::live`]).
 fn spec_range(name: &str) -> (f32, f32) {
-    MORPH_SPECS
-        .iter()
-        .chain(CALIBRATION_SPECS.iter())
-        .find(|s| s.name == name)
-        .map(|s| (s.min, s.max))
+    Settings::DEFAULT
+        .find(name)
+        .map(|(_, s)| (s.min, s.max))
         .unwrap_or_else(|| panic!("no setting {name}"))
 }
 
@@ -334,6 +334,14 @@ pub fn run(args: &Args) -> Result<(), String> {
         };
         let (wp, wp_at) = worst(0);
         let (wt, wt_at) = worst(1);
+        // A corner every run refused has no peak.
+        let peak = |c: f64, at: &str| {
+            if c.is_finite() {
+                format!("{c:.1} ({at})")
+            } else {
+                "none".to_string()
+            }
+        };
         let over: Vec<_> = rows
             .iter()
             .filter(|(_, p)| {
@@ -355,9 +363,11 @@ pub fn run(args: &Args) -> Result<(), String> {
         }
         let codes: Vec<String> = codes.iter().map(|(k, v)| format!("{k} ×{v}")).collect();
         println!(
-            "| {} | {} | {wp:.1} ({wp_at}) | {wt:.1} ({wt_at}) | {} | {alarms} | {} |",
+            "| {} | {} | {} | {} | {} | {alarms} | {} |",
             corner.name,
             rows.len(),
+            peak(wp, &wp_at),
+            peak(wt, &wt_at),
             over.len(),
             codes.join(", ")
         );
