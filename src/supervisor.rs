@@ -88,12 +88,14 @@ pub struct Fault {
     pub value: f32,
 }
 
-/// The README section that explains every check and its setting; alarm lines point to it.
-pub const SAFETY_README_SECTION: &str = "Safety defaults";
+/// The doc that explains every check and its setting; alarm lines point to it.
+pub const SAFETY_DOC: &str = "docs/safety.md";
+/// The section of [`SAFETY_DOC`] with the table of every check and its setting.
+pub const SAFETY_DOC_SECTION: &str = "Safety defaults";
 
 impl Fault {
     /// The named settings that govern this trip, as they are spelled in the source and in the
-    /// README's [`SAFETY_README_SECTION`] table (alarm lines name them).
+    /// [`SAFETY_DOC`]'s [`SAFETY_DOC_SECTION`] table (alarm lines name them).
     pub fn settings(&self) -> &'static str {
         match (self.code, self.subject) {
             (FaultCode::ThermistorOpen, _) => "DEFAULT_MAX_FRACTION",
@@ -137,7 +139,7 @@ impl Fault {
             (FaultCode::SensorImplausible, Subject::Sensor(Sensor::Amb)) => {
                 "AMB_RAMP_MAX_K_PER_S, AMB_RAMP_SETTLING_SHARE"
             }
-            // The line cap leaves room for one name: the README row names both.
+            // The line cap leaves room for one name: the doc's row names both.
             (FaultCode::SensorImplausible, Subject::Heater(_)) => "CROSS_MAX_LEAD_K",
             (FaultCode::SensorImplausible, _) => {
                 "PLAUS_LOW_GAIN, PLAUS_HIGH_GAIN, PLAUS_MARGIN_K, PLAUS_TIME_S"

@@ -803,11 +803,11 @@ fn a_stuck_thermistor_trips_once_its_heater_is_on(link: Link) {
     );
 }
 
-/// The alarm line names its settings and the README section (`settings` is the start of the
+/// The alarm line names its settings and the safety doc (`settings` is the start of the
 /// list in parentheses).
 fn assert_names(alarm: &str, settings: &str) {
     assert!(
-        alarm.contains(&format!("({settings}")) && alarm.contains("see README \"Safety defaults\""),
+        alarm.contains(&format!("({settings}")) && alarm.contains("see docs/safety.md"),
         "{alarm}"
     );
 }

@@ -316,3 +316,260 @@ fn documented_outputs_match_the_commands() {
     );
     assert!(checked >= 4, "only {checked} marked blocks found");
 }
+
+/// The README's `## <heading>` section, up to the next `## ` heading.
+fn readme_section(heading: &str) -> String {
+    let text = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let start = text
+        .find(&format!("\n## {heading}\n"))
+        .unwrap_or_else(|| panic!("README.md has no \"## {heading}\" heading"));
+    let body = &text[start + 1..];
+    let end = body[3..].find("\n## ").map_or(body.len(), |e| e + 3);
+    body[..end].to_string()
+}
+
+/// The Layout table's rows: the backticked paths of the first column, and the row's text.
+fn layout_rows() -> Vec<(Vec<String>, String)> {
+    readme_section("Layout")
+        .lines()
+        .filter(|l| l.starts_with("| `"))
+        .map(|l| {
+            let first = l.split(" | ").next().unwrap();
+            let paths = first
+                .split('`')
+                .skip(1)
+                .step_by(2)
+                .map(str::to_string)
+                .collect();
+            (paths, l.to_string())
+        })
+        .collect()
+}
+
+/// The README is a front door: a page or two, the rest in `docs/`.
+#[test]
+fn the_readme_stays_short() {
+    let lines = std::fs::read_to_string(root().join("README.md"))
+        .unwrap()
+        .lines()
+        .count();
+    assert!(
+        lines <= 220,
+        "README.md has {lines} lines; keep it under about 200 and move detail to docs/"
+    );
+}
+
+/// Every top-level directory of the checkout (and every workspace member) has a row in the
+/// README's Layout table, and every path the table lists exists.
+#[test]
+fn the_readme_layout_matches_the_tree() {
+    let rows = layout_rows();
+    let listed: Vec<&String> = rows.iter().flat_map(|(p, _)| p).collect();
+    assert!(!listed.is_empty(), "README.md: no Layout rows found");
+    for p in &listed {
+        assert!(
+            root().join(p).exists(),
+            "README.md Layout lists `{p}`, which does not exist"
+        );
+    }
+    let mut dirs: Vec<String> = std::fs::read_dir(root())
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| e.file_type().unwrap().is_dir())
+        .map(|e| e.file_name().into_string().unwrap())
+        // Hidden folders (git, cargo's and CI's configuration) and the build output.
+        .filter(|n| !n.starts_with('.') && n != "target")
+        .collect();
+    let manifest = std::fs::read_to_string(root().join("Cargo.toml")).unwrap();
+    let members = manifest
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("members = "))
+        .expect("Cargo.toml: no workspace members line");
+    dirs.extend(members.split('"').skip(1).step_by(2).map(str::to_string));
+    dirs.sort();
+    dirs.dedup();
+    for d in dirs {
+        assert!(
+            listed.iter().any(|p| p.trim_end_matches('/') == d),
+            "README.md Layout has no row for `{d}/`"
+        );
+    }
+}
+
+/// Every `cargo xtask` subcommand (xtask's `enum Task`) is named in the Layout's `xtask/` row.
+#[test]
+fn the_readme_layout_names_every_xtask() {
+    let main = std::fs::read_to_string(root().join("xtask/src/main.rs")).unwrap();
+    let body = main
+        .split_once("enum Task {")
+        .expect("xtask/src/main.rs: no `enum Task`")
+        .1;
+    let body = &body[..body.find("\n}").unwrap()];
+    let tasks: Vec<String> = body
+        .lines()
+        .map(str::trim)
+        .filter(|l| l.starts_with(|c: char| c.is_ascii_uppercase()))
+        .map(|l| {
+            let name: String = l.chars().take_while(|c| c.is_alphanumeric()).collect();
+            // clap's default: CamelCase to kebab-case.
+            let mut kebab = String::new();
+            for (i, c) in name.chars().enumerate() {
+                if c.is_ascii_uppercase() && i > 0 {
+                    kebab.push('-');
+                }
+                kebab.push(c.to_ascii_lowercase());
+            }
+            kebab
+        })
+        .collect();
+    assert!(tasks.len() >= 5, "only {tasks:?} found in enum Task");
+    let rows = layout_rows();
+    let (_, row) = rows
+        .iter()
+        .find(|(p, _)| p.iter().any(|p| p == "xtask/"))
+        .expect("README.md Layout has no `xtask/` row");
+    for t in tasks {
+        assert!(
+            row.contains(&format!("`{t}`")) || row.contains(&format!("`cargo xtask {t}`")),
+            "README.md Layout's xtask row does not name `{t}`"
+        );
+    }
+}
+
+/// `.ci/run` runs the README's test command (the first command of its "Test" section).
+#[test]
+fn ci_runs_the_readme_test_command() {
+    let section = readme_section("Test");
+    let cmd = section
+        .split("```sh\n")
+        .nth(1)
+        .and_then(|b| b.lines().next())
+        .expect("README.md \"Test\": no ```sh block")
+        .trim();
+    assert!(
+        cmd.starts_with("cargo test"),
+        "README.md \"Test\" runs `{cmd}`"
+    );
+    let ci = std::fs::read_to_string(root().join(".ci/run")).unwrap();
+    assert!(
+        ci.lines()
+            .map(str::trim)
+            .any(|l| l == cmd || l.strip_prefix(cmd) == Some(" --locked")),
+        ".ci/run does not run the README's test command `{cmd}`"
+    );
+}
+
+/// GitHub's anchor of a heading: lower case, spaces to `-`, punctuation dropped.
+fn slug(heading: &str) -> String {
+    heading
+        .trim()
+        .to_lowercase()
+        .chars()
+        .filter_map(|c| match c {
+            ' ' => Some('-'),
+            c if c.is_alphanumeric() || c == '-' || c == '_' => Some(c),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The anchors of a Markdown file's headings (outside fenced blocks).
+fn anchors(text: &str) -> Vec<String> {
+    let mut fenced = false;
+    let mut out = Vec::new();
+    for l in text.lines() {
+        if l.starts_with("```") {
+            fenced = !fenced;
+        } else if !fenced && l.starts_with('#') {
+            out.push(slug(l.trim_start_matches('#')));
+        }
+    }
+    out
+}
+
+/// The targets of a Markdown file's inline links and images `[..](target)`, outside fenced
+/// blocks and code spans, with their line numbers.
+fn link_targets(text: &str) -> Vec<(usize, String)> {
+    let mut fenced = false;
+    let mut out = Vec::new();
+    for (n, l) in text.lines().enumerate() {
+        if l.starts_with("```") {
+            fenced = !fenced;
+            continue;
+        }
+        if fenced {
+            continue;
+        }
+        // Outside code spans: every other piece between backticks.
+        for piece in l.split('`').step_by(2) {
+            let mut rest = piece;
+            while let Some(i) = rest.find("](") {
+                let after = &rest[i + 2..];
+                let Some(end) = after.find(')') else { break };
+                out.push((n + 1, after[..end].to_string()));
+                rest = &after[end..];
+            }
+        }
+    }
+    out
+}
+
+/// Every relative link in the README and `docs/*.md` (and the other Markdown files they link
+/// to: ARCHITECTURE.md, boards/README.md) points to a file that exists, and an anchor into a
+/// Markdown file to one of its headings.
+#[test]
+fn relative_links_point_to_files_that_exist() {
+    let mut files = doc_files();
+    files.extend([
+        root().join("ARCHITECTURE.md"),
+        root().join("boards/README.md"),
+    ]);
+    let mut broken = Vec::new();
+    let mut checked = 0;
+    for file in &files {
+        let text = std::fs::read_to_string(file).unwrap();
+        let shown = file.strip_prefix(root()).unwrap().display().to_string();
+        for (line, target) in link_targets(&text) {
+            if target.contains("://") || target.starts_with("mailto:") {
+                continue;
+            }
+            checked += 1;
+            let (path, anchor) = match target.split_once('#') {
+                Some((p, a)) => (p, Some(a)),
+                None => (target.as_str(), None),
+            };
+            let resolved = if path.is_empty() {
+                file.clone()
+            } else {
+                file.parent().unwrap().join(path)
+            };
+            if !resolved.exists() {
+                broken.push(format!("{shown}:{line}: `{target}`: no such file"));
+                continue;
+            }
+            if let Some(a) = anchor {
+                if resolved.extension().is_some_and(|x| x == "md") {
+                    let t = std::fs::read_to_string(&resolved).unwrap();
+                    if !anchors(&t).iter().any(|h| h == a) {
+                        broken.push(format!("{shown}:{line}: `{target}`: no such heading"));
+                    }
+                }
+            }
+        }
+    }
+    assert!(broken.is_empty(), "broken links:\n{}", broken.join("\n"));
+    assert!(checked >= 20, "only {checked} relative links found");
+}
+
+#[test]
+fn link_parsing_and_anchors() {
+    assert_eq!(
+        link_targets("see [a](docs/a.md#x) and `[b](no.md)` and ![c](c.svg)\n```\n[d](d.md)\n```"),
+        vec![(1, "docs/a.md#x".to_string()), (1, "c.svg".to_string())]
+    );
+    assert_eq!(slug(" Safety defaults"), "safety-defaults".to_string());
+    assert_eq!(
+        slug(" Scripts: one session, many commands (`morphctl run`)"),
+        "scripts-one-session-many-commands-morphctl-run"
+    );
+}

@@ -9,9 +9,7 @@ use super::{
     EVENT_TAG, OK, PROTOCOL_VERSION,
 };
 use crate::fixed::Fixed;
-use crate::supervisor::{
-    Fault, FaultCode, Subject, SAFETY_README_SECTION, SUPPLY_MAX_V, SUPPLY_MIN_V,
-};
+use crate::supervisor::{Fault, FaultCode, Subject, SAFETY_DOC, SUPPLY_MAX_V, SUPPLY_MIN_V};
 use crate::vocab::ResetCause;
 use crate::vocab::{Heater, Phase};
 use core::fmt::{self, Write};
@@ -322,15 +320,15 @@ pub fn done_event(l: &mut OutLine, t_s: f32, radius_mm: f32) {
 }
 
 /// The alarm line of a trip: `alarm: <code> <sentence>; heaters off, RESET when cleared
-/// (<settings>; see README "<section>")`, naming the settings that govern it and the README
-/// section that explains them (Klipper's habit).
+/// (<settings>; see docs/safety.md)`, naming the settings that govern it and the doc whose
+/// `SAFETY_DOC_SECTION` explains them (Klipper's habit; the heading is left out to keep
+/// the line within its cap).
 pub fn alarm(l: &mut OutLine, f: &Fault) {
     let _ = write!(
         l,
-        "{ALARM_TAG} {}; heaters off, RESET when cleared ({}; see README \"{}\")",
+        "{ALARM_TAG} {}; heaters off, RESET when cleared ({}; see {SAFETY_DOC})",
         FaultText(f),
-        f.settings(),
-        SAFETY_README_SECTION
+        f.settings()
     );
 }
 
@@ -822,14 +820,15 @@ mod tests {
 #[cfg(test)]
 mod alarm_tests {
     use super::*;
-    use crate::supervisor::{Fault, FaultCode, Subject};
+    use crate::supervisor::{Fault, FaultCode, Subject, SAFETY_DOC_SECTION};
     use crate::vocab::Phase;
     use crate::vocab::{Heater, Sensor};
     extern crate std;
     use std::format;
     use std::vec::Vec;
 
-    const README: &str = include_str!("../../README.md");
+    /// [`SAFETY_DOC`] (`include_str!` takes only a literal; the test checks they agree).
+    const SAFETY_DOC_TEXT: &str = include_str!("../../docs/safety.md");
 
     /// Every kind of trip, with every subject it can have.
     fn every_fault() -> Vec<Fault> {
@@ -863,19 +862,20 @@ mod alarm_tests {
             .collect()
     }
 
-    /// The README section `heading` (a `## ` heading), up to the next `## ` heading.
-    fn readme_section(heading: &str) -> &'static str {
-        let start = README
+    /// The safety doc's section `heading` (a `## ` heading), up to the next `## ` heading.
+    fn doc_section(heading: &str) -> &'static str {
+        let start = SAFETY_DOC_TEXT
             .find(&format!("\n## {heading}\n"))
-            .unwrap_or_else(|| panic!("README has no \"## {heading}\" heading"));
-        let body = &README[start + 1..];
+            .unwrap_or_else(|| panic!("{SAFETY_DOC} has no \"## {heading}\" heading"));
+        let body = &SAFETY_DOC_TEXT[start + 1..];
         let end = body[3..].find("\n## ").map_or(body.len(), |e| e + 3);
         &body[..end]
     }
 
     #[test]
-    fn every_alarm_names_its_settings_and_a_readme_section_that_explains_them() {
-        let section = readme_section(SAFETY_README_SECTION);
+    fn every_alarm_names_its_settings_and_a_doc_section_that_explains_them() {
+        assert_eq!(SAFETY_DOC, "docs/safety.md", "the doc the test reads");
+        let section = doc_section(SAFETY_DOC_SECTION);
         for f in every_fault() {
             let mut l = OutLine::new();
             alarm(&mut l, &f);
@@ -884,7 +884,7 @@ mod alarm_tests {
                 "{l}"
             );
             let tail = format!(
-                "; heaters off, RESET when cleared ({}; see README \"{SAFETY_README_SECTION}\")",
+                "; heaters off, RESET when cleared ({}; see {SAFETY_DOC})",
                 f.settings()
             );
             // Not truncated: the whole suffix fits the line.
@@ -892,7 +892,7 @@ mod alarm_tests {
             for setting in f.settings().split(", ") {
                 assert!(
                     section.contains(&format!("`{setting}`")),
-                    "README \"{SAFETY_README_SECTION}\" does not explain `{setting}` ({l})"
+                    "{SAFETY_DOC} \"{SAFETY_DOC_SECTION}\" does not explain `{setting}` ({l})"
                 );
             }
         }

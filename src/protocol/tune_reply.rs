@@ -9,8 +9,11 @@ use crate::tune::{Rejection, TuneEvent, TuneFailure, TUNE_START_MAX_RISE_K};
 use crate::vocab::Heater;
 use core::fmt::Write;
 
-/// The README section that explains TUNE, MEASURED and their settings.
-pub const CALIBRATION_README_SECTION: &str = "Tune and calibrate";
+/// The doc that explains TUNE, MEASURED and their settings; their refusals point to it.
+pub const CALIBRATION_DOC: &str = "docs/calibration.md";
+/// The section of [`CALIBRATION_DOC`] that explains the two commands (the replies name only the
+/// doc, to stay within the line cap).
+pub const CALIBRATION_DOC_SECTION: &str = "Tune and calibrate";
 
 /// HELP lines of the two commands (appended to [`super::reply::HELP`]).
 pub const HELP: [&str; 2] = [
@@ -77,7 +80,7 @@ pub fn measured_no_morph(l: &mut OutLine) {
         ErrorCode::NoFinishedMorph,
         format_args!(
             "no finished morph to attach the radius to; MORPH, wait for event: done, then \
-             measure (see README \"{CALIBRATION_README_SECTION}\")"
+             measure (see {CALIBRATION_DOC})"
         ),
     );
 }
@@ -122,14 +125,14 @@ pub fn measured_out_of_range(l: &mut OutLine, min_mm: f32, max_mm: f32) {
 
 /// MEASURED whose correction would leave the calibration's bounds, naming the bound:
 /// `error: out-of-range report refused: <why>; calibration unchanged, check the measurement
-/// (see README ...)`.
+/// (see docs/calibration.md ...)`.
 pub fn measured_implausible(l: &mut OutLine, why: ReportRejection) {
     error(
         l,
         ErrorCode::OutOfRange,
         format_args!(
-            "report refused: {}; calibration unchanged, check the measurement (see README \
-             \"{CALIBRATION_README_SECTION}\")",
+            "report refused: {}; calibration unchanged, check the measurement (see \
+             {CALIBRATION_DOC})",
             Why(why)
         ),
     );
@@ -329,10 +332,86 @@ pub fn tune_event(l: &mut OutLine, e: &TuneEvent) {
                     );
                 }
             }
-            let _ = write!(
-                l,
-                "; heaters off, calibration kept (see README \"{CALIBRATION_README_SECTION}\")"
-            );
+            let _ = write!(l, "; heaters off, calibration kept (see {CALIBRATION_DOC})");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibration::FIELDS;
+    use crate::tune::Fitted;
+    extern crate std;
+    use std::format;
+    use std::vec::Vec;
+
+    /// [`CALIBRATION_DOC`] (`include_str!` takes only a literal; the test checks they agree).
+    const CALIBRATION_DOC_TEXT: &str = include_str!("../../docs/calibration.md");
+
+    /// Every line that points at the doc, with the longest values its numbers can take.
+    fn lines_naming_the_doc() -> Vec<OutLine> {
+        let big = -12345.6;
+        let mut failures = Vec::new();
+        for what in [
+            Fitted::Own(Heater::Pla),
+            Fitted::Own(Heater::Tca),
+            Fitted::PlaToTca,
+            Fitted::TcaToPla,
+        ] {
+            failures.push(TuneFailure::Fit(what, Rejection::NoFit));
+            failures.push(TuneFailure::Fit(what, Rejection::Extrapolated(big, big)));
+            failures.push(TuneFailure::Fit(what, Rejection::Residual(big, big)));
+            for f in FIELDS {
+                failures.push(TuneFailure::Fit(what, Rejection::OutOfBounds(f, big)));
+            }
+        }
+        failures.extend([
+            TuneFailure::Aborted,
+            TuneFailure::Tripped,
+            TuneFailure::PlaTooFast(big),
+            TuneFailure::AmbientMoved(big),
+            TuneFailure::TcaTooFast(big),
+        ]);
+        let mut lines = Vec::new();
+        for f in failures {
+            let mut l = OutLine::new();
+            tune_event(&mut l, &TuneEvent::Failed(f));
+            lines.push(l);
+        }
+        let mut reports = Vec::from([
+            ReportRejection::NotFinite,
+            ReportRejection::Slope(big),
+            ReportRejection::Correction(big),
+            ReportRejection::PowerRatio(big),
+            ReportRejection::PowerTooSmall(big),
+        ]);
+        reports.extend(FIELDS.map(ReportRejection::Field));
+        for why in reports {
+            let mut l = OutLine::new();
+            measured_implausible(&mut l, why);
+            lines.push(l);
+        }
+        let mut l = OutLine::new();
+        measured_no_morph(&mut l);
+        lines.push(l);
+        lines
+    }
+
+    #[test]
+    fn replies_name_a_doc_section_that_exists_whole() {
+        assert_eq!(
+            CALIBRATION_DOC, "docs/calibration.md",
+            "the doc the test reads"
+        );
+        assert!(
+            CALIBRATION_DOC_TEXT.contains(&format!("\n## {CALIBRATION_DOC_SECTION}\n")),
+            "{CALIBRATION_DOC} has no \"## {CALIBRATION_DOC_SECTION}\" heading"
+        );
+        let tail = format!("(see {CALIBRATION_DOC})");
+        for l in lines_naming_the_doc() {
+            // Not truncated: the whole pointer fits the line.
+            assert!(l.ends_with(&tail), "{l}");
         }
     }
 }

@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 /// beside the ambient one, while a wrong part or pull-up (tens of kelvin off) fails.
 pub const REST_SPREAD_K: f64 = 3.0;
 /// Length of each heater's pulse, s: its bead answers within a few seconds (measured rises
-/// below, docs: README "Bring-up"), and the pulse ends a second before the supervisor's
+/// below, docs: docs/bringup.md "Bring-up"), and the pulse ends a second before the supervisor's
 /// heater-not-heating window (`HEATING_WINDOW_S`) would judge it, so a dead heater or crossed
 /// wires get this tool's diagnosis rather than an alarm.
 pub const PULSE_S: f64 = morphlink::supervisor::HEATING_WINDOW_S as f64 - 1.0;
@@ -27,7 +27,7 @@ pub const PULSE_S: f64 = morphlink::supervisor::HEATING_WINDOW_S as f64 - 1.0;
 pub const AFTER_PULSE_S: f64 = 10.0;
 /// Least rise of a heater's own thermistor, K. Measured at 20 % of the cap for 10 s
 /// (tests/heat.rs): the PLA bead rises 15 K (lumped) and 8 K (hifi), the TCA bead 8 K and 3.4 K
-/// (the [`PULSE_S`] pulses a little less: README "Bring-up"); 1.5 K is far above the readings'
+/// (the [`PULSE_S`] pulses a little less: docs/bringup.md "Bring-up"); 1.5 K is far above the readings'
 /// noise and well under the weakest healthy rise.
 pub const MIN_OWN_RISE_K: f64 = 1.5;
 /// The own thermistor must rise at least this many times more than the other heater's: the
@@ -106,7 +106,7 @@ pub fn judge(rest: &Rest, pulses: Option<(Rise, Rise)>) -> Vec<Check> {
         supply_ok,
         format!(
             "heater supply: {v:.2} V (in {SUPPLY_MIN_V}..{SUPPLY_MAX_V} V){}",
-            if supply_ok { "" } else { "; check the supply and the sense divider (SUPPLY_MIN_V, SUPPLY_MAX_V; see README \"Safety defaults\")" }
+            if supply_ok { "" } else { "; check the supply and the sense divider (SUPPLY_MIN_V, SUPPLY_MAX_V; see docs/safety.md)" }
         ),
     ));
     let Some((pla, tca)) = pulses else {

@@ -325,7 +325,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
         }
         Cmd::Bringup => {
             println!(
-                "{}: firmware {version}; bring-up checks (README \"Bring-up\")",
+                "{}: firmware {version}; bring-up checks (docs/bringup.md)",
                 link.name
             );
             let result = bringup::run(&mut link, speed, &mut |l| println!("  {l}"));
