@@ -11,6 +11,7 @@
 #![allow(clippy::needless_range_loop)]
 
 #[cfg(feature = "sim")]
+pub mod activity;
 pub mod bench;
 pub mod calibration;
 pub mod controller;
