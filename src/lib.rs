@@ -23,6 +23,7 @@ pub mod part_limit;
 pub mod protocol;
 pub mod pulse;
 pub mod sequencer;
+pub mod session;
 pub mod settings;
 pub mod stats;
 pub mod strategy;
