@@ -3,8 +3,10 @@
 //! simulator and the emulated image need: they only move ADC counts in and duties out.
 //!
 //! Per tick: ADC counts → classified temperatures and supply volts → supervisor (a trip turns
-//! both heaters off in this same tick and latches) → sequencer → watts → PWM duties.
+//! both heaters off in this same tick and latches) → the one activity that runs (a morph's
+//! sequencer, a TUNE or a HEAT pulse: [`crate::activity`]) → watts → PWM duties.
 
+use crate::activity::{Activity, Busy, Start};
 use crate::calibration::{Calibration, CalibrationError, ReportRejection};
 use crate::heater::HeaterConfig;
 use crate::part_limit::{limit_shares, under_ceiling_w, CEILING_MARGIN_K};
@@ -20,7 +22,7 @@ use crate::supervisor::{Fault, FaultCode, Faults, Frame, Subject, Supervisor};
 use crate::table;
 use crate::thermistor::ThermistorConfig;
 use crate::tune::{Tune, TuneEvent, TuneFailure, TuneTick};
-use crate::vocab::{Heater, Measurements, Phase, Powers};
+use crate::vocab::{Doing, Heater, Measurements, Phase, Powers};
 use heapless::Deque;
 
 /// Control rate, Hz. The fastest thermal part (the TCA, about 1 s) is sampled ten times per
@@ -178,10 +180,11 @@ pub struct Controller {
     storage: bool,
     /// A SAVE the shell is to carry out ([`Controller::take_save_request`]).
     save_request: Option<Blob>,
-    /// A running `HEAT` pulse (only while idle: a morph or a fault ends it).
-    pulse: Option<Pulse>,
-    /// The tune under way, if any (the sequencer is idle meanwhile).
-    tune: Option<Tune>,
+    /// What runs: idle, a morph, a TUNE or a HEAT pulse (one at a time).
+    activity: Activity,
+    /// The latched safety trip: the one place the fault state lives. While it is set the phase
+    /// reads [`Phase::Fault`], the activity is idle and nothing heats.
+    fault: Option<Fault>,
     /// The last morph started, for MEASURED.
     last: Option<LastMorph>,
     /// Counts the calibration's replacements (TUNE done, CONFIG RESET, CONFIG SET of a
@@ -243,8 +246,8 @@ impl Controller {
             settings: Settings::DEFAULT,
             storage: false,
             save_request: None,
-            pulse: None,
-            tune: None,
+            activity: Activity::Idle,
+            fault: None,
             last: None,
             cal_epoch: 0,
             heat_budget: crate::pulse::HeatBudget::default(),
@@ -265,14 +268,23 @@ impl Controller {
         }
     }
 
-    /// Current phase (Fault while a fault is latched).
+    /// Current phase (Fault while a fault is latched; Idle during a TUNE or a HEAT pulse).
     pub fn phase(&self) -> Phase {
-        self.seq.phase()
+        if self.fault.is_some() {
+            Phase::Fault
+        } else {
+            self.seq.phase()
+        }
     }
 
-    /// The latched fault, if any (the sequencer holds it: see [`Sequencer::fault`]).
+    /// The latched fault, if any.
     pub fn fault(&self) -> Option<Fault> {
-        self.seq.fault()
+        self.fault
+    }
+
+    /// What runs now, as the supervisor is told it.
+    pub fn doing(&self) -> Doing {
+        self.activity.doing(self.seq.phase())
     }
 
     /// Duties to apply now (also right after a command: ABORT zeroes them at once).
@@ -302,7 +314,7 @@ impl Controller {
 
     /// True while a morph, a `TUNE` or a `HEAT` pulse is under way (not idle, not faulted).
     pub fn busy(&self) -> bool {
-        self.seq.busy() || self.pulse.is_some() || self.tune.is_some()
+        self.activity.busy()
     }
 
     /// Queues `e`; a full queue makes room by dropping its oldest event that is not an alarm
@@ -344,15 +356,23 @@ impl Controller {
         }
     }
 
-    fn trip(&mut self, fault: Fault) {
-        self.pulse = None;
-        let tuning = self.tune.take().is_some();
-        self.seq.latch(fault);
+    /// Ends what runs with both heaters off from this tick (ABORT, a trip): the one stop path.
+    /// Returns what ran.
+    fn stop(&mut self) -> Activity {
+        let ran = self.activity.stop();
+        self.seq.abort();
         self.powers = Powers::default();
         self.outputs = Outputs::default();
+        ran
+    }
+
+    /// Latches `fault`: what runs stops, its alarm is raised, then (for a TUNE) the tune's end.
+    fn trip(&mut self, fault: Fault) {
+        let ran = self.stop();
+        self.fault = Some(fault);
         // The alarm first: `tune failed safety trip (see the alarm)` points back at it.
         self.alarm_once(fault);
-        if tuning {
+        if matches!(ran, Activity::Tune(_)) {
             self.push(Event::Tune(TuneEvent::Failed(TuneFailure::Tripped)));
         }
     }
@@ -409,9 +429,10 @@ impl Controller {
             self.outputs = Outputs::default();
         }
         let mut faults = Faults::new();
+        let doing = self.doing();
         let m = self
             .sup
-            .check_all(now_ms, &frame, self.powers, self.seq.phase(), &mut faults);
+            .check_all(now_ms, &frame, self.powers, doing, &mut faults);
         for f in faults {
             if self.fault().is_none() {
                 self.trip(f);
@@ -422,59 +443,69 @@ impl Controller {
         if self.fault().is_some() {
             return self.outputs;
         }
-        if let Some(mut t) = self.tune.take() {
-            let mut tune_events: heapless::Vec<TuneEvent, 4> = heapless::Vec::new();
-            let r = t.tick(now_ms, &m, &mut |e| {
-                let _ = tune_events.push(e);
-            });
-            for e in tune_events {
-                self.push(Event::Tune(e));
-            }
-            let p = match r {
-                TuneTick::Run(p) => {
-                    self.tune = Some(t);
-                    p
-                }
-                TuneTick::Done(cal) => {
-                    self.settings.cal = cal;
-                    self.cal_epoch = self.cal_epoch.wrapping_add(1);
-                    self.sync_limits();
-                    Powers::default()
-                }
-                TuneTick::Failed(_) => Powers::default(),
-            };
-            self.apply(p, frame.supply_v);
-            return self.outputs;
-        }
-        let mut seq_events: heapless::Vec<SeqEvent, 4> = heapless::Vec::new();
-        self.seq.set_supply_v(frame.supply_v);
-        let result = self.seq.step(now_ms, &m, &mut |e| {
-            let _ = seq_events.push(e);
-        });
-        for e in seq_events {
-            if let (SeqEvent::Done { radius_mm, .. }, Some(last)) = (e, self.last.as_mut()) {
-                last.done_mm = radius_mm;
-            }
-            self.push(Event::Seq(e));
-        }
-        // A HEAT pulse drives its heater while no morph runs, until its own clock ends it.
-        let result = result.map(|p| match self.pulse.and_then(|h| h.powers(now_ms)) {
-            Some(pulse) if !self.seq.busy() => pulse,
-            _ => {
-                self.pulse = None;
-                p
-            }
-        });
-        match result {
+        match self.tick_activity(now_ms, &m, frame.supply_v) {
             Ok(p) => self.apply(p, frame.supply_v),
-            // The sequencer has latched the timeout; report it and turn the heaters off.
-            Err(_) => {
-                if let Some(f) = self.seq.fault() {
-                    self.trip(f);
-                }
-            }
+            Err(f) => self.trip(f),
         }
         self.outputs
+    }
+
+    /// Runs this tick of the activity in the slot: the powers it asks for, or the fault it
+    /// ended in (a phase timeout). An activity that ends goes back to idle here.
+    fn tick_activity(
+        &mut self,
+        now_ms: u64,
+        m: &Measurements,
+        supply_v: f32,
+    ) -> Result<Powers, Fault> {
+        let mut events: heapless::Vec<Event, 4> = heapless::Vec::new();
+        let mut ended = false;
+        let result = match &mut self.activity {
+            Activity::Idle => Ok(Powers::default()),
+            Activity::Morph => {
+                self.seq.set_supply_v(supply_v);
+                let r = self.seq.step(now_ms, m, &mut |e| {
+                    let _ = events.push(Event::Seq(e));
+                });
+                ended = !self.seq.busy();
+                r.map_err(|t| t.fault())
+            }
+            Activity::Tune(t) => {
+                let r = t.tick(now_ms, m, &mut |e| {
+                    let _ = events.push(Event::Tune(e));
+                });
+                Ok(match r {
+                    TuneTick::Run(p) => p,
+                    TuneTick::Done(cal) => {
+                        self.settings.cal = cal;
+                        self.cal_epoch = self.cal_epoch.wrapping_add(1);
+                        ended = true;
+                        Powers::default()
+                    }
+                    TuneTick::Failed(_) => {
+                        ended = true;
+                        Powers::default()
+                    }
+                })
+            }
+            Activity::Heat(pulse) => Ok(pulse.powers(now_ms).unwrap_or_else(|| {
+                ended = true;
+                Powers::default()
+            })),
+        };
+        if ended {
+            self.activity.stop();
+            self.sync_limits();
+        }
+        for e in events {
+            if let (Event::Seq(SeqEvent::Done { radius_mm, .. }), Some(last)) =
+                (e, self.last.as_mut())
+            {
+                last.done_mm = radius_mm;
+            }
+            self.push(e);
+        }
+        result
     }
 
     /// Handles one received line: writes zero or more `data:` lines and exactly one final reply
@@ -510,15 +541,9 @@ impl Controller {
                 out(&l);
             }
             Command::Abort => {
-                if self.fault().is_none() {
-                    self.seq.abort();
-                }
-                self.pulse = None;
-                if self.tune.take().is_some() {
+                if matches!(self.stop(), Activity::Tune(_)) {
                     self.push(Event::Tune(TuneEvent::Failed(TuneFailure::Aborted)));
                 }
-                self.powers = Powers::default();
-                self.outputs = Outputs::default();
                 out(protocol::OK);
             }
             Command::Reset => self.reset(now_ms, out),
@@ -579,13 +604,13 @@ impl Controller {
         out: &mut impl FnMut(&str),
     ) {
         let mut l = OutLine::new();
-        if self.refused(&mut l) {
+        if self.refused(Start::Heat, &mut l) {
             return out(&l);
         }
         match Pulse::new(now_ms, heater, power_w, duration_s) {
             Ok(p) => match self.heat_budget.take(heater, duration_s, now_ms) {
                 Ok(()) => {
-                    self.pulse = Some(p);
+                    self.activity = Activity::Heat(p);
                     out(protocol::OK);
                 }
                 Err(left_s) => {
@@ -597,16 +622,21 @@ impl Controller {
         }
     }
 
-    /// Whether heating must be refused now (a fault latched, a morph or TUNE running, no reading
-    /// yet): if so, writes the refusal into `l`. MORPH, HEAT and TUNE share it.
-    fn refused(&self, l: &mut OutLine) -> bool {
-        if let Some(f) = self.fault() {
+    /// Whether `start` must be refused now (a fault latched, an activity in its way, or for
+    /// heating no reading yet): if so, writes the refusal into `l`. Every command that starts
+    /// an activity or changes what one runs with goes through it.
+    fn refused(&self, start: Start, l: &mut OutLine) -> bool {
+        let heats = matches!(start, Start::Morph | Start::Heat | Start::Tune);
+        if let (Some(f), true) = (self.fault(), heats) {
             reply::fault_latched(l, f.code);
-        } else if self.seq.busy() {
-            reply::busy_morphing(l, self.seq.phase());
-        } else if self.tune.is_some() {
-            tune_reply::busy_tuning(l);
-        } else if self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan() {
+        } else if let Some(busy) = self.activity.refusal(start, self.seq.phase()) {
+            match (start, busy) {
+                (Start::Change, _) => reply::config_busy(l, self.phase()),
+                (_, Busy::Morphing(phase)) => reply::busy_morphing(l, phase),
+                (_, Busy::Tuning) => tune_reply::busy_tuning(l),
+                (_, Busy::Heating) => *l = protocol::format_error(&reply::ERR_BUSY_HEATING),
+            }
+        } else if heats && (self.frame.is_none() || self.sup.measurements().t_pla_c.is_nan()) {
             reply::busy_no_reading(l);
         } else {
             return false;
@@ -616,15 +646,12 @@ impl Controller {
 
     /// The running `HEAT` pulse's heater, if one runs.
     pub fn heating(&self) -> Option<Heater> {
-        self.pulse.map(|p| p.heater)
+        self.activity.pulse().map(|p| p.heater)
     }
 
     fn morph(&mut self, now_ms: u64, radius_mm: f32, mode: Mode, out: &mut impl FnMut(&str)) {
         let mut l = OutLine::new();
-        if self.pulse.is_some() {
-            return out(&protocol::format_error(&reply::ERR_BUSY_HEATING));
-        }
-        if self.refused(&mut l) {
+        if self.refused(Start::Morph, &mut l) {
             return out(&l);
         }
         let mode = self.settings.morph.resolve(mode);
@@ -657,6 +684,7 @@ impl Controller {
                     .start_from(now_ms, radius_mm, power_w, mode, &m, &cal, &mut |e| {
                         let _ = first.push(e);
                     });
+                self.activity = Activity::Morph;
                 for e in first {
                     self.push(Event::Seq(e));
                 }
@@ -676,7 +704,7 @@ impl Controller {
         };
         match check {
             Ok(()) => {
-                self.seq.clear_fault();
+                self.fault = None;
                 self.sup.rearm();
                 self.alarmed.clear();
                 reply::reset_cleared(&mut l, latched.code);
@@ -798,8 +826,7 @@ impl Controller {
     fn config(&mut self, c: protocol::ConfigCommand, out: &mut impl FnMut(&str)) {
         use protocol::ConfigCommand;
         let mut l = OutLine::new();
-        if !matches!(c, ConfigCommand::List) && self.busy() {
-            reply::config_busy(&mut l, self.phase());
+        if !matches!(c, ConfigCommand::List) && self.refused(Start::Change, &mut l) {
             return out(&l);
         }
         match c {
@@ -856,8 +883,7 @@ impl Controller {
         if !self.storage {
             return out(&protocol::format_error(&reply::ERR_SAVE_UNSUPPORTED));
         }
-        if self.busy() {
-            reply::config_busy(&mut l, self.phase());
+        if self.refused(Start::Change, &mut l) {
             return out(&l);
         }
         // What a tune or a morph learnt while a fault built up is not to be kept.
@@ -907,21 +933,18 @@ impl Controller {
 
     /// True while a TUNE runs.
     pub fn tuning(&self) -> bool {
-        self.tune.is_some()
+        self.activity.tune().is_some()
     }
 
     /// The step of the TUNE under way, if one runs.
     pub fn tune_step(&self) -> Option<crate::tune::TuneStep> {
-        self.tune.as_ref().map(|t| t.step_now())
+        self.activity.tune().map(|t| t.step_now())
     }
 
     fn start_tune(&mut self, now_ms: u64, out: &mut impl FnMut(&str)) {
         let mut l = OutLine::new();
-        if self.refused(&mut l) {
+        if self.refused(Start::Tune, &mut l) {
             return out(&l);
-        }
-        if self.pulse.is_some() {
-            return out(&protocol::format_error(&reply::ERR_BUSY_HEATING));
         }
         // TUNE judges every sensor's rise over ambient: all three must read.
         let m = self.sup.measurements();
@@ -939,7 +962,7 @@ impl Controller {
         tune_reply::tune_started(&mut l, crate::tune::TUNE_TOTAL_S);
         out(&l);
         let mut first: heapless::Vec<TuneEvent, 2> = heapless::Vec::new();
-        self.tune = Some(Tune::new(now_ms, self.settings.cal, &mut |e| {
+        self.activity = Activity::Tune(Tune::new(now_ms, self.settings.cal, &mut |e| {
             let _ = first.push(e);
         }));
         for e in first {
@@ -950,17 +973,9 @@ impl Controller {
     fn measured(&mut self, radius_mm: f32, out: &mut impl FnMut(&str)) {
         use crate::strategy::model::target;
         let mut l = OutLine::new();
-        if self.seq.busy() {
-            reply::busy_morphing(&mut l, self.seq.phase());
+        // The busy rule of CONFIG SET (the calibration is a setting), in MEASURED's words.
+        if self.refused(Start::Measured, &mut l) {
             return out(&l);
-        }
-        if self.tune.is_some() {
-            tune_reply::busy_tuning(&mut l);
-            return out(&l);
-        }
-        // The busy rule of CONFIG SET: the calibration is a setting.
-        if self.pulse.is_some() {
-            return out(&protocol::format_error(&reply::ERR_BUSY_HEATING));
         }
         let (min_mm, max_mm) = table::range_mm();
         let (lo, hi) = (

@@ -87,7 +87,7 @@ pub fn init() -> &'static Link {
 /// Carries out a `SIM` command on the simulated link at firmware time `now_ms`; `SIM PANIC`
 /// panics on purpose, to prove the panic path, and `SIM STALL` stops the tasks, to prove the
 /// watchdog.
-pub fn sim_command(_: &mut Controller, now_ms: u64, cmd: SimCommand, out: &mut impl FnMut(&str)) {
+pub fn sim_command(_: &mut Controller, now_ms: u64, cmd: SimCommand, out: &mut dyn FnMut(&str)) {
     if cmd == SimCommand::Panic {
         panic!("SIM PANIC asked for a panic");
     }
@@ -100,7 +100,7 @@ pub fn sim_command(_: &mut Controller, now_ms: u64, cmd: SimCommand, out: &mut i
     }
     with_state(|s| {
         s.advance_to(now_ms);
-        s.bench.command(cmd, out);
+        s.bench.command(cmd, &mut |l| out(l));
     });
 }
 

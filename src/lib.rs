@@ -11,6 +11,7 @@
 #![allow(clippy::needless_range_loop)]
 
 #[cfg(feature = "sim")]
+pub mod activity;
 pub mod bench;
 pub mod calibration;
 pub mod controller;
@@ -22,6 +23,7 @@ pub mod part_limit;
 pub mod protocol;
 pub mod pulse;
 pub mod sequencer;
+pub mod session;
 pub mod settings;
 pub mod stats;
 pub mod strategy;

@@ -5,11 +5,10 @@
 //! Two embassy tasks share one [`morphlink::controller::Controller`]:
 //! - `control`, every [`TICK_MS`] (10 Hz): ADC burst (16 samples per input) → `Controller::step`
 //!   → PWM duties; feeds the watchdog; records its timing for `STATS`.
-//! - `serial`: bytes from the board's serial port → `SerialInput` (line assembly, the
-//!   ABORT-first scan) → `Controller::handle_line` → replies into an `Outbox`, with queued
-//!   events and alarms → the port. The rules (input never waits behind output; replies the
-//!   line cannot carry are dropped and counted; lost input makes its line an overrun; an ABORT
-//!   acts as soon as its bytes are read) are the core's, in `morphlink::protocol::serial`.
+//! - `serial`: bytes from the board's serial port → `morphlink::session::Session` (line
+//!   assembly, ABORT first, replies built or dropped and counted, events and alarms) → the
+//!   port; it signals the control task to apply the duties at once after an ABORT and carries
+//!   out a SAVE the session hands it. Every decision is the session's, host-tested.
 //!
 //! Both are written once against the board traits of `morphlink-boards`; the board (pins,
 //! clocks, memory) is the one its `board-*` feature selects.
@@ -43,9 +42,9 @@ mod firmware {
     use embassy_sync::signal::Signal;
     use embassy_time::{Duration, Instant, Ticker, Timer};
     use embedded_io_async::Write;
-    use morphlink::controller::{Config, Controller, Inputs, MAX_REPLY_BYTES, OVERSAMPLE, TICK_MS};
-    use morphlink::protocol::serial::{is_abort, Outbox, SerialInput};
-    use morphlink::protocol::{format_error, reply, Command, OutLine, ProtoError, SimCommand};
+    use morphlink::controller::{Config, Controller, Inputs, OVERSAMPLE, TICK_MS};
+    use morphlink::protocol::{reply, OutLine, SimCommand};
+    use morphlink::session::{Session, OUT_BYTES};
     use morphlink::settings::codec::LoadError;
     use morphlink::settings::store::SettingsStore;
     use morphlink::stats::{write_boot_line, LoopTiming};
@@ -55,9 +54,6 @@ mod firmware {
         AnalogInputs, HeaterOutputs, Input, LastFatal, Received, SerialReceive, Watchdog, INPUTS,
         SERIAL_RX_BYTES,
     };
-
-    /// Largest reply the serial task collects under the controller lock, bytes: the core's bound.
-    const REPLY_BYTES: usize = MAX_REPLY_BYTES;
 
     /// Spacing of the ADC samples in a tick's burst: 16 samples 1 ms apart span 16 ms, about
     /// one mains period, so 50/60 Hz pickup averages out (the G4 sums in hardware instead).
@@ -116,11 +112,13 @@ mod firmware {
 
     /// Where `SIM` commands go: the simulated link on the emulated board; on hardware the
     /// core's `error: unsupported` reply.
-    fn sim_command(c: &mut Controller, now_ms: u64, sim: SimCommand, out: &mut impl FnMut(&str)) {
+    fn sim_command(c: &mut Controller, now_ms: u64, sim: SimCommand, out: &mut dyn FnMut(&str)) {
         #[cfg(emulated)]
         crate::emulated::sim_command(c, now_ms, sim, out);
         #[cfg(not(emulated))]
-        c.handle(now_ms, morphlink::protocol::Command::Sim(sim), out);
+        c.handle(now_ms, morphlink::protocol::Command::Sim(sim), &mut |l| {
+            out(l)
+        });
     }
 
     #[embassy_executor::main]
@@ -224,134 +222,60 @@ mod firmware {
         }
     }
 
-    /// Appends `line` and a newline to `reply`; a line that does not fit is dropped (logged).
-    fn push_line(reply: &mut heapless::String<REPLY_BYTES>, line: &str) {
-        if reply
-            .push_str(line)
-            .and_then(|()| reply.push('\n'))
-            .is_err()
-        {
-            defmt::warn!("reply longer than {} bytes; line dropped", REPLY_BYTES);
-        }
-    }
-
-    /// Output waiting for the serial port, bytes: two of the longest replies (HELP).
-    const OUT_BYTES: usize = 2 * REPLY_BYTES;
-
-    /// Answers one finished line: runs it and writes its reply into `reply`, or, with `build`
-    /// false (the reply will be dropped), runs it and only notes whether it replied (one
-    /// empty line stands for the reply). Says whether it was an ABORT.
-    fn answer(
-        c: &mut Controller,
-        now_ms: u64,
-        line: Result<&str, &ProtoError>,
-        build: bool,
-        reply: &mut heapless::String<REPLY_BYTES>,
-    ) -> bool {
-        let mut out = |l: &str| {
-            if build {
-                push_line(reply, l);
-            } else if reply.is_empty() {
-                let _ = reply.push('\n');
-            }
-        };
-        match line {
-            Ok(l) => {
-                if let Some(sim) = c.handle_line(now_ms, l, &mut out) {
-                    sim_command(c, now_ms, sim, &mut out);
-                }
-                is_abort(l)
-            }
-            Err(e) => {
-                out(&format_error(e));
-                false
-            }
-        }
-    }
-
-    /// The serial line: commands in, replies, events and alarms out; the decisions are the
-    /// core's (`morphlink::protocol::serial`), this loop only moves bytes.
+    /// The serial line: commands in, replies, events and alarms out. The decisions are the
+    /// core's [`Session`]; this loop only moves bytes between it and the port, and carries out
+    /// a SAVE.
     ///
     /// Input is never left waiting behind output: each pass answers at most one line, writes
-    /// at most one [`Outbox::chunk`] and yields, and waits on the port only for whichever of
-    /// input, room to write or events comes first. A whole ABORT line is acted on as soon as
-    /// its bytes are read, before the lines ahead of it are answered.
+    /// at most one chunk and yields, and waits on the port only for whichever of input, room
+    /// to write or events comes first.
     async fn serial_loop(
         mut tx: impl Write,
         mut rx: impl SerialReceive,
         boot: OutLine,
         mut store: Store,
     ) {
-        let mut reply: heapless::String<REPLY_BYTES> = heapless::String::new();
-        let mut out: Outbox<OUT_BYTES> = Outbox::new();
-        out.push_line(&boot);
-        let mut input: SerialInput<SERIAL_RX_BYTES> = SerialInput::new();
-        let events = || with_controller(|c| c.pop_event_line());
+        let mut session: Session<SERIAL_RX_BYTES, OUT_BYTES> = Session::new(&boot);
         loop {
-            out.refill(events);
-            if !input.is_drained() {
-                let answered = input.next_line(|line| {
-                    reply.clear();
-                    let now_ms = Instant::now().as_millis();
-                    // Behind a flood the reply will be dropped: not built at all, so a long
-                    // one (HELP) does not hold the control task up (an ABORT's always is).
-                    let build = !out.drops_replies() || line.is_ok_and(is_abort);
-                    with_controller(|c| {
-                        let before = c.outputs();
-                        let abort = answer(c, now_ms, line, build, &mut reply);
-                        (abort, c.outputs() != before, build)
-                    })
-                });
-                if let Some((abort, changed, build)) = answered {
-                    if changed || abort {
+            with_controller(|c| session.refill(c));
+            if session.has_input() {
+                let now_ms = Instant::now().as_millis();
+                let answered = with_controller(|c| session.answer_next(c, now_ms, sim_command));
+                if let Some(a) = answered {
+                    if a.apply_now {
                         APPLY_NOW.signal(());
                     }
-                    // SAVE: only ever asked for while no morph runs (heaters off), so the CPU
-                    // stalling on its flash during an erase or write holds no heater on.
-                    if let Some(blob) = with_controller(|c| c.take_save_request()) {
-                        if let Some(s) = &mut store {
-                            let t0 = Instant::now();
-                            let r = s.save(&blob).await;
-                            defmt::info!("SAVE took {} ms", t0.elapsed().as_millis());
-                            with_controller(|c| {
-                                c.finish_save(r, &mut |l| push_line(&mut reply, l))
-                            });
-                        }
+                    // SAVE: only ever handed out while nothing heats, so the CPU stalling on
+                    // its flash during an erase or write holds no heater on.
+                    if let (Some(blob), Some(s)) = (a.save, &mut store) {
+                        let t0 = Instant::now();
+                        let r = s.save(&blob).await;
+                        defmt::info!("SAVE took {} ms", t0.elapsed().as_millis());
+                        with_controller(|c| session.finish_save(c, r));
                     }
-                    if build {
-                        out.push_reply(&reply, abort);
-                    } else if !reply.is_empty() {
-                        out.drop_reply();
-                    }
-                    // A MORPH's first event follows its `ok`.
-                    out.refill(events);
                 }
                 // Offer output without waiting for room, then let the control task run.
-                if !out.is_empty() {
-                    if let Either::First(r) = select(tx.write(out.chunk()), yield_now()).await {
-                        sent(&mut out, r);
+                if session.has_output() {
+                    if let Either::First(r) = select(tx.write(session.output()), yield_now()).await
+                    {
+                        sent(&mut session, r);
                     }
                 }
                 yield_now().await;
                 continue;
             }
             // Everything received is answered: wait for input, room to write, or events.
-            let got: Option<Received> = if out.is_empty() {
-                match select(rx.receive(input.buffer()), EVENTS.wait()).await {
+            let got: Option<Received> = if !session.has_output() {
+                match select(rx.receive(session.buffer()), EVENTS.wait()).await {
                     Either::First(r) => Some(r),
                     Either::Second(()) => None,
                 }
             } else {
-                match select3(
-                    rx.receive(input.buffer()),
-                    tx.write(out.chunk()),
-                    EVENTS.wait(),
-                )
-                .await
-                {
+                let (buffer, output) = session.buffer_and_output();
+                match select3(rx.receive(buffer), tx.write(output), EVENTS.wait()).await {
                     Either3::First(r) => Some(r),
                     Either3::Second(r) => {
-                        sent(&mut out, r);
+                        sent(&mut session, r);
                         yield_now().await;
                         None
                     }
@@ -359,24 +283,22 @@ mod firmware {
                 }
             };
             if let Some(r) = got {
-                if input.received(r.len, r.lost_after) {
-                    // ABORT first: the heaters stop now; the line is answered in its turn (a
-                    // second ABORT changes nothing).
-                    let now_ms = Instant::now().as_millis();
-                    with_controller(|c| c.handle(now_ms, Command::Abort, &mut |_| {}));
+                let now_ms = Instant::now().as_millis();
+                if with_controller(|c| session.received(c, now_ms, r.len, r.lost_after)) {
                     APPLY_NOW.signal(());
                 }
             }
         }
     }
 
-    /// Drops what a write took from `out` (a failed write drops the rest of its line, logged).
-    fn sent<E, const N: usize>(out: &mut Outbox<N>, r: Result<usize, E>) {
+    /// Drops what a write took from the output (a failed write drops the rest of its line,
+    /// logged).
+    fn sent<E, const R: usize, const N: usize>(s: &mut Session<R, N>, r: Result<usize, E>) {
         match r {
-            Ok(n) => out.sent(n),
+            Ok(n) => s.sent(n),
             Err(_) => {
                 defmt::warn!("serial send error");
-                out.send_failed();
+                s.send_failed();
             }
         }
     }

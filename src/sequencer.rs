@@ -6,7 +6,6 @@
 
 use crate::protocol::Mode;
 use crate::strategy::{AnyStrategy, Start, Strategy, TargetTemps, Thresholds, Tick, RELEASE_S};
-use crate::supervisor::{Fault, FaultCode, Subject};
 use crate::vocab::{Measurements, Phase, Powers};
 
 /// Phase timeouts of the gated sequence, s. Soften reaches its threshold in about 5 s under
@@ -68,9 +67,20 @@ pub enum SeqEvent {
     },
 }
 
-/// A phase overran its timeout.
+/// A phase overran its timeout (the morph has ended; the controller latches the fault).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PhaseTimeout(pub Phase);
+
+impl PhaseTimeout {
+    /// The fault it latches: `phase-timeout <phase>`.
+    pub fn fault(self) -> crate::supervisor::Fault {
+        crate::supervisor::Fault {
+            code: crate::supervisor::FaultCode::PhaseTimeout,
+            subject: crate::supervisor::Subject::Phase(self.0),
+            value: f32::NAN,
+        }
+    }
+}
 
 /// Where the running or last morph is: its phase and its clocks.
 #[derive(Clone, Copy, Debug)]
@@ -119,9 +129,6 @@ impl Progress {
 #[derive(Clone, Copy, Debug)]
 pub struct Sequencer {
     at: Progress,
-    /// The latched safety trip: the one place the fault state lives. While it is set the phase
-    /// reads [`Phase::Fault`] (derived; `at.phase` is then idle) and nothing runs.
-    fault: Option<Fault>,
     strategy: Option<AnyStrategy>,
     supply_v: f32,
     thresholds: Thresholds,
@@ -150,7 +157,6 @@ impl Sequencer {
                 phase_ms: 0,
                 estimate_mm: f32::NAN,
             },
-            fault: None,
             strategy: None,
             supply_v: f32::NAN,
             thresholds: Thresholds::DEFAULT,
@@ -172,18 +178,10 @@ impl Sequencer {
         self.supply_v = supply_v;
     }
 
-    /// Current phase ([`Phase::Fault`] while a fault is latched).
+    /// The running morph's phase ([`Phase::Idle`] when none runs; the controller, which
+    /// latches faults, reports [`Phase::Fault`]).
     pub fn phase(&self) -> Phase {
-        if self.fault.is_some() {
-            Phase::Fault
-        } else {
-            self.at.phase
-        }
-    }
-
-    /// The latched fault, if any.
-    pub fn fault(&self) -> Option<Fault> {
-        self.fault
+        self.at.phase
     }
 
     /// Target radius of the running or last morph, mm (NaN if none).
@@ -191,9 +189,9 @@ impl Sequencer {
         self.at.target_mm
     }
 
-    /// True while a morph is under way (never while a fault is latched).
+    /// True while a morph is under way.
     pub fn busy(&self) -> bool {
-        self.fault.is_none() && self.at.phase.is_morphing()
+        self.at.phase.is_morphing()
     }
 
     /// Starts a morph to `radius_mm` with TCA power `tca_power_w` (from the table) in `mode`
@@ -227,21 +225,9 @@ impl Sequencer {
             .enter(Some(strategy.get_mut()), Phase::Soften, now_ms, emit);
     }
 
-    /// Stops at once: Idle, heaters off from the next step.
+    /// Stops at once (ABORT, a trip): Idle, heaters off from the next step.
     pub fn abort(&mut self) {
         self.at.phase = Phase::Idle;
-    }
-
-    /// Latches `fault` (the supervisor tripped, or a phase timed out): the morph ends, heaters
-    /// off, phase Fault until [`Sequencer::clear_fault`].
-    pub fn latch(&mut self, fault: Fault) {
-        self.at.phase = Phase::Idle;
-        self.fault = Some(fault);
-    }
-
-    /// Leaves Fault after a successful RESET: Idle.
-    pub fn clear_fault(&mut self) {
-        self.fault = None;
     }
 
     /// The temperatures the running morph's strategy aims at in the current phase, °C (NaN
@@ -275,11 +261,7 @@ impl Sequencer {
     fn check_timeout(&mut self, now_ms: u64) -> Result<(), PhaseTimeout> {
         if self.busy() && since_s(now_ms, self.at.phase_ms) > self.timeout_s() {
             let p = self.at.phase;
-            self.latch(Fault {
-                code: FaultCode::PhaseTimeout,
-                subject: Subject::Phase(p),
-                value: f32::NAN,
-            });
+            self.abort();
             return Err(PhaseTimeout(p));
         }
         Ok(())
@@ -522,7 +504,9 @@ mod tests {
                 }
             }
             assert_eq!(result, Err(PhaseTimeout(p)), "phase {p:?}");
-            assert_eq!(s.phase(), Phase::Fault);
+            // The morph has ended (the controller latches the fault): nothing runs, no heat.
+            assert_eq!(s.phase(), Phase::Idle);
+            assert!(!s.busy());
             assert_eq!(
                 s.step(t + 100, &stuck, &mut |e| ev.push(e)),
                 Ok(Powers::default())

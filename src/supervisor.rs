@@ -12,7 +12,7 @@ use crate::heater::HeaterConfig;
 use crate::link::{R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W};
 use crate::part_limit::{estimate_c, CEILING_BAND_K, CEILING_MARGIN_K, UNTUNED_BEAD_SHARES};
 use crate::thermistor::{RangeCheck, Reading};
-use crate::vocab::{Heater, Measurements, Phase, Powers, Sensor};
+use crate::vocab::{Doing, Heater, Measurements, Phase, Powers, Sensor};
 
 /// What tripped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -347,8 +347,8 @@ struct HeatWatch {
     below_since_ms: Option<u64>,
     /// The power of the last judged tick, W.
     last_w: f32,
-    /// The phase the watch was armed in (a new phase re-arms it).
-    phase: Option<Phase>,
+    /// The activity the watch was armed in (a new phase or activity re-arms it).
+    doing: Option<Doing>,
 }
 
 /// Every fault one frame can show at once: one per sensor, the supply, the two heater checks,
@@ -518,25 +518,26 @@ impl Supervisor {
         Measurements::from_array(self.last_c)
     }
 
-    /// Checks one frame with the powers commanded in the previous tick, in `phase` (the phase
-    /// they were commanded in: a new phase re-arms the heater watches). Returns the
+    /// Checks one frame with the powers commanded in the previous tick by `doing` (the activity
+    /// that commanded them, a morph's phase included: a new one re-arms the heater watches; a
+    /// bare [`Phase`] stands for a morph in it). Returns the
     /// temperatures to control from, or the first fault found (see [`Supervisor::check_all`]).
     pub fn check(
         &mut self,
         now_ms: u64,
         frame: &Frame,
         commanded: Powers,
-        phase: Phase,
+        doing: impl Into<Doing>,
     ) -> Result<Measurements, Fault> {
         let mut faults = Faults::new();
-        let m = self.check_all(now_ms, frame, commanded, phase, &mut faults);
+        let m = self.check_all(now_ms, frame, commanded, doing, &mut faults);
         match faults.first() {
             Some(f) => Err(*f),
             None => Ok(m),
         }
     }
 
-    /// Runs every check on one frame, whatever the phase (a latched fault included: the
+    /// Runs every check on one frame, whatever runs (a latched fault included: the
     /// controller calls it every tick), and collects every fault present into `faults`, in
     /// check order. Returns the last good temperatures. Every sensor is read even when an
     /// earlier one is faulty, so [`Supervisor::live`] stays live.
@@ -545,9 +546,10 @@ impl Supervisor {
         now_ms: u64,
         frame: &Frame,
         commanded: Powers,
-        phase: Phase,
+        doing: impl Into<Doing>,
         faults: &mut Faults,
     ) -> Measurements {
+        let doing = doing.into();
         let mut found = |f: Fault| {
             let _ = faults.push(f);
         };
@@ -605,13 +607,13 @@ impl Supervisor {
         self.last_ms = Some(now_ms);
         // Once a tick, before every check that reads it.
         self.update_amb_slow(dt_s);
-        if let Err(f) = self.check_heating(now_ms, commanded, phase) {
+        if let Err(f) = self.check_heating(now_ms, commanded, doing) {
             found(f);
         }
         if let Err(f) = self.check_off(now_ms, commanded) {
             found(f);
         }
-        if let Err(f) = self.check_frozen(now_ms, commanded, phase) {
+        if let Err(f) = self.check_frozen(now_ms, commanded, doing) {
             found(f);
         }
         if let Err(f) = self.check_plausible(dt_s, commanded) {
@@ -620,7 +622,7 @@ impl Supervisor {
         if let Err(f) = self.check_hold(dt_s, commanded) {
             found(f);
         }
-        if let Err(f) = self.check_held(dt_s, commanded, phase) {
+        if let Err(f) = self.check_held(dt_s, commanded, doing) {
             found(f);
         }
         if let Err(f) = self.check_low(now_ms, commanded) {
@@ -678,7 +680,7 @@ impl Supervisor {
     ///
     /// The watch starts again with every switch-on and every phase in which the heater's power
     /// drops; in a phase at no less power its window runs on.
-    fn check_heating(&mut self, now_ms: u64, cmd: Powers, phase: Phase) -> Result<(), Fault> {
+    fn check_heating(&mut self, now_ms: u64, cmd: Powers, doing: Doing) -> Result<(), Fault> {
         let m = self.measurements();
         for heater in Heater::ALL {
             let own_w = cmd.of(heater);
@@ -688,17 +690,17 @@ impl Supervisor {
             let w = &mut self.watch[heater.index()];
             // A new phase re-arms the watch, unless the heater stays on at no less power: its
             // window then runs on (closed's phases can each be shorter than one window).
-            if w.phase != Some(phase) {
+            if w.doing != Some(doing) {
                 let carries_on =
                     own_w >= w.last_w * (1.0 - HEATING_POWER_STEP_FRACTION) && w.last_w > 0.0;
                 *w = if carries_on {
                     HeatWatch {
-                        phase: Some(phase),
+                        doing: Some(doing),
                         ..*w
                     }
                 } else {
                     HeatWatch {
-                        phase: Some(phase),
+                        doing: Some(doing),
                         ..HeatWatch::default()
                     }
                 };
@@ -923,7 +925,7 @@ impl Supervisor {
     /// peak (relaxing with [`HOLD_PEAK_TAU_S`]) beyond the fall of the lagged own model rise
     /// since that peak. A dead TCA's bead sinks toward what the cooling PLA rod gives it; a live
     /// one at the power the controller holds stays up, whatever the PLA does.
-    fn check_held(&mut self, dt_s: f32, cmd: Powers, phase: Phase) -> Result<(), Fault> {
+    fn check_held(&mut self, dt_s: f32, cmd: Powers, doing: Doing) -> Result<(), Fault> {
         let heater = Heater::Tca;
         let own_w = cmd.of(heater);
         // A bath that warms moves the ambient bead before the heated ones (`check_plausible`).
@@ -945,7 +947,7 @@ impl Supervisor {
         let q_k = (tca_c - amb_c) - held_share() * pla_k;
         // Judged in the phases whose hold `done` reports from; a HEAT pulse or TUNE step (in
         // idle) is left to the other checks, so bring-up can still name swapped wires.
-        let held = matches!(phase, Phase::Bend | Phase::Lock);
+        let held = matches!(doing, Doing::Morph(Phase::Bend | Phase::Lock));
         let judged = held && own_w >= HEATING_MIN_POWER_FRACTION * heater_cap_w(heater);
         if !judged || !q_k.is_finite() || q_k >= response_k {
             w.peak_k = None;
@@ -1062,7 +1064,7 @@ impl Supervisor {
     /// and its sensor reads more than [`MUST_COOL_MARGIN_K`] above the TCA's (plus the
     /// still-air reach of its own low power; the rod must then cool, as it does in lock), the
     /// sensor must move [`FROZEN_MIN_MOVE_K`] (either way) within [`FROZEN_WINDOW_S`].
-    fn check_frozen(&mut self, now_ms: u64, cmd: Powers, phase: Phase) -> Result<(), Fault> {
+    fn check_frozen(&mut self, now_ms: u64, cmd: Powers, doing: Doing) -> Result<(), Fault> {
         let [_, tca_c, amb_c] = self.live_c;
         for heater in Heater::ALL {
             let temp_c = self.live_c[heater.sensor().index()];
@@ -1088,7 +1090,7 @@ impl Supervisor {
             // Judged in lock only (the phase that waits for the PLA to fall): at rest a rod
             // near ambient in still air may cool slower than the window can see.
             let cooling = heater == Heater::Pla
-                && phase == Phase::Lock
+                && doing == Doing::Morph(Phase::Lock)
                 && low
                 && tca_c.is_finite()
                 && temp_c - amb_c > held_up_k + MUST_COOL_MARGIN_K;

@@ -45,6 +45,31 @@ impl Phase {
     }
 }
 
+/// What the controller is doing, as the supervisor is told it: its checks judge a heater's
+/// power by the activity that commands it (a morph's phase, a TUNE step, a bring-up pulse).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Doing {
+    /// Nothing runs (at rest, or a fault latched): both heaters off.
+    Idle,
+    /// A morph, in this phase (one of [`Phase::is_morphing`]'s).
+    Morph(Phase),
+    /// A `TUNE`.
+    Tune,
+    /// A `HEAT` pulse of this heater.
+    Heat(Heater),
+}
+
+impl From<Phase> for Doing {
+    /// A morph in `phase`; idle for [`Phase::Idle`] and [`Phase::Fault`].
+    fn from(phase: Phase) -> Doing {
+        if phase.is_morphing() {
+            Doing::Morph(phase)
+        } else {
+            Doing::Idle
+        }
+    }
+}
+
 /// One of the three thermistors. Its [`Sensor::index`] is its place in every per-sensor array
 /// of the core (ADC counts, readings, limits, counters): the one definition of that order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

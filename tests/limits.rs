@@ -9,7 +9,6 @@ use common::{Bench, Link};
 use morphlink::protocol::{classify, LineKind};
 use morphlink::settings::Settings;
 use morphlink::supervisor::{PLA_LIMITS, TCA_LIMITS};
-use morphlink_plant::Plant;
 
 /// The top of a setting's range as `CONFIG` prints it.
 fn top(name: &str) -> String {

@@ -430,7 +430,7 @@ impl Settings {
         let r = self.cal.model_resistances();
         let model = [r.r_pp, r.r_tt, r.r_tp, r.r_tp][k] as f32;
         let (lo, hi) = SHARE_RULE[k].1;
-        let scale = 10f32.powi(spec.decimals as i32);
+        let scale = decimal_scale(spec.decimals);
         let min = ((lo * model * scale) as i64 + 1) as f32 / scale;
         let max = ((hi * model * scale) as i64) as f32 / scale;
         Spec {
@@ -454,7 +454,7 @@ impl Settings {
         if !ok(now) || !spec.allows(now) {
             return spec;
         }
-        let step = 1.0 / 10f32.powi(spec.decimals as i32);
+        let step = 1.0 / decimal_scale(spec.decimals);
         // Bisects between an allowed `inside` and a refused `outside`.
         let edge = |mut inside: f32, mut outside: f32| {
             for _ in 0..40 {
@@ -543,8 +543,13 @@ impl Settings {
 }
 
 /// `v` rounded to `decimals` places (half away from zero), as [`crate::fixed::Fixed`] shows it.
+/// 10 to the power `decimals` (at most 3: no setting shows more).
+fn decimal_scale(decimals: u8) -> f32 {
+    [1.0f32, 10.0, 100.0, 1000.0][(decimals as usize).min(3)]
+}
+
 fn round_to(v: f32, decimals: u8) -> f32 {
-    let scale = [1.0f32, 10.0, 100.0, 1000.0][(decimals as usize).min(3)];
+    let scale = decimal_scale(decimals);
     let x = v * scale;
     let r = if x >= 0.0 {
         (x + 0.5) as i64
