@@ -102,12 +102,13 @@ fn morph_while_busy_or_out_of_range_is_refused_and_changes_nothing() {
     );
 }
 
-/// KNOWN GAP, measured (the calibration issue closes it): the radius error of `auto` morphs on the
-/// nominal hifi link after 60 s of rest lies within this band, %. Measured (2026-12-02, the
-/// compiled-in calibration): −8.8 % at 35.1 mm to −5.4 % at 46.3 mm (docs/performance.md; TUNE
-/// and MEASURED bring it to the link: docs/calibration.md); the controller's table and model are the lumped link's, not this
-/// link's (docs/plant.md, "The controller on the hifi link"). The lumped link's bound is 2 %.
-const HIFI_ERROR_BAND_PCT: f32 = 12.0;
+/// The accuracy the project claims for an uncalibrated `closed` (`auto`) morph on a link it was
+/// not built from, %: the hifi ensemble's water p95 |error| (docs/strategies.md, "High-fidelity
+/// plant"), rounded up. The nominal hifi link is one of those links, so each of its morphs
+/// lands inside it; a regression past the ensemble's claim fails, and a better controller keeps
+/// it. The calibrated claim (2 % after TUNE and measured morphs) is held by
+/// `tests/tune.rs` (`measured_morphs_reduce_the_error_on_a_mismatched_link`, both plants).
+const UNCALIBRATED_HIFI_ERROR_PCT: f32 = 11.0;
 
 #[test]
 fn auto_morphs_on_the_hifi_link_end_within_the_limits_and_their_error_is_measured() {
@@ -135,7 +136,7 @@ fn auto_morphs_on_the_hifi_link_end_within_the_limits_and_their_error_is_measure
             peak_c[0], peak_c[1]
         );
         assert!(
-            err.abs() < HIFI_ERROR_BAND_PCT,
+            err.abs() < UNCALIBRATED_HIFI_ERROR_PCT,
             "target {target} mm ended at {r} mm ({err:+.2} %)"
         );
     }

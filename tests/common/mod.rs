@@ -34,7 +34,7 @@ use morphlink_plant::Plant;
 use morphlink_sim::{LinkSetup, Rig};
 
 /// The simulated link a bench runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Link {
     /// The nominal lumped link: the controller's own equations.
     Lumped,
