@@ -1212,7 +1212,10 @@ fn healthy_morphs_raise_no_false_alarm_on_either_link() {
                         "{link:?} {mode} {target}: {alarms:?}"
                     );
                     assert_eq!(b.phase(), Phase::Fault);
-                    assert_eq!(false_alarm(link, mode, target).map(|a| a.0), Some(first.clone()));
+                    assert_eq!(
+                        false_alarm(link, mode, target).map(|a| a.0),
+                        Some(first.clone())
+                    );
                     continue;
                 }
                 assert_eq!(false_alarm(link, mode, target), None);
