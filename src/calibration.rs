@@ -73,10 +73,9 @@ pub const MAP_PRIOR_WEIGHT: f32 = 0.2;
 /// residual). The high-fidelity links' error after TUNE is mostly an offset in this space
 /// (the PLA's heat at the TCA bead, which the model's coupling does not share): one report
 /// at a mid-range rise puts about half of its correction into the offset, three at
-/// different radii fit the offset almost freely. A weight of 100 (the slope alone) left the
-/// loose radii 2–5 % tight after three reports; 0.05 fitted the high-fidelity links as well
-/// but passed more of the measuring error into the lumped links' map (`cargo xtask
-/// calibration`, docs/calibration.md).
+/// different radii fit the offset almost freely, and a lighter prior passes more of the
+/// measuring error into the map (`cargo xtask calibration`; docs/calibration.md, "What changed,
+/// and why").
 pub const MAP_OFFSET_PRIOR_WEIGHT: f32 = 0.2;
 const _: () = assert!(MAP_OFFSET_PRIOR_WEIGHT > 0.0 && MAP_OFFSET_PRIOR_WEIGHT <= 10.0);
 /// TCA rise that scales the slope's prior, K: a mid-range rise (the table spans 12–63 K), so

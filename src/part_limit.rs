@@ -17,10 +17,9 @@ use crate::calibration::Calibration;
 use crate::vocab::Heater;
 
 /// The least share of its heater's rise above the surroundings each bead (PLA, TCA) is taken
-/// to read, 1: the estimate of a part divides its bead's rise by it. On the high-fidelity
-/// ensemble the PLA beads read about 0.72 of the rod's mean rise once it is steady (median, in
-/// water; up to 0.93), the TCA beads about 0.77 (0.74–0.95), and both less while their heater
-/// rises fast; the lumped link's beads read all of it (`cargo xtask limits --trace`).
+/// to read, 1: the estimate of a part divides its bead's rise by it. Set under the shares the
+/// high-fidelity beads read once their part is steady (`cargo xtask limits --trace`;
+/// docs/safety.md, "The parts' limits").
 pub const UNTUNED_BEAD_SHARES: [f32; 2] = [0.7, 0.75];
 /// The least share [`limit_shares`] takes from a fit, 1: the fitted rises are held to at
 /// least this share of the model's (`calibration::RISE_MIN_SHARE`).
@@ -36,10 +35,9 @@ pub const CEILING_MARGIN_K: f32 = 15.0;
 const _: () = assert!(CEILING_MARGIN_K >= 5.0 && CEILING_MARGIN_K <= 30.0);
 /// The band below its ceiling over which a heater's power is scaled down, K: at `ceiling −
 /// CEILING_BAND_K` an activity gets all it asks, at the ceiling only the keep-alive power,
-/// linearly between, so a part held at its ceiling settles there on a steady power. Cut and
-/// restored at one temperature instead, the heater dithered about it: a lumped TCA held at its
-/// ceiling in lock swung 10 K at 0.1 Hz, and the supervisor's expectation of the PLA beside it
-/// (and its frozen-sensor check, 0.1 K in 8 s after a power step) called healthy links faulty.
+/// linearly between, so a part held at its ceiling settles there on a steady power: cut and
+/// restored at one temperature, the heater would dither about it and the supervisor's checks
+/// would take the swings for faults (docs/safety.md, "The parts' limits").
 pub const CEILING_BAND_K: f32 = 5.0;
 const _: () = assert!(CEILING_BAND_K > 0.0 && CEILING_BAND_K < CEILING_MARGIN_K);
 /// The ambient the estimate assumes while the ambient thermistor has no good reading, °C: the

@@ -22,8 +22,7 @@ const _: () = assert!(
 /// The window HEAT's time is counted over, s: a heater may be pulsed for at most
 /// [`HEAT_MAX_S`] in any such window ([`HeatBudget`]), so chained pulses average at most a
 /// fifth of the pulse power: 0.2 W into the PLA, whose steady rise even in still air (about
-/// 100 K/W) stays some 20 K, far below the glass transition. (Twelve chained one-minute pulses
-/// at 1 W took a still-air rod to 89 °C and the link out of its shape.)
+/// 100 K/W) stays some 20 K, far below the glass transition (docs/protocol.md, `HEAT`).
 pub const HEAT_WINDOW_S: f32 = 300.0;
 const _: () = assert!(HEAT_WINDOW_S >= 2.0 * HEAT_MAX_S);
 

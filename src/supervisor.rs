@@ -207,9 +207,8 @@ pub const HEATING_MIN_POWER_FRACTION: f32 = 0.2;
 pub const HEATING_MIN_GAIN_K: f32 = 2.0;
 /// Heater-not-heating: the window for [`HEATING_MIN_GAIN_K`], s. A dead heater trips within
 /// this time of being switched on (or of its phase starting). About the PLA bead's lag and 3
-/// TCA bead time constants: 9 s leaves no alarm on the healthy ensemble (`cargo xtask
-/// strategies`, 2026-12-02), where 8 s tripped two healthy hifi morphs in water (closed at
-/// 46.26 mm, boost at 39.59 mm) and 10 s left dead heaters 0.1–0.2 s over the 10 s aim.
+/// TCA bead time constants: the shortest window the healthy ensemble passes without an alarm
+/// (`cargo xtask strategies`; docs/safety.md, "What the table says").
 pub const HEATING_WINDOW_S: f32 = 9.0;
 /// Heater-not-heating: the band's floor, K above ambient plus the model's steady rise the other
 /// heater alone would give this sensor (`R_TP_K_PER_W` times its power). Below it the heater has
@@ -228,9 +227,9 @@ pub const HEATING_MAX_FALL_K: f32 = 15.0;
 /// Heater-not-heating: longest time a judged heater's sensor may stay below its band, s
 /// (restarted by a power step up of more than [`HEATING_POWER_STEP_FRACTION`]; judged while the
 /// heater's own model rise is at least [`HEATING_BAND_MIN_OWN_SHARE`] times the other heater's
-/// share). The slowest
-/// healthy climb into the band measured (the hifi TCA bead at a low bend power, 0.7 W) takes
-/// about 20 s; a dead heater whose sensor the other heater keeps warming never gets there.
+/// share). The slowest healthy climb into the band measured (the hifi TCA bead at a low bend
+/// power, 0.7 W) takes about 20 s; a dead heater whose sensor the other heater keeps warming
+/// never gets there.
 pub const HEATING_BAND_TIMEOUT_S: f32 = 30.0;
 /// [`HEATING_BAND_TIMEOUT_S`] is judged only while the heater's own model rise is at least this
 /// many times the other heater's share: the hifi link couples the heaters less than the model
@@ -254,29 +253,24 @@ pub const OFF_GRACE_S: f32 = 15.0;
 pub const OFF_MAX_RISE_K: f32 = 3.0;
 /// Heating-while-off: a sensor that rises this far above its lowest reading (above ambient)
 /// since both heaters were cut trips at once, within [`OFF_GRACE_S`] too, K. The heat stored in
-/// the link lifts a lagging bead a few kelvin after a cut: where judged (above the other heated
-/// sensor, [`OFF_NEIGHBOUR_MARGIN_K`]) at most 11.2 K over an ABORT at 1–30 s into a morph in
-/// every mode on both nominal links in water and still air, on the lumped link with 2, 3 and
-/// 6 s beads and on 40 high-fidelity draws (the most: hifi draw 22, ABORT 4 s into closed's
-/// soften; `cargo xtask stored-heat`). A PLA heater stuck on in release gains 12 K within about
-/// 5 s, where the grace alone let the rod pass 130 °C.
+/// the link lifts a lagging bead a few kelvin after a cut: set above the largest such rise
+/// where judged (above the other heated sensor, [`OFF_NEIGHBOUR_MARGIN_K`]) measured by `cargo
+/// xtask stored-heat` (docs/safety.md, "ABORT on a healthy link"), and low enough that a PLA
+/// heater stuck on in release trips within the grace, before the rod passes 130 °C.
 pub const OFF_STORED_MAX_RISE_K: f32 = 12.0;
 /// Heating-while-off: a heater's sensor that rises while it reads less than this above the other
 /// heated sensor is not judged, K: with both heaters off it may be warmed by the hotter part of
-/// the link, and heat flows only from hot to cold. In still air the PLA rod, cut after
-/// `paper`'s or `gated`'s long soften at 4 W, warms the TCA's bead by up to 15.6 K over a
-/// minute: without this rule 214 of 3 360 such healthy ABORTed morphs tripped (`cargo xtask
-/// stored-heat`). A stuck heater soon lifts its own sensor above the other's (no row of `cargo
-/// xtask faults` moved). The margin covers the PLA bead reading below its rod. The same rule
-/// holds for a heater turned down while the other is on: the TCA holding a tight radius in still
-/// air at 84 °C warms the cooling PLA 3 K over a minute of lock (six lumped still-air links at
-/// 32.92 mm tripped `heating-while-off pla` once the still-air model let the PLA cool below
-/// it; `cargo xtask calibration`), and no row of `cargo xtask faults` moved.
+/// the link, and heat flows only from hot to cold (in still air the PLA rod cut after a long
+/// soften warms the TCA's bead for a minute). The same holds for a heater turned down while the
+/// other is on (a TCA holding a tight radius in still air warms the cooling PLA). A stuck
+/// heater soon lifts its own sensor above the other's; the margin covers the PLA bead reading
+/// below its rod. Measured by `cargo xtask stored-heat` and `cargo xtask faults`
+/// (docs/safety.md, "ABORT on a healthy link").
 pub const OFF_NEIGHBOUR_MARGIN_K: f32 = 3.0;
 /// Heating-while-off: the most a sensor may rise since both heaters were cut and still count as
-/// warmed by the other ([`OFF_NEIGHBOUR_MARGIN_K`]), K. The largest such rise over 7 200
-/// ABORTed healthy morphs is 15.6 K (`cargo xtask stored-heat`); past 20 K a stuck heater is
-/// named whatever the other sensor reads.
+/// warmed by the other ([`OFF_NEIGHBOUR_MARGIN_K`]), K: set above the largest such rise a
+/// healthy ABORT leaves (`cargo xtask stored-heat`; docs/safety.md, "ABORT on a healthy link");
+/// past it a stuck heater is named whatever the other sensor reads.
 pub const OFF_NEIGHBOUR_MAX_RISE_K: f32 = 20.0;
 /// Sensor-implausible, crossed: the PLA heater is judged by the crossed-wires check while it is
 /// commanded at least this share of its cap (from 2.5 W: soften's power) and the TCA below
@@ -284,18 +278,18 @@ pub const OFF_NEIGHBOUR_MAX_RISE_K: f32 = 20.0;
 pub const CROSS_MIN_POWER_FRACTION: f32 = 0.5;
 /// Sensor-implausible, crossed: while judged ([`CROSS_MIN_POWER_FRACTION`]) the TCA's sensor
 /// may gain at most this much more than the PLA's own since that began, K. A heater warms its
-/// own bead first and most; the other bead sees its heat through the silicone, later and less. With the PLA and TCA thermistors swapped, `closed` cuts the TCA as the PLA rod's
-/// reading passes the TCA's target and holds the PLA at 5 W as the TCA's cooling bead reads
-/// "PLA": before this check the rod passed 130 °C (138 °C lumped, 134 °C hifi) before the
-/// over-temperature trip.
+/// own bead first and most; the other bead sees its heat through the silicone, later and less,
+/// so a TCA reading that leads is a swapped pair of thermistors, which would let `closed` hold
+/// the PLA at 5 W on the TCA's cooling bead (docs/safety.md, "Wiring faults: swapped
+/// thermistors, a bead off its heater").
 pub const CROSS_MAX_LEAD_K: f32 = 3.0;
 
 /// Heating-while-off, one heater low: how long a heater must have been commanded below
 /// [`HEATING_MIN_POWER_FRACTION`] of its cap, with the other heater on, before its sensor is
 /// watched, s (with both off, [`OFF_GRACE_S`] applies). After a power drop the hifi PLA bead,
-/// 10 s behind its rod, keeps rising for about 3 s while it catches up; 8 s covers it and
-/// leaves a stuck heater caught 8.9–10.3 s after the controller turns its power down (the 3 K
-/// rise at 1.5–2 K/s on top; `tests/safety.rs` bounds it at 11 s).
+/// 10 s behind its rod, keeps rising for about 3 s while it catches up; 8 s covers it and still
+/// finds a stuck heater within the 11 s `tests/safety.rs` holds it to (docs/safety.md, "What
+/// the table says").
 pub const LOW_GRACE_S: f32 = 8.0;
 /// Heating-while-off, one heater low: a heater's sensor is watched only while it reads more
 /// than this above the widest rise the commanded powers can explain ([`PLAUS_HIGH_GAIN`] times
@@ -874,9 +868,9 @@ impl Supervisor {
     /// of its cap) whose sensor falls more than [`HOLD_MAX_FALL_K`] below its recent peak,
     /// beyond what the recent power drops explain (the model's steady rise of each drop, the
     /// other heater's through `R_TP_K_PER_W`), trips. Peak and powers are recent maxima that
-    /// relax toward the present with [`HOLD_TAU_S`]. A heater that dies while held (bend, lock)
-    /// loses its sensor's rise within seconds, long before a phase ends and `done` reports a
-    /// radius from it.
+    /// relax toward the present ([`HOLD_PEAK_TAU_S`], [`HOLD_POWER_TAU_S`]). A heater that dies
+    /// while held (bend, lock) loses its sensor's rise within seconds, long before a phase ends
+    /// and `done` reports a radius from it.
     fn check_hold(&mut self, dt_s: f32, cmd: Powers) -> Result<(), Fault> {
         let k_peak = lag_share(dt_s, HOLD_PEAK_TAU_S);
         let k_power = lag_share(dt_s, HOLD_POWER_TAU_S);
@@ -979,8 +973,8 @@ impl Supervisor {
     /// since that began (the PLA's gain counted from its lowest reading since: a lagging bead may
     /// still fall for a moment when heating resumes): heat reaches the PLA's own bead first. A
     /// TCA held alone is left out: in still air a lock that stalls holds it for minutes, and the
-    /// cooled rod's bead, warmed by it, overtook its held one by 3 K (lumped draw 22 of `cargo
-    /// xtask strategies`, 32.9 mm).
+    /// cooled rod's bead, warmed by it, may overtake its held one (docs/safety.md, "Wiring faults:
+    /// swapped thermistors, a bead off its heater").
     fn check_cross(&mut self, cmd: Powers) -> Result<(), Fault> {
         // A PLA held at its ceiling (`part_limit::under_ceiling_w`) is kept from rising: its
         // own bead cannot lead then, whatever the wiring.
@@ -1028,7 +1022,7 @@ impl Supervisor {
             // With both off, `check_off` watches it (with its longer grace). With the other
             // heater off too (its keep-alive aside) the link is cooling from stored heat, which
             // warms a low heater's sensor in still air: judged only while the other is on
-            // (all 40 lumped paper morphs in air at 42.9–46.3 mm tripped otherwise).
+            // (docs/safety.md, "Safety defaults", heating while turned down).
             if !low || !other_on || !rise_k.is_finite() {
                 *w = LowWatch {
                     tripped_min_k: w.tripped_min_k,
@@ -1245,25 +1239,25 @@ pub const FROZEN_MIN_MOVE_K: f32 = 0.1;
 /// 1 W step; 8 s leaves margin and keeps a frozen sensor under the 10 s aim.
 pub const FROZEN_WINDOW_S: f32 = 8.0;
 /// Sensor-frozen, still reading: how long a reading may repeat to the last bit, s of sample
-/// time (any sensor, any phase). The thermistors are read as a sum of 16 12-bit samples, about
-/// 0.003 K per count at 60 °C and 0.016 K at 120 °C, and the quietest bead's noise (0.02 K rms)
-/// spans several counts: two healthy readings in a row are alike about one time in five at
-/// 120 °C, 50 in a row never. A hung channel repeats at once; 5 s (50 readings) finds it within
-/// the 10 s aim wherever it comes, a TCA frozen in a closed-loop hold (whose power and reading
-/// barely move) included.
+/// time (any sensor, any phase). The quietest bead's noise spans several counts of the summed
+/// reading, so 50 identical readings never come from a live sensor (docs/safety.md, "What the
+/// table says"). A hung channel repeats at once; 5 s (50 readings) finds it within the 10 s aim
+/// wherever it comes, a TCA frozen in a closed-loop hold (whose power and reading barely move)
+/// included.
 pub const FROZEN_STILL_S: f32 = 5.0;
 const _: () = assert!(FROZEN_STILL_S >= 1.0 && FROZEN_STILL_S < FROZEN_WINDOW_S);
 
 /// Sensor-implausible, the envelope's floor: this share of the model's steady rise (own heater
 /// plus the other's share, `R_PP_K_PER_W`/`R_TT_K_PER_W` and `R_TP_K_PER_W` times the commanded
 /// powers), reached no faster than [`PLAUS_TAU_SLOW_S`] and then [`PLAUS_LAG_S`] behind. A
-/// bead beside its heater reads a fraction of the heater's mean rise; 0.3 leaves no alarm on
-/// either ensemble (in water or air) while a dead heater's sensor stays near ambient.
+/// bead beside its heater reads a fraction of the heater's mean rise: set under what the healthy
+/// ensembles read in water and air (docs/safety.md, "No false alarm on a healthy link"), while a
+/// dead heater's sensor stays near ambient.
 pub const PLAUS_LOW_GAIN: f32 = 0.3;
 /// Sensor-implausible, the envelope's ceiling: this many times the model's steady rise, reached
 /// with [`PLAUS_TAU_FAST_S`] and left no faster than [`PLAUS_CEILING_FALL_S`] (a hot link
 /// cools slowly). The model's resistances are water's; in still air a healthy link rises
-/// several times as far (1.2 tripped healthy morphs in air on both ensembles), so 4.
+/// several times as far (docs/safety.md, "No false alarm on a healthy link"), so 4.
 pub const PLAUS_HIGH_GAIN: f32 = 4.0;
 /// Sensor-implausible: the envelope's fast time constant, s (the TCA's fast thermal part is
 /// about 1 s; the ceiling rises this fast, the floor falls this fast).
@@ -1288,8 +1282,8 @@ pub const PLAUS_AMB_TAU_S: f32 = 60.0;
 pub const PLAUS_MARGIN_K: f32 = 3.0;
 /// Sensor-implausible: seconds outside the envelope before a trip, counted leaky (+dt outside,
 /// −dt inside), so one noisy excursion never trips. 2.5 s (25 readings) brings a PLA heater
-/// that is open in soften on the nominal hifi link in at 9.9 s (3 s: 10.4 s) with no alarm on
-/// either healthy ensemble.
+/// open in soften on the nominal hifi link under the 10 s aim with no alarm on either healthy
+/// ensemble (docs/safety.md, "What the table says").
 pub const PLAUS_TIME_S: f32 = 2.5;
 const _: () = assert!(PLAUS_LOW_GAIN > 0.0 && PLAUS_LOW_GAIN < 1.0 && PLAUS_HIGH_GAIN > 1.0);
 const _: () = assert!(PLAUS_TAU_FAST_S > 0.0 && PLAUS_TAU_SLOW_S > PLAUS_TAU_FAST_S);
@@ -1311,8 +1305,8 @@ pub const AMB_RAMP_MAX_K_PER_S: f32 = 0.1;
 /// 30 readings, so the ADC's noise is far below a segment's change at the threshold, 0.3 K).
 pub const AMB_RAMP_SEGMENT_S: f32 = 3.0;
 /// Sensor-implausible, ambient: how many consecutive segment-to-segment changes must all exceed
-/// [`AMB_RAMP_MAX_K_PER_S`], with one sign: 4 (12 s) finds a 0.2 K/s drift 12–15 s after it
-/// starts, inside the 20 s aim.
+/// [`AMB_RAMP_MAX_K_PER_S`], with one sign: 4 (12 s) finds a 0.2 K/s drift inside the 20 s aim
+/// (`cargo xtask faults`; docs/safety.md, "What the table says").
 pub const AMB_RAMP_SEGMENTS: usize = 4;
 /// Sensor-implausible, ambient: the evenness a ramp needs: its smallest segment change at least
 /// this share of its largest (the first change after a step, or after a drift starts, covers
@@ -1440,7 +1434,7 @@ fn steady_ramp(means_c: &[f32]) -> bool {
 /// (a bead relaxing to that link's lower equilibrium) sets it.
 pub const HOLD_MAX_FALL_K: f32 = 4.0;
 /// Heater-not-heating while held: how fast the recent peak relaxes toward the present reading,
-/// s. A healthy sensor falling at r K/s stays about r × this below its recent peak: 10 s
+/// s. A healthy sensor falling at r K/s stays about r × this below its recent peak: this
 /// forgives the slow healthy relaxations (well under 0.5 K/s) but not a dead TCA's bead,
 /// which loses its rise at several K/s.
 pub const HOLD_PEAK_TAU_S: f32 = 30.0;
@@ -1459,11 +1453,10 @@ const _: () = assert!(HOLD_CROSS_TAU_S > 0.0);
 /// largest fall of the TCA's rise less the PLA's model share of its rise, below its recent
 /// peak, while the TCA's reading is below the model's steady rise for its power, K. A TCA that
 /// dies in bend or lock under a closed-loop hold (which turns it up as the reading falls) loses
-/// 4–12 K of it within the lock on both nominal links; the largest healthy fall measured is
-/// 2.05 K (two lumped links at 32.9 mm after TUNE in `cargo xtask calibration`; 0.8 K over the
-/// strategy ensemble), so 3 K leaves a third above it, and none of the 5 800 healthy ensemble
-/// morphs nor of the calibration's morphs trips it (docs/safety.md). `HOLD_MAX_FALL_K` misses a dead TCA in lock
-/// because the PLA's power drop at lock explains any TCA fall for tens of seconds.
+/// several kelvin of it within the lock; 3 K is set a third above the largest healthy fall
+/// measured (`cargo xtask calibration`, `cargo xtask strategies`; docs/safety.md, "What the
+/// table says"). `HOLD_MAX_FALL_K` misses a dead TCA in lock because the PLA's power drop at
+/// lock explains any TCA fall for tens of seconds.
 pub const HELD_MAX_FALL_K: f32 = 3.0;
 /// Heater-not-heating while held, TCA: the lag of the own model rise that explains a fall
 /// after a power drop, s (the TCA bead's response to its heater; a shorter lag only explains
@@ -2019,8 +2012,8 @@ mod tests {
     fn a_sensor_rising_far_after_both_heaters_are_cut_trips_within_the_grace_and_stored_heat_never_does(
     ) {
         // Release: both heaters cut at 10 s after 10 s of heating, the PLA reading 30 K above
-        // ambient. Stored heat lifts it 11.2 K at most (the ensemble's worst, `cargo xtask
-        // stored-heat`) before it cools; a stuck heater keeps it rising 2.5 K/s.
+        // ambient. Stored heat lifts it less than `OFF_STORED_MAX_RISE_K` before it cools
+        // (docs/safety.md, "ABORT on a healthy link"); a stuck heater keeps it rising 2.5 K/s.
         let cmd = |t: f32| Powers {
             pla_w: if t < 10.0 { 1.0 } else { 0.0 },
             tca_w: if t < 10.0 { 0.5 } else { 0.0 },

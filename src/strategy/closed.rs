@@ -21,43 +21,42 @@ pub const CLOSED_LEAD_AMBIENT_MARGIN_K: f32 = 10.0;
 /// Where `closed` counts the PLA as rigid in cool surroundings (see
 /// [`CLOSED_LEAD_AMBIENT_MARGIN_K`]), °C: 12 K below Tg the PLA's modulus is 98 % of the way to
 /// glassy on a log scale (about 1.5 GPa) and its flow time 27 s, growing e-fold with every 3 K it
-/// keeps cooling after release, so the shape is frozen. Waiting for [`RIGID_THRESHOLD_C`] costs
-/// 3–8 s under water with no measurable change of the final radius over the ensemble. In warm
-/// surroundings the rod may stall near these temperatures, so there `closed` waits for
-/// [`RIGID_THRESHOLD_C`] on the bare thermistor, as `gated` does.
+/// keeps cooling after release, so the shape is frozen and waiting for [`RIGID_THRESHOLD_C`]
+/// only costs time (docs/strategies.md, "The strategies"). In warm surroundings the rod may
+/// stall near these temperatures, so there `closed` waits for [`RIGID_THRESHOLD_C`] on the bare
+/// thermistor, as `gated` does.
 pub const CLOSED_RIGID_COOL_C: f32 = 50.0;
 const _: () =
     assert!(RIGID_THRESHOLD_C <= CLOSED_RIGID_COOL_C && CLOSED_RIGID_COOL_C < SOFT_THRESHOLD_C);
 
 /// Bend need not wait for the PLA thermistor to slow while it reads within this of what the
-/// observer expects ([`super::model::observer::Observer::innovation_k`]), K: the model follows the rod, so its
-/// estimate holds. 3 K is what the reading's 0.5 s smoothing and a bead lag 1.5 s off the
-/// assumed 3 s make together at the 1.5 K/s the bead rises at late in soften (the lumped
-/// ensemble's lags are 2–6 s); on the high-fidelity links the bead reads far
-/// under the model there (the rod heats slower than the model's), and bend waits. 1.5 K
-/// made the lumped links wait too, 1–2 s longer at the median with no gain in error (`cargo
-/// xtask calibration`).
+/// observer expects ([`super::model::observer::Observer::innovation_k`]), K: the model follows
+/// the rod, so its estimate holds. 3 K is what the reading's 0.5 s smoothing and a bead lag
+/// 1.5 s off the assumed 3 s make together at the 1.5 K/s the bead rises at late in soften (the
+/// lumped ensemble's lags are 2–6 s); on the high-fidelity links the bead reads far under the
+/// model there (the rod heats slower than the model's), and bend waits (`cargo xtask
+/// calibration`; docs/calibration.md, "What changed, and why").
 pub const CLOSED_PLA_AGREE_K: f32 = 3.0;
 const _: () = assert!(CLOSED_PLA_AGREE_K > 0.0 && CLOSED_PLA_AGREE_K < 5.0);
 
 /// Bend waits for the PLA thermistor to change slower than this, K/s (unless it reads what the
 /// observer expects, [`CLOSED_PLA_AGREE_K`]): a bead still rising says the rod is still
-/// heating, and a rod a few kelvin under the PLA target flows several times slower. At the
-/// observer's 0.6 K/s the hifi rod of draw 15 was still flowing 1 mm/s when bend ended; 0.3 K/s
-/// took the hifi water p95 after TUNE + 3 measured from 3.11 to 1.49 % (`cargo xtask
-/// calibration`; 0.2 K/s gave the same).
+/// heating, and a rod a few kelvin under the PLA target flows several times slower. It is half
+/// the observer's learning rate ([`LEARN_MAX_RATE_K_PER_S`]), at which the hifi rods were still
+/// heating when bend ended (`cargo xtask calibration`; docs/calibration.md, "What changed, and
+/// why").
 pub const CLOSED_PLA_SETTLED_K_PER_S: f32 = 0.3;
 const _: () = assert!(
     CLOSED_PLA_SETTLED_K_PER_S > 0.0 && CLOSED_PLA_SETTLED_K_PER_S <= LEARN_MAX_RATE_K_PER_S
 );
 
 /// A TCA past its target on the PLA's heat alone still waits in bend while the PLA thermistor,
-/// not yet slowed under [`CLOSED_PLA_SETTLED_K_PER_S`], reads more than this below what the observer expects, K: the rod is then
-/// colder than the estimate and has not flowed (the high-fidelity links, whose bead reads far
-/// under the model late in soften, locked 4–8 % loose at the loosest target). A reading that
+/// not yet slowed under [`CLOSED_PLA_SETTLED_K_PER_S`], reads more than this below what the
+/// observer expects, K: the rod is then colder than the estimate and has not flowed (the
+/// high-fidelity links, whose bead reads far under the model late in soften). A reading that
 /// trails the model by a bead lag alone (the lumped links', 2–6 s) is left out: there the rod
-/// has flowed and waiting only bends it further (`cargo xtask calibration`: with 4.5 K, 5
-/// lumped water links ended over 2 %; with 6 K, 1).
+/// has flowed and waiting only bends it further (`cargo xtask calibration`;
+/// docs/calibration.md, "What changed, and why").
 pub const CLOSED_PLA_COLD_K: f32 = 6.0;
 const _: () = assert!(CLOSED_PLA_COLD_K > CLOSED_PLA_AGREE_K);
 
@@ -66,13 +65,12 @@ const _: () = assert!(CLOSED_PLA_COLD_K > CLOSED_PLA_AGREE_K);
 /// at a temperature under
 /// [`CLOSED_LOCK_STALL_MAX_C`], in cool surroundings ([`CLOSED_LEAD_AMBIENT_MARGIN_K`], so the rod
 /// keeps cooling after release; a bath too warm for the rod to turn rigid still ends in the lock
-/// timeout). In still air the TCA's hold keeps the rod warm (at 34 mm the nominal links settle at
-/// 52.6 °C lumped and 54 °C hifi, above [`CLOSED_RIGID_COOL_C`]: `SIM MEDIUM air`, `MORPH 34`,
-/// `STATUS` in lock with `morph-sim --plant lumped|hifi`), and waiting for a temperature
-/// the link will not reach kept the TCA on until the 600 s lock timeout. 0.03 K/s is within a
+/// timeout). In still air the TCA's hold keeps the rod warm above [`CLOSED_RIGID_COOL_C`], and
+/// waiting for a temperature the link will not reach would keep the TCA on until the lock
+/// timeout (docs/strategies.md, "Where each strategy fails (lumped plant)"). 0.03 K/s is within a
 /// few kelvin of the settled value at the still-air cooling time of minutes; under water the rod
-/// passes these temperatures at several K/s, so no water morph of the ensemble changed (`cargo
-/// xtask strategies`).
+/// passes these temperatures at several K/s, so the rule leaves water morphs alone (`cargo xtask
+/// strategies`).
 pub const CLOSED_LOCK_STALL_K_PER_S: f32 = 0.03;
 /// How long the PLA thermistor must stay stalled before lock ends on it, s: from a rate under
 /// [`CLOSED_LOCK_STALL_K_PER_S`], with no rate over [`CLOSED_LOCK_STALL_RESET_K_PER_S`] since. A
@@ -83,13 +81,11 @@ pub const CLOSED_LOCK_STALL_S: f32 = 10.0;
 /// rate carries up to 0.05 K/s of noise, which at the stall rate itself restarted the count
 /// for a minute on the nominal still-air links.
 pub const CLOSED_LOCK_STALL_RESET_K_PER_S: f32 = 0.06;
-/// The warmest stalled PLA reading that ends lock, °C: 4 K under the 62 °C glass transition.
-/// Released there the shape held on both ensembles' still-air links as it did after the full
-/// wait (the runs that ended either way have the same final radius to 0.02 %, 60 s after
-/// `done`; 56 and 59 °C gave the same), and it does not creep later: the hifi plant's
-/// viscoelastic rod, released at 54 °C at 34 mm, is 0.01 mm from it 600 s after `done`
-/// (`tests/morph.rs` allows 0.05 mm). A rod that settles warmer is left to the lock timeout
-/// (`LOCK_TIMEOUT_S`): the link cannot lock that radius in those surroundings.
+/// The warmest stalled PLA reading that ends lock, °C: 4 K under the 62 °C glass transition,
+/// where a released shape holds as it does after the full wait and does not creep later
+/// (`tests/morph.rs`; docs/strategies.md, "Where each strategy fails (lumped plant)"). A rod that
+/// settles warmer is left to the lock timeout (`LOCK_TIMEOUT_S`): the link cannot lock that
+/// radius in those surroundings.
 pub const CLOSED_LOCK_STALL_MAX_C: f32 = 58.0;
 const _: () = assert!(
     CLOSED_LOCK_STALL_K_PER_S > 0.0

@@ -33,16 +33,15 @@ pub const MODEL_SETTLE_S: f32 = 1.5;
 /// A TCA past its target on the PLA's heat alone (its heater at keep-alive) waits in bend for
 /// the PLA's view to be learnt, so the rod has flowed, until it is this far over its target,
 /// K: then waiting would only bend the rod past the target (0.27 mm of radius per kelvin), so
-/// bend ends as it is. Measured on the hifi ensemble after TUNE + 3 measured morphs (`cargo
-/// xtask calibration`, water): 1 K left draw 18 at 6 % loose (p95 2.16 %), 2 K brought it under
-/// 2 % (p95 2.04 %, before the PLA settle gate); waiting with no bound left still air at 11.8 %.
+/// bend ends as it is (`cargo xtask calibration`; docs/calibration.md, "What changed, and
+/// why").
 pub const MODEL_PASSIVE_OVERSHOOT_K: f32 = 2.0;
 
 /// Longest bend waits on the PLA's view alone once everything else is ready, s: long enough for
-/// a hifi PLA bead, 10 s behind its rod, to slow after soften (`cargo xtask calibration`: 10 s
-/// left the hifi water p95 after TUNE + 3 measured at 3.34 %, 20 s at 1.46 %), short enough that
-/// a PLA thermistor that never slows (drifting low while the PLA is held on it) does not keep
-/// the rod heated until the bend timeout.
+/// a hifi PLA bead, 10 s behind its rod, to slow after soften (`cargo xtask calibration`;
+/// docs/calibration.md, "What changed, and why"), short enough that a PLA thermistor that never
+/// slows (drifting low while the PLA is held on it) does not keep the rod heated until the bend
+/// timeout.
 pub const MODEL_PLA_WAIT_MAX_S: f32 = 20.0;
 
 /// Thermistor guard of the model strategies, K: a heater is switched off for the tick while its
