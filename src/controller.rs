@@ -747,8 +747,14 @@ impl Controller {
                 t_s,
                 power_w,
             }) => reply::phase_event(&mut l, phase, t_s, power_w),
-            Event::Seq(SeqEvent::Done { t_s, radius_mm }) => {
-                reply::done_event(&mut l, t_s, radius_mm)
+            Event::Seq(SeqEvent::Done {
+                t_s,
+                radius_mm,
+                target_mm,
+            }) => {
+                let missed_mm = radius_mm - target_mm;
+                let missed = missed_mm.abs() > crate::sequencer::DONE_MISS_SHARE * target_mm;
+                reply::done_event(&mut l, t_s, radius_mm, missed.then_some(missed_mm))
             }
             Event::Alarm(f) => reply::alarm(&mut l, &f),
             Event::Config(ConfigEvent::Loaded { newest_skipped }) => reply::config_loaded_event(

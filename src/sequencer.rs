@@ -1,5 +1,5 @@
-//! The morph sequence as a pure state machine: Idle → Soften → Bend → Lock → Release → Idle,
-//! plus Fault. It owns the phases, their timeouts and the events; the strategy the morph runs
+//! The morph sequence as a pure state machine: Idle → (Rest →) Soften → Bend → Lock →
+//! Release → Idle, plus Fault. It owns the phases, their timeouts and the events; the strategy the morph runs
 //! ([`crate::strategy`]) turns measured temperatures into heater powers and says when a phase
 //! is over. It never touches hardware and never decides about safety (the supervisor does,
 //! every tick, before it).
@@ -18,6 +18,16 @@ pub const BEND_TIMEOUT_S: f32 = 120.0;
 pub const LOCK_TIMEOUT_S: f32 = 600.0;
 /// See [`SOFTEN_TIMEOUT_S`].
 pub const RELEASE_TIMEOUT_S: f32 = 10.0;
+/// A MORPH starts heating only once the PLA's and the TCA's thermistors read within this of
+/// ambient, K; before that it rests ([`Phase::Rest`], heaters off). The heat a previous morph
+/// left in the silicone keeps the TCA above a looser morph's target while the PLA is held
+/// soft, and the rod then locks tighter than asked; from a link this close to ambient a morph
+/// lands as from rest (`cargo xtask warm`, docs/strategies.md "Morphs in a row"). The same
+/// 3 K as TUNE's start (`tune::TUNE_START_MAX_RISE_K`).
+pub const REST_MAX_RISE_K: f32 = 3.0;
+/// Longest rest, s: a still-air link cools from a morph's 80 °C to within
+/// [`REST_MAX_RISE_K`] of ambient in several minutes (its lock alone may take 10).
+pub const REST_TIMEOUT_S: f32 = 900.0;
 // Release is fixed-length: it must end well before its timeout.
 const _: () = assert!(RELEASE_S < RELEASE_TIMEOUT_S);
 // The heater-not-heating check judges a heater during soften, before soften can time out.
@@ -64,8 +74,17 @@ pub enum SeqEvent {
         t_s: f32,
         /// Estimated achieved radius, mm.
         radius_mm: f32,
+        /// The target it was asked for, mm (`done` says how far the estimate missed it when
+        /// that is more than [`DONE_MISS_SHARE`] of it).
+        target_mm: f32,
     },
 }
+
+/// A `done` whose own radius estimate is further than this share of its target from the
+/// target says by how much (`missed_mm=`): the morph ended, but not where it was asked to (a
+/// TCA the link's heat keeps past a looser target, a heater cap short of a tighter one). 1 %
+/// is half the accuracy the calibrated morphs are held to.
+pub const DONE_MISS_SHARE: f32 = 0.01;
 
 /// A phase overran its timeout (the morph has ended; the controller latches the fault).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -89,6 +108,8 @@ struct Progress {
     target_mm: f32,
     tca_power_w: f32,
     start_ms: u64,
+    /// When heating began (soften entered), ms: the strategies' clock.
+    heat_ms: u64,
     phase_ms: u64,
     estimate_mm: f32,
 }
@@ -121,14 +142,33 @@ impl Progress {
         emit(SeqEvent::Done {
             t_s,
             radius_mm: self.estimate_mm,
+            target_mm: self.target_mm,
         });
     }
+}
+
+/// What a resting morph starts its strategy with.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    radius_mm: f32,
+    tca_power_w: f32,
+    mode: Mode,
+    cal: crate::calibration::Calibration,
+}
+
+/// Whether `m` reads a link close enough to ambient for a morph to start heating.
+fn rested(m: &Measurements) -> bool {
+    let warm = |c: f32| !(c - m.t_amb_c <= REST_MAX_RISE_K);
+    !(warm(m.t_pla_c) || warm(m.t_tca_c))
 }
 
 /// The sequence state.
 #[derive(Clone, Copy, Debug)]
 pub struct Sequencer {
     at: Progress,
+    /// A morph resting before it heats: what its strategy starts with once the link has
+    /// cooled.
+    pending: Option<Pending>,
     strategy: Option<AnyStrategy>,
     supply_v: f32,
     thresholds: Thresholds,
@@ -154,9 +194,11 @@ impl Sequencer {
                 target_mm: f32::NAN,
                 tca_power_w: 0.0,
                 start_ms: 0,
+                heat_ms: 0,
                 phase_ms: 0,
                 estimate_mm: f32::NAN,
             },
+            pending: None,
             strategy: None,
             supply_v: f32::NAN,
             thresholds: Thresholds::DEFAULT,
@@ -208,19 +250,37 @@ impl Sequencer {
         cal: &crate::calibration::Calibration,
         emit: &mut impl FnMut(SeqEvent),
     ) {
-        let start = Start {
-            now_ms,
-            radius_mm,
-            tca_power_w,
-            m,
-            cal,
-            pla_target_c: self.thresholds.pla_soft_target_c,
-        };
-        let strategy = self.strategy.insert(AnyStrategy::new(mode, &start));
         self.at.target_mm = radius_mm;
         self.at.tca_power_w = tca_power_w;
         self.at.start_ms = now_ms;
         self.at.estimate_mm = f32::NAN;
+        let pending = Pending {
+            radius_mm,
+            tca_power_w,
+            mode,
+            cal: *cal,
+        };
+        if rested(m) {
+            self.heat(now_ms, pending, m, emit);
+        } else {
+            self.pending = Some(pending);
+            self.at.enter(None, Phase::Rest, now_ms, emit);
+        }
+    }
+
+    /// Starts the strategy from the measurements `m` and enters soften.
+    fn heat(&mut self, now_ms: u64, p: Pending, m: &Measurements, emit: &mut impl FnMut(SeqEvent)) {
+        let start = Start {
+            now_ms,
+            radius_mm: p.radius_mm,
+            tca_power_w: p.tca_power_w,
+            m,
+            cal: &p.cal,
+            pla_target_c: self.thresholds.pla_soft_target_c,
+        };
+        self.pending = None;
+        let strategy = self.strategy.insert(AnyStrategy::new(p.mode, &start));
+        self.at.heat_ms = now_ms;
         self.at
             .enter(Some(strategy.get_mut()), Phase::Soften, now_ms, emit);
     }
@@ -239,9 +299,13 @@ impl Sequencer {
         }
     }
 
-    /// The strategy the running or last morph ran (`auto` resolved), None before the first.
+    /// The strategy the running or last morph ran (`auto` resolved; a resting morph's, the
+    /// one it will run), None before the first.
     pub fn mode_ran(&self) -> Option<Mode> {
-        self.strategy.as_ref().map(AnyStrategy::mode)
+        match self.pending {
+            Some(p) => Some(AnyStrategy::resolve(p.mode)),
+            None => self.strategy.as_ref().map(AnyStrategy::mode),
+        }
     }
 
     fn timeout_s(&self) -> f32 {
@@ -254,6 +318,7 @@ impl Sequencer {
             Phase::Soften => self.timeouts.soften_s,
             Phase::Bend => self.timeouts.bend_s,
             Phase::Lock => self.timeouts.lock_s,
+            Phase::Rest => REST_TIMEOUT_S,
             _ => RELEASE_TIMEOUT_S,
         })
     }
@@ -278,6 +343,13 @@ impl Sequencer {
         if !self.busy() {
             return Ok(Powers::default());
         }
+        if self.at.phase == Phase::Rest {
+            if let Some(p) = self.pending.filter(|_| rested(m)) {
+                self.heat(now_ms, p, m, emit);
+            } else {
+                return Ok(Powers::default());
+            }
+        }
         let at = &mut self.at;
         let Some(strategy) = self.strategy.as_mut() else {
             return Ok(Powers::default());
@@ -288,7 +360,7 @@ impl Sequencer {
             phase: at.phase,
             m,
             in_phase_s: since_s(now_ms, at.phase_ms),
-            since_start_s: since_s(now_ms, at.start_ms),
+            since_start_s: since_s(now_ms, at.heat_ms),
             supply_v: self.supply_v,
             th: &self.thresholds,
         };
@@ -301,7 +373,7 @@ impl Sequencer {
                 }
                 Phase::Lock => at.enter(Some(&mut *s), Phase::Release, now_ms, emit),
                 Phase::Release => at.finish(now_ms, emit),
-                Phase::Idle | Phase::Fault => {}
+                Phase::Idle | Phase::Rest | Phase::Fault => {}
             }
         }
         Ok(s.powers(at.phase, &tick))
@@ -393,6 +465,46 @@ mod tests {
 
     fn run(seq: &mut Sequencer, now: u64, m: Measurements, ev: &mut Vec<SeqEvent>) -> Powers {
         seq.step(now, &m, &mut |e| ev.push(e)).unwrap()
+    }
+
+    #[test]
+    fn a_warm_link_rests_heaters_off_until_it_has_cooled_and_a_rest_is_bounded() {
+        let cal = crate::calibration::Calibration::DEFAULT;
+        let warm = meas(22.0 + REST_MAX_RISE_K + 20.0, 60.0);
+        let mut s = Sequencer::new();
+        let mut ev = Vec::new();
+        s.start_from(0, 38.0, 0.6, Mode::Gated, &warm, &cal, &mut |e| ev.push(e));
+        assert_eq!(s.phase(), Phase::Rest);
+        assert!(s.busy());
+        assert_eq!(s.mode_ran(), Some(Mode::Gated));
+        assert_eq!(run(&mut s, 1000, warm, &mut ev), Powers::default());
+        assert_eq!(s.phase(), Phase::Rest);
+        // Cooled to within the rest: soften starts, and heats, on that tick.
+        let cool = meas(22.0 + REST_MAX_RISE_K - 0.1, 22.0 + REST_MAX_RISE_K - 0.1);
+        let p = run(&mut s, 60_000, cool, &mut ev);
+        assert_eq!(s.phase(), Phase::Soften);
+        assert!(p.pla_w > 0.0, "{p:?}");
+        let entered: Vec<Phase> = ev
+            .iter()
+            .filter_map(|e| match e {
+                SeqEvent::Phase { phase, .. } => Some(*phase),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(entered, [Phase::Rest, Phase::Soften]);
+        // A link that never cools: the rest times out, heaters off throughout.
+        let mut s = Sequencer::new();
+        s.start_from(0, 38.0, 0.6, Mode::Closed, &warm, &cal, &mut |_| {});
+        let mut t = 0;
+        let end = loop {
+            t += 1000;
+            match s.step(t, &warm, &mut |_| {}) {
+                Ok(p) => assert_eq!(p, Powers::default()),
+                Err(e) => break e,
+            }
+        };
+        assert_eq!(end, PhaseTimeout(Phase::Rest));
+        assert!(t as f32 / 1000.0 > REST_TIMEOUT_S && !s.busy());
     }
 
     #[test]

@@ -130,6 +130,7 @@ impl Fault {
                 Phase::Soften => "SOFTEN_TIMEOUT_S",
                 Phase::Bend => "BEND_TIMEOUT_S",
                 Phase::Lock => "LOCK_TIMEOUT_S",
+                Phase::Rest => "REST_TIMEOUT_S, REST_MAX_RISE_K",
                 _ => "RELEASE_TIMEOUT_S",
             },
             (FaultCode::PhaseTimeout, _) => "SOFTEN_TIMEOUT_S",

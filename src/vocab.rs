@@ -11,6 +11,9 @@ pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 pub enum Phase {
     /// Both heaters off, waiting for MORPH.
     Idle,
+    /// A MORPH on a warm link: both heaters off until it has cooled to the rest the morph's
+    /// model starts from ([`crate::sequencer::REST_MAX_RISE_K`]).
+    Rest,
     /// Heating the PLA until it is soft.
     Soften,
     /// PLA held soft; TCA at the power that gives the target radius.
@@ -28,6 +31,7 @@ impl Phase {
     pub fn as_str(self) -> &'static str {
         match self {
             Phase::Idle => "idle",
+            Phase::Rest => "rest",
             Phase::Soften => "soften",
             Phase::Bend => "bend",
             Phase::Lock => "lock",
@@ -36,11 +40,11 @@ impl Phase {
         }
     }
 
-    /// True for the phases of a running morph (soften, bend, lock, release).
+    /// True for the phases of a running morph (rest, soften, bend, lock, release).
     pub fn is_morphing(self) -> bool {
         matches!(
             self,
-            Phase::Soften | Phase::Bend | Phase::Lock | Phase::Release
+            Phase::Rest | Phase::Soften | Phase::Bend | Phase::Lock | Phase::Release
         )
     }
 }

@@ -13,6 +13,7 @@ mod common;
 use common::{Bench, Link, Wiring};
 use morphlink::controller::Outputs;
 use morphlink::protocol::{classify, LineKind};
+use morphlink::sequencer::REST_TIMEOUT_S;
 use morphlink::supervisor::{PLA_LIMITS, TCA_LIMITS};
 use morphlink::vocab::Phase;
 use morphlink_plant::Plant;
@@ -402,7 +403,13 @@ fn a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph(lin
             }
             assert_eq!(b.tick().0, ZERO);
             assert_eq!(b.send(&format!("MORPH {target} {mode}")), ["ok"]);
-            // paper switches the TCA on only 20 s after MORPH.
+            // A warm link rests first, heaters off: the heater is judged once soften starts.
+            assert!(
+                b.run_until(REST_TIMEOUT_S as f64, |b| b.phase() != Phase::Rest),
+                "{mode} {phase:?} {heater}: {:?}",
+                b.lines
+            );
+            // paper switches the TCA on only 20 s after soften starts.
             // The band timeout (`HEATING_BAND_TIMEOUT_S`, 30 s) may be what catches a dead TCA.
             let trip_s = 60.0;
             let a = expect_alarm_of(&mut b, DEAD_HEATER_CODES, trip_s);

@@ -49,7 +49,7 @@ impl Strategy for Boost {
             }
             Phase::Lock => t.m.t_pla_c < t.th.rigid_threshold_c,
             Phase::Release => t.in_phase_s >= RELEASE_S,
-            Phase::Idle | Phase::Fault => false,
+            Phase::Idle | Phase::Rest | Phase::Fault => false,
         }
     }
 

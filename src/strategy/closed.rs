@@ -187,7 +187,7 @@ impl Strategy for Closed {
             }
             Phase::Lock => self.rigid(t, pla_c),
             Phase::Release => t.in_phase_s >= RELEASE_S,
-            Phase::Idle | Phase::Fault => false,
+            Phase::Idle | Phase::Rest | Phase::Fault => false,
         }
     }
 

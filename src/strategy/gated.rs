@@ -72,7 +72,7 @@ impl Strategy for Gated {
             Phase::Bend => self.tca_settled(t.now_ms, m.t_tca_c) && t.in_phase_s >= MIN_BEND_S,
             Phase::Lock => m.t_pla_c < t.th.rigid_threshold_c,
             Phase::Release => t.in_phase_s >= RELEASE_S,
-            Phase::Idle | Phase::Fault => false,
+            Phase::Idle | Phase::Rest | Phase::Fault => false,
         }
     }
 

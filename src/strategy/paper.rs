@@ -78,7 +78,7 @@ impl Strategy for Paper {
             Phase::Bend => t_s >= PAPER_HOLD_END_S,
             Phase::Lock => t_s >= PAPER_TCA_END_S,
             Phase::Release => t.in_phase_s >= RELEASE_S,
-            Phase::Idle | Phase::Fault => false,
+            Phase::Idle | Phase::Rest | Phase::Fault => false,
         }
     }
 

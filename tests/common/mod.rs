@@ -27,7 +27,9 @@ use std::sync::OnceLock;
 use morphlink::bench::Noise;
 use morphlink::controller::Outputs;
 use morphlink::protocol::{classify, LineKind};
-use morphlink::sequencer::{BEND_TIMEOUT_S, LOCK_TIMEOUT_S, RELEASE_TIMEOUT_S, SOFTEN_TIMEOUT_S};
+use morphlink::sequencer::{
+    BEND_TIMEOUT_S, LOCK_TIMEOUT_S, RELEASE_TIMEOUT_S, REST_TIMEOUT_S, SOFTEN_TIMEOUT_S,
+};
 use morphlink::vocab::Phase;
 use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
 use morphlink_plant::Plant;
@@ -175,7 +177,11 @@ impl Bench {
         let t0 = self.rig.now_ms();
         let mut peak_c = [f64::NEG_INFINITY; 2];
         // Every phase may run to its timeout (a still-air lock takes minutes).
-        let max_s = (SOFTEN_TIMEOUT_S + BEND_TIMEOUT_S + LOCK_TIMEOUT_S + RELEASE_TIMEOUT_S) as f64;
+        let max_s = (REST_TIMEOUT_S
+            + SOFTEN_TIMEOUT_S
+            + BEND_TIMEOUT_S
+            + LOCK_TIMEOUT_S
+            + RELEASE_TIMEOUT_S) as f64;
         assert!(
             self.run_until(max_s + 10.0, |b| {
                 let t = b.rig.plant().truth();

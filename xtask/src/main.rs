@@ -14,6 +14,7 @@ mod flash;
 mod limits;
 mod stored_heat;
 mod strategies;
+mod warm;
 use morphlink_host::workspace::Workspace;
 use std::process::ExitCode;
 
@@ -42,6 +43,8 @@ enum Task {
     Calibration(calibration::Args),
     /// Every strategy on every link at each corner of the settings: true peaks against limits.
     Limits(limits::Args),
+    /// Morphs back to back on the hifi ensemble: a warm start against the same morph from rest.
+    Warm(warm::Args),
     /// Build a board's firmware (its feature) and flash it with probe-rs (its chip).
     Flash(flash::Args),
     /// Build a board's firmware, flash and run it, printing the defmt log (probe-rs run).
@@ -62,6 +65,7 @@ fn main() -> ExitCode {
         Task::StoredHeat(a) => stored_heat::run(&a),
         Task::Calibration(a) => calibration::run(&a, &ws.root),
         Task::Limits(a) => limits::run(&a),
+        Task::Warm(a) => warm::run(&a),
         Task::Flash(a) => flash::run(flash::Action::Flash, &a, &ws),
         Task::Run(a) => flash::run(flash::Action::Run, &a, &ws),
     });

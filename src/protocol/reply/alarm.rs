@@ -105,7 +105,14 @@ mod tests {
     /// Every kind of trip, with every subject it can have.
     fn every_fault() -> Vec<Fault> {
         let sensors = Sensor::ALL.map(Subject::Sensor);
-        let phases = [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release].map(Subject::Phase);
+        let phases = [
+            Phase::Rest,
+            Phase::Soften,
+            Phase::Bend,
+            Phase::Lock,
+            Phase::Release,
+        ]
+        .map(Subject::Phase);
         let heaters = Heater::ALL.map(Subject::Heater);
         let cases: [(FaultCode, &[Subject]); 13] = [
             (FaultCode::ThermistorOpen, &sensors),

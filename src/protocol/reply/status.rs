@@ -171,14 +171,18 @@ pub fn phase_event(l: &mut OutLine, phase: Phase, t_s: f32, power_w: Option<f32>
     }
 }
 
-/// `event: done t=<s> radius_mm=<mm>`.
-pub fn done_event(l: &mut OutLine, t_s: f32, radius_mm: f32) {
+/// `event: done t=<s> radius_mm=<mm>`, and ` missed_mm=<estimate − target>` when the estimate
+/// missed its target ([`crate::sequencer::DONE_MISS_SHARE`]).
+pub fn done_event(l: &mut OutLine, t_s: f32, radius_mm: f32, missed_mm: Option<f32>) {
     let _ = write!(
         l,
         "{EVENT_TAG} done t={} radius_mm={}",
         Fixed(t_s, 1),
         Fixed(radius_mm, 2)
     );
+    if let Some(m) = missed_mm {
+        let _ = write!(l, " missed_mm={}", Fixed(m, 2));
+    }
 }
 
 /// The line the firmware sends once at boot:
