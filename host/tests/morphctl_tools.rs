@@ -188,7 +188,7 @@ fn a_script_injects_a_fault_then_morphs_on_one_simulator_and_logs_every_line() {
     }
     assert!(
         text.lines()
-            .all(|l| l.starts_with('[') && l[1..].contains(" s] ")),
+            .all(|l| l.starts_with("[wall ") && l[1..].contains(" s] ")),
         "{text}"
     );
     let last = text.lines().last().unwrap();
@@ -213,6 +213,22 @@ fn a_bad_script_is_refused_before_the_device_is_started() {
     assert_eq!(out.status.code(), Some(1));
     assert!(
         err.contains("typo.txt: line 2: `wait` needs `done` or `alarm`"),
+        "{err}"
+    );
+    assert!(!dir.join("starts").exists(), "the device was started");
+    // A misspelt step is not sent as a protocol line: the core's parser refuses it first.
+    std::fs::write(&file, "MORPH 38\nslep 3\nwait done\n").unwrap();
+    let out = morphctl(&[
+        "--sim",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "run",
+        file.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        err.contains("typo.txt: line 2: `slep 3` is neither"),
         "{err}"
     );
     assert!(!dir.join("starts").exists(), "the device was started");
