@@ -10,7 +10,7 @@ use std::process::ExitCode;
 
 /// How long SAVE may take, s: a flash erase of the largest settings sector (the F401's 128 KiB)
 /// takes up to 2 s, plus the reply.
-const SAVE_TIMEOUT_S: f64 = 10.0;
+pub const SAVE_TIMEOUT_S: f64 = 10.0;
 
 /// What `morphctl config` does.
 #[derive(Subcommand, Clone)]
