@@ -680,3 +680,34 @@ fn bringup_names_a_dead_heater_and_refuses_a_faulted_device() {
     assert!(!out.contains("HEAT"), "a heater was pulsed:\n{out}");
     ends_heaters_off(&out);
 }
+
+#[test]
+fn config_set_with_save_says_saved_once() {
+    let dir = scratch("config-save");
+    let flash = dir.join("link.flash");
+    let out = morphctl(&[
+        "--sim",
+        "--sim-flash-file",
+        flash.to_str().unwrap(),
+        "config",
+        "set",
+        "lock_timeout_s",
+        "500",
+        "--save",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}");
+    assert!(!stdout.contains("saved=no"), "{stdout}");
+    assert!(stdout.contains("ok lock_timeout_s=500.0\n"), "{stdout}");
+    assert!(stdout.contains("ok saved bytes="), "{stdout}");
+    assert!(
+        stdout.contains("(saved: kept across a restart)"),
+        "{stdout}"
+    );
+    // Without a flash file SAVE is refused: the set is said to last until a restart.
+    let out = morphctl(&["--sim", "config", "set", "lock_timeout_s", "500", "--save"]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{stdout}");
+    assert!(stdout.contains("(set, but not saved"), "{stdout}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
