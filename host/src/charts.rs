@@ -47,7 +47,13 @@ fn err<E: std::fmt::Display>(e: E) -> String {
 pub fn score_all(p: &LinkParams, fig9: &Fig9, budget_s: f64) -> Result<Vec<Scored>, String> {
     let study = Level::study();
     let bar = ProgressBar::new(study.len() as u64);
-    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} levels, {msg}").map_err(err)?);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} levels, {elapsed} elapsed {msg}")
+            .map_err(err)?,
+    );
+    // Drawn from the start (the first level takes half a minute), on stderr, and only on a
+    // terminal (indicatif hides a bar whose stderr is not one).
+    bar.enable_steady_tick(std::time::Duration::from_millis(250));
     let out = levels::score(p, &study, &fig9.measured, budget_s, |l| {
         bar.set_message(l.name());
         bar.inc(1);

@@ -141,6 +141,61 @@ pub fn qemu_command(qemu: &Path, image: &Path, port: u16, clock: Clock) -> Comma
     c
 }
 
+/// How a child run by [`run_to_end_or_signal`] ended.
+#[derive(Debug)]
+pub enum Ended {
+    /// It exited on its own.
+    Exited(ExitStatus),
+    /// This signal reached this process first; the child was killed and reaped.
+    Signalled(i32),
+}
+
+/// Runs `command` (QEMU serving a port) to its end. A SIGINT, SIGTERM or SIGHUP to this
+/// process no longer ends it alone: the child is killed and reaped first, so no QEMU outlives
+/// the `cargo xtask emulate` that started it. The handlers are removed again on return.
+pub fn run_to_end_or_signal(command: &mut Command) -> Result<Ended, String> {
+    use std::sync::atomic::AtomicUsize;
+    use std::sync::Arc;
+    let flag = Arc::new(AtomicUsize::new(0));
+    let mut ids = Vec::new();
+    for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+        let id = signal_hook::flag::register_usize(sig, Arc::clone(&flag), sig as usize)
+            .map_err(|e| format!("cannot watch signal {sig}: {e}"))?;
+        ids.push(id);
+    }
+    let program = command.get_program().to_string_lossy().into_owned();
+    let ended = match command.spawn() {
+        Ok(mut child) => {
+            wait_or_kill(&mut child, &flag).map_err(|e| format!("waiting for {program}: {e}"))
+        }
+        Err(e) => Err(format!("cannot start {program}: {e}")),
+    };
+    for id in ids {
+        signal_hook::low_level::unregister(id);
+    }
+    ended
+}
+
+/// Waits for `child` to exit, or kills and reaps it once `signal` holds a signal's number.
+pub fn wait_or_kill(
+    child: &mut Child,
+    signal: &std::sync::atomic::AtomicUsize,
+) -> std::io::Result<Ended> {
+    use std::sync::atomic::Ordering;
+    loop {
+        if let Some(status) = child.try_wait()? {
+            return Ok(Ended::Exited(status));
+        }
+        let sig = signal.load(Ordering::SeqCst);
+        if sig != 0 {
+            let _ = child.kill();
+            child.wait()?;
+            return Ok(Ended::Signalled(sig as i32));
+        }
+        thread::sleep(Duration::from_millis(50));
+    }
+}
+
 /// QEMU's `-icount` shift under [`Clock::Instructions`]: every emulated instruction advances
 /// the virtual clock by 2^`ICOUNT_SHIFT` ns, so the firmware's time follows the instructions it
 /// runs and not QEMU's host-side work, such as the per-byte TCP round trips of the serial port,
@@ -364,5 +419,38 @@ impl Drop for Emulator {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    #[test]
+    fn a_signal_kills_and_reaps_the_child_instead_of_leaving_it_running() {
+        let mut child = Command::new("sleep").arg("30").spawn().unwrap();
+        let pid = child.id() as i32;
+        let flag = AtomicUsize::new(0);
+        let t0 = Instant::now();
+        thread::scope(|s| {
+            s.spawn(|| {
+                thread::sleep(Duration::from_millis(200));
+                flag.store(libc::SIGTERM as usize, Ordering::SeqCst);
+            });
+            match wait_or_kill(&mut child, &flag).unwrap() {
+                Ended::Signalled(sig) => assert_eq!(sig, libc::SIGTERM),
+                other => panic!("{other:?}"),
+            }
+        });
+        assert!(t0.elapsed() < Duration::from_secs(5));
+        // Reaped: no such process any more.
+        assert_eq!(unsafe { libc::kill(pid, 0) }, -1);
+        // A child that ends on its own is waited for.
+        let mut quick = Command::new("true").spawn().unwrap();
+        assert!(matches!(
+            wait_or_kill(&mut quick, &AtomicUsize::new(0)).unwrap(),
+            Ended::Exited(s) if s.success()
+        ));
     }
 }

@@ -140,3 +140,30 @@ fn a_bad_value_names_the_file_the_key_and_the_range() {
     );
     assert_eq!(text(&out.stdout), "", "nothing printed for a bad file");
 }
+
+#[test]
+fn outside_the_checkout_it_says_what_it_needs_and_how_to_run_it() {
+    let dir = scratch("outside");
+    let out = morph_model(&dir, &["params"]);
+    let err = text(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(!err.contains("cargo metadata"), "{err}");
+    assert!(
+        err.contains("is not inside the morphlink checkout"),
+        "{err}"
+    );
+    assert!(err.contains("pass --link FILE"), "{err}");
+    // A cargo project that is not morphlink.
+    std::fs::write(
+        dir.join("Cargo.toml"),
+        "[package]\nname = \"other\"\nversion = \"0.1.0\"\nedition = \"2021\"\n",
+    )
+    .unwrap();
+    std::fs::create_dir_all(dir.join("src")).unwrap();
+    std::fs::write(dir.join("src/lib.rs"), "").unwrap();
+    let out = morph_model(&dir, &["params"]);
+    let err = text(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("without link.toml"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

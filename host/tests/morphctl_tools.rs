@@ -46,6 +46,178 @@ fn a_plot_morphctl_cannot_write_is_refused_before_the_device_is_started() {
     );
     assert!(!started.exists(), "the device was started");
     assert!(!dir.join("run.jpg").exists());
+    // A directory that is not there: refused at once, not after the whole morph.
+    let nowhere = dir.join("no-such-dir").join("x.png");
+    let out = morphctl(&[
+        "--sim",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "morph",
+        "38",
+        "--plot",
+        nowhere.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("no-such-dir does not exist"), "{err}");
+    assert!(!started.exists(), "the device was started");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_plot_that_fails_to_write_fails_the_run() {
+    // The directory is there when the run starts and gone at its end.
+    let dir = scratch("plot-fails");
+    let out_dir = dir.join("plots");
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let device = script(
+        &dir,
+        "device.sh",
+        &format!("rm -rf '{}'; exec '{MORPH_SIM}' \"$@\"", out_dir.display()),
+    );
+    let out = morphctl(&[
+        "--sim",
+        "--sim-speed",
+        "50",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "morph",
+        "38",
+        "--plot",
+        out_dir.join("run.svg").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("morphctl: plot "), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_sim_program_takes_arguments_the_plant_is_in_the_title_and_pipes_get_plain_lines() {
+    let dir = scratch("sim-args");
+    let plot = dir.join("run.svg");
+    // `--speed` after the command is `--sim-speed`.
+    let program = format!("'{MORPH_SIM}' --plant hifi");
+    let out = morphctl(&[
+        "--sim",
+        "--sim-program",
+        &program,
+        "morph",
+        "38",
+        "--speed",
+        "50",
+        "--plot",
+        plot.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stdout}{err}");
+    // Not a terminal: one line per poll, no carriage returns for a `tee` log to swallow.
+    assert!(!stdout.contains('\r'), "{stdout:?}");
+    assert!(
+        stdout.lines().filter(|l| l.contains(" s  ")).count() > 5,
+        "{stdout}"
+    );
+    let svg = read(&plot);
+    assert!(
+        svg.contains("on morph-sim (plant hifi)"),
+        "the plot's title names the plant"
+    );
+    let out = morphctl(&["--sim", "morph", "38", "--speed", "max"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("--sim-speed 100"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn morph_waits_for_the_first_sensor_reading_of_a_device_that_just_booted() {
+    let dir = scratch("no-reading-yet");
+    // STATUS shows no temperatures for its first three answers, and MORPH is refused until it
+    // does, as the emulated image right after boot.
+    let device = script(
+        &dir,
+        "device.sh",
+        r#"n=0
+while IFS= read -r line; do
+  case "$line" in
+    VERSION) echo "ok version=0.1.0 protocol=1" ;;
+    STATUS) n=$((n+1))
+      if [ $n -le 3 ]; then t=nan; else t=22.00; fi
+      echo "ok phase=idle target_mm=38.00 t_pla_c=$t t_tca_c=$t t_amb_c=$t p_pla_w=0.000 p_tca_w=0.000 supply_v=12.00 fault=none" ;;
+    MORPH*) if [ $n -le 3 ]; then echo "error: busy no sensor reading yet; try again in a moment"
+      else echo ok; echo "event: done t=1.0 radius_mm=38.00"; fi ;;
+    *) echo "error: unsupported" ;;
+  esac
+done"#,
+    );
+    let out = morphctl(&[
+        "--sim",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "morph",
+        "38",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stdout}{err}");
+    assert!(
+        stdout.contains("waiting for the first sensor reading"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("event: done"), "{stdout}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn calibrate_asks_again_after_an_answer_that_is_not_a_radius_and_says_it_is_not_stored() {
+    let out = common::run_with_input(
+        MORPHCTL,
+        ["--sim", "--sim-speed", "50", "calibrate", "--radii", "38"],
+        b"abc\n34,9\n38.1\n",
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stdout}{err}");
+    assert!(stdout.contains("`abc` is not a radius in mm"), "{stdout}");
+    assert!(stdout.contains("`34,9` is not a radius in mm"), "{stdout}");
+    assert!(stdout.contains("1 measured morph(s) counted"), "{stdout}");
+    // No flash file: SAVE is not tried (it would answer `error: unsupported`), and said so.
+    assert!(!stdout.contains("error: unsupported"), "{stdout}");
+    assert!(
+        stdout.contains("not saved: this morph-sim has no flash file"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn tune_on_the_simulator_says_the_fit_ends_with_it_or_saves_it_to_the_flash_file() {
+    let out = morphctl(&["--sim", "--sim-speed", "200", "tune"]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stdout}{err}");
+    assert!(stdout.contains("event: tune done"), "{stdout}");
+    assert!(
+        stdout.contains("the fit is in use, not saved: this morph-sim has no flash file"),
+        "{stdout}"
+    );
+    let dir = scratch("tune-flash");
+    let flash = dir.join("link.flash");
+    let out = morphctl(&[
+        "--sim",
+        "--sim-speed",
+        "200",
+        "--sim-flash-file",
+        flash.to_str().unwrap(),
+        "tune",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}");
+    assert!(
+        stdout.contains("tune: saved to the simulator's flash file"),
+        "{stdout}"
+    );
+    assert!(flash.is_file());
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -188,7 +360,7 @@ fn a_script_injects_a_fault_then_morphs_on_one_simulator_and_logs_every_line() {
     }
     assert!(
         text.lines()
-            .all(|l| l.starts_with('[') && l[1..].contains(" s] ")),
+            .all(|l| l.starts_with("[wall ") && l[1..].contains(" s] ")),
         "{text}"
     );
     let last = text.lines().last().unwrap();
@@ -213,6 +385,22 @@ fn a_bad_script_is_refused_before_the_device_is_started() {
     assert_eq!(out.status.code(), Some(1));
     assert!(
         err.contains("typo.txt: line 2: `wait` needs `done` or `alarm`"),
+        "{err}"
+    );
+    assert!(!dir.join("starts").exists(), "the device was started");
+    // A misspelt step is not sent as a protocol line: the core's parser refuses it first.
+    std::fs::write(&file, "MORPH 38\nslep 3\nwait done\n").unwrap();
+    let out = morphctl(&[
+        "--sim",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "run",
+        file.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        err.contains("typo.txt: line 2: `slep 3` is neither"),
         "{err}"
     );
     assert!(!dir.join("starts").exists(), "the device was started");
@@ -491,4 +679,35 @@ fn bringup_names_a_dead_heater_and_refuses_a_faulted_device() {
     );
     assert!(!out.contains("HEAT"), "a heater was pulsed:\n{out}");
     ends_heaters_off(&out);
+}
+
+#[test]
+fn config_set_with_save_says_saved_once() {
+    let dir = scratch("config-save");
+    let flash = dir.join("link.flash");
+    let out = morphctl(&[
+        "--sim",
+        "--sim-flash-file",
+        flash.to_str().unwrap(),
+        "config",
+        "set",
+        "lock_timeout_s",
+        "500",
+        "--save",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}");
+    assert!(!stdout.contains("saved=no"), "{stdout}");
+    assert!(stdout.contains("ok lock_timeout_s=500.0\n"), "{stdout}");
+    assert!(stdout.contains("ok saved bytes="), "{stdout}");
+    assert!(
+        stdout.contains("(saved: kept across a restart)"),
+        "{stdout}"
+    );
+    // Without a flash file SAVE is refused: the set is said to last until a restart.
+    let out = morphctl(&["--sim", "config", "set", "lock_timeout_s", "500", "--save"]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{stdout}");
+    assert!(stdout.contains("(set, but not saved"), "{stdout}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -77,3 +77,33 @@ fn a_speed_outside_its_range_is_refused_not_a_panic() {
         assert!(!err.contains("panicked"), "{err}");
     }
 }
+
+#[test]
+fn an_event_never_comes_after_the_reply_to_a_later_command() {
+    // All three lines arrive at once: MORPH's first phase event is queued before ABORT and
+    // STATUS are read, so it must go out before their replies.
+    let out = run_with_input(
+        env!("CARGO_BIN_EXE_morph-sim"),
+        ["--speed", "max"],
+        b"MORPH 38\nABORT\nSTATUS\n",
+    );
+    let text = text(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    let lines: Vec<&str> = text.lines().collect();
+    let status = lines
+        .iter()
+        .position(|l| l.starts_with("ok phase="))
+        .expect(&text);
+    assert!(lines[status].starts_with("ok phase=idle"), "{text}");
+    assert_eq!(
+        lines.len(),
+        status + 1,
+        "nothing after the STATUS reply:\n{text}"
+    );
+    let soften = lines
+        .iter()
+        .position(|l| l.starts_with("event: phase soften"))
+        .expect(&text);
+    assert_eq!(lines[soften - 1], "ok", "after MORPH's reply: {text}");
+    assert_eq!(lines[soften + 1], "ok", "before ABORT's reply: {text}");
+}

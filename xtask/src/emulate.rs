@@ -2,7 +2,9 @@
 //! b-l475e-iot01a machine, either serving USART1 on a loopback TCP port for any client, or
 //! running one morph and printing what the firmware says.
 use morphlink::protocol::{classify, LineKind};
-use morphlink_host::emulator::{build_image, find_qemu, qemu_command, Clock, Emulator};
+use morphlink_host::emulator::{
+    build_image, find_qemu, qemu_command, run_to_end_or_signal, Clock, Emulator, Ended,
+};
 use morphlink_host::workspace::Workspace;
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -57,9 +59,13 @@ fn serve(qemu: &Path, image: &Path, port: u16) -> Result<(), String> {
     check_port_free(port)?;
     eprintln!("booting {} under QEMU; USART1 on 127.0.0.1:{port} (QEMU starts when a client connects, e.g. `nc 127.0.0.1 {port}`)", image.display());
     // The host's clock: a client such as `morphctl --tcp-speed 20` paces itself by wall time.
-    let status = qemu_command(qemu, image, port, Clock::Host)
-        .status()
-        .map_err(|e| format!("cannot start {}: {e}", qemu.display()))?;
+    // SIGTERM or Ctrl-C to xtask ends QEMU with it (QEMU was left running).
+    let status = match run_to_end_or_signal(&mut qemu_command(qemu, image, port, Clock::Host))? {
+        Ended::Exited(status) => status,
+        Ended::Signalled(sig) => {
+            return Err(format!("stopped by signal {sig}; QEMU was ended with it"))
+        }
+    };
     if status.success() {
         Ok(())
     } else {

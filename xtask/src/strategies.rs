@@ -244,6 +244,9 @@ pub(crate) fn parallel<T: Sync, R: Send>(
         ))
         .map_err(|e| e.to_string())?,
     );
+    // Drawn from the start, not only once the first item is done (a hifi link takes seconds);
+    // on stderr, and only on a terminal (indicatif hides a bar whose stderr is not one).
+    bar.enable_steady_tick(std::time::Duration::from_millis(250));
     let next = AtomicUsize::new(0);
     let out = Mutex::new(Vec::with_capacity(items.len()));
     std::thread::scope(|scope| {

@@ -99,11 +99,30 @@ enum Cmd {
     },
 }
 
-/// The parameters file of the workspace the tool is run in: `link.toml` at its root.
+/// What morph-model needs when it is run outside the checkout, and how to run it.
+const NEEDS: &str = "morph-model reads the link's parameters from link.toml (and, for charts \
+    and pick, the paper's radii from data/fig9_calibration.csv) at the root of the morphlink \
+    checkout: run it from inside the checkout (`cargo run -p morphlink-host --bin morph-model \
+    -- ...`), or pass --link FILE (and --data FILE)";
+
+/// The root of the morphlink checkout the tool is run in (where `link.toml` is).
 fn workspace_root() -> Result<PathBuf, String> {
-    Workspace::current()
-        .map(|w| w.root)
-        .map_err(|e| format!("no --link given and {e}; pass --link FILE"))
+    let here = std::env::current_dir().map_err(|e| format!("no current directory: {e}"))?;
+    // Asked of cargo only inside a cargo project: elsewhere its error says nothing useful.
+    if !here.ancestors().any(|d| d.join("Cargo.toml").is_file()) {
+        return Err(format!(
+            "{} is not inside the morphlink checkout; {NEEDS}",
+            here.display()
+        ));
+    }
+    match Workspace::current() {
+        Ok(w) if w.root.join("link.toml").is_file() => Ok(w.root),
+        Ok(w) => Err(format!(
+            "{} is a cargo workspace without link.toml, not the morphlink checkout; {NEEDS}",
+            w.root.display()
+        )),
+        Err(e) => Err(format!("{e}; {NEEDS}")),
+    }
 }
 
 /// `--data`, or the paper's measured radii in the workspace's `data/`.

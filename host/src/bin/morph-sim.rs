@@ -98,6 +98,10 @@ fn feed(
         }
         match asm.push(b) {
             Some(Assembled::Line(line)) => {
+                // Events queued by the commands before this one (MORPH's first phase) go out
+                // before this command's reply, as the board writes them: a line read later
+                // never answers ahead of an event raised earlier.
+                rig.drain_events(emit);
                 let saves = rig.saves();
                 let mut replies: Vec<String> = Vec::new();
                 rig.handle_line(line, &mut |l: &str| replies.push(l.to_string()));

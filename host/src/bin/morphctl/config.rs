@@ -10,7 +10,7 @@ use std::process::ExitCode;
 
 /// How long SAVE may take, s: a flash erase of the largest settings sector (the F401's 128 KiB)
 /// takes up to 2 s, plus the reply.
-const SAVE_TIMEOUT_S: f64 = 10.0;
+pub const SAVE_TIMEOUT_S: f64 = 10.0;
 
 /// What `morphctl config` does.
 #[derive(Subcommand, Clone)]
@@ -50,11 +50,19 @@ pub fn run(link: &mut Link, cmd: ConfigCmd) -> Result<ExitCode, String> {
     if let ConfigCmd::List = cmd {
         print_table(&data);
     }
-    println!("{fin}");
     let accepted = classify(&fin) == LineKind::Ok;
     if let (ConfigCmd::Set { save: true, .. }, true) = (&cmd, accepted) {
-        return run(link, ConfigCmd::Save);
+        // `saved=no` is true of the set alone; the SAVE that follows says what is stored.
+        println!("{}", without_saved_no(&fin));
+        let code = run(link, ConfigCmd::Save)?;
+        if code == ExitCode::SUCCESS {
+            println!("(saved: kept across a restart)");
+        } else {
+            println!("(set, but not saved: it lasts until a restart)");
+        }
+        return Ok(code);
     }
+    println!("{fin}");
     if let (ConfigCmd::Set { .. } | ConfigCmd::Reset, true) = (&cmd, accepted) {
         println!("(not saved: `morphctl config save` keeps it across a restart)");
     }
@@ -63,6 +71,15 @@ pub fn run(link: &mut Link, cmd: ConfigCmd) -> Result<ExitCode, String> {
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// A `CONFIG SET` reply without its `saved=no` (shown before the SAVE that `--save` sends).
+fn without_saved_no(reply: &str) -> String {
+    reply
+        .split(' ')
+        .filter(|w| *w != "saved=no")
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// One `CONFIG` data line (`name=value unit range=a..b default=d`, or `name=word choices=...
@@ -118,6 +135,14 @@ fn print_table(data: &[String]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_set_then_saved_does_not_say_saved_no() {
+        assert_eq!(
+            without_saved_no("ok lock_timeout_s=500.0 saved=no"),
+            "ok lock_timeout_s=500.0"
+        );
+    }
 
     #[test]
     fn config_lines_split_into_columns() {

@@ -94,6 +94,11 @@ pub enum Target {
     Sim {
         /// The `morph-sim` executable.
         program: PathBuf,
+        /// Arguments given with it (`--sim-program "morph-sim --plant hifi"`), before
+        /// morphctl's own (`--flash-file`, `--plant`, `--speed`).
+        args: Vec<String>,
+        /// morph-sim's `--plant` (`--sim-plant`), if given.
+        plant: Option<String>,
         /// Simulation speed, a factor of real time.
         speed: f64,
         /// morph-sim's `--flash-file`: where the simulated settings flash is kept.
@@ -142,6 +147,8 @@ pub struct Link {
     pub simulated: bool,
     /// What the link is, for messages.
     pub name: String,
+    /// The simulator's plant, where known (`lumped`, `hifi`, `--plant-cmd`), for titles.
+    pub plant: Option<String>,
 }
 
 /// Error text for a serial port that could not be opened.
@@ -260,6 +267,15 @@ impl Link {
             dropped_lines: 0,
             simulated,
             name,
+            plant: None,
+        }
+    }
+
+    /// The device for titles: `morph-sim (plant hifi)`, or its name.
+    pub fn device(&self) -> String {
+        match &self.plant {
+            Some(p) => format!("{} (plant {p})", self.name),
+            None => self.name.clone(),
         }
     }
 
@@ -311,12 +327,18 @@ impl Link {
             Target::Tcp { addr } => open_tcp(addr),
             Target::Sim {
                 program,
+                args,
+                plant,
                 speed,
                 flash_file,
             } => {
                 let mut command = Command::new(program);
+                command.args(args);
                 if let Some(f) = flash_file {
                     command.arg("--flash-file").arg(f);
+                }
+                if let Some(p) = plant {
+                    command.arg("--plant").arg(p);
                 }
                 let mut child = command
                     .arg("--speed")
@@ -336,13 +358,15 @@ impl Link {
                     })?;
                 let stdin = child.stdin.take().expect("piped stdin");
                 let stdout = child.stdout.take().expect("piped stdout");
-                Ok(Link::new(
+                let mut link = Link::new(
                     Box::new(stdin),
                     spawn_reader(stdout, "morph-sim".into()),
                     Some(child),
                     true,
                     "morph-sim".into(),
-                ))
+                );
+                link.plant = Some(sim_plant(args, plant.as_deref()));
+                Ok(link)
             }
         }
     }
@@ -475,6 +499,28 @@ impl Link {
             _ => Err(not_morphlink(&self.name, &reply)),
         }
     }
+}
+
+/// The plant a morph-sim started with `args` and `--sim-plant` runs: the last `--plant` given,
+/// `--plant-cmd` for a plant over the plant protocol, else morph-sim's default, `lumped`.
+pub fn sim_plant(args: &[String], sim_plant: Option<&str>) -> String {
+    if let Some(p) = sim_plant {
+        return p.to_string();
+    }
+    let mut plant = "lumped".to_string();
+    let mut words = args.iter();
+    while let Some(w) = words.next() {
+        if let Some(v) = w.strip_prefix("--plant=") {
+            plant = v.to_string();
+        } else if w == "--plant" {
+            if let Some(v) = words.next() {
+                plant = v.clone();
+            }
+        } else if w == "--plant-cmd" || w.starts_with("--plant-cmd=") {
+            plant = "--plant-cmd".into();
+        }
+    }
+    plant
 }
 
 /// Connects to a TCP serial port (`HOST:PORT`), Nagle off so each line goes out at once.
@@ -660,6 +706,19 @@ mod tests {
             l.command("STATUS", 1.0, &mut |_| {}).unwrap_err(),
             LinkError::Closed(_)
         ));
+    }
+
+    #[test]
+    fn the_sim_plant_is_named_from_its_arguments() {
+        let a = |s: &[&str]| s.iter().map(|w| w.to_string()).collect::<Vec<_>>();
+        assert_eq!(sim_plant(&[], None), "lumped");
+        assert_eq!(sim_plant(&a(&["--plant", "hifi"]), None), "hifi");
+        assert_eq!(
+            sim_plant(&a(&["--plant=hifi", "--seed", "3"]), None),
+            "hifi"
+        );
+        assert_eq!(sim_plant(&a(&["--plant-cmd", "x"]), None), "--plant-cmd");
+        assert_eq!(sim_plant(&[], Some("hifi")), "hifi");
     }
 
     #[test]

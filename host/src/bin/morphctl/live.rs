@@ -85,6 +85,9 @@ pub struct LiveState {
     pub timeout_s: f64,
     /// A note from morphctl (aborting, the heaters confirmed off).
     pub note: Option<String>,
+    /// True once the morph this morphctl started has ended and a sample has shown it (the log
+    /// and the plot end there; the view goes on until `q`).
+    pub ended: bool,
 }
 
 impl LiveState {
@@ -100,11 +103,15 @@ impl LiveState {
             outcome: None,
             timeout_s,
             note: None,
+            ended: false,
         }
     }
 
-    /// Takes in one STATUS sample (with the simulator's radius if known).
-    pub fn sample(&mut self, s: Sample) {
+    /// Takes in one STATUS sample (with the simulator's radius if known). Returns whether it
+    /// belongs to the morph's record (`--log`, `--plot`): every sample until the first one
+    /// after the morph this morphctl started ended; for `watch`, every sample.
+    pub fn sample(&mut self, s: Sample) -> bool {
+        let recorded = !self.ended;
         if self.last.as_ref().is_none_or(|l| l.phase != s.phase) {
             self.phase_since_s = s.t_s;
         }
@@ -117,6 +124,10 @@ impl LiveState {
             }
         }
         self.last = Some(s);
+        if self.started && !self.morphing() {
+            self.ended = true;
+        }
+        recorded
     }
 
     /// Takes in one unsolicited line (event, done, alarm, boot).
@@ -193,18 +204,36 @@ fn val(v: f64, decimals: usize, unit: &str) -> String {
     }
 }
 
+/// Rows the view needs with its temperature chart (at least 8 rows high); a smaller terminal
+/// (80×24) gets every reading and the events, without the chart.
+pub const ROWS_WITH_CHART: u16 = 4 + 5 + 4 + 3 + 8 + EVENTS_KEPT as u16 + 2 + 1;
+
 /// Draws the view into `frame`.
 pub fn draw(frame: &mut Frame, st: &LiveState) {
+    let with_chart = frame.area().height >= ROWS_WITH_CHART;
     let [head, temps, powers, radius, chart, events, keys] = Layout::vertical([
-        Constraint::Length(3),
+        Constraint::Length(4),
         Constraint::Length(5),
         Constraint::Length(4),
         Constraint::Length(3),
-        Constraint::Min(8),
-        Constraint::Length(EVENTS_KEPT as u16 + 2),
+        if with_chart {
+            Constraint::Min(8)
+        } else {
+            Constraint::Length(0)
+        },
+        if with_chart {
+            Constraint::Length(EVENTS_KEPT as u16 + 2)
+        } else {
+            Constraint::Min(3)
+        },
         Constraint::Length(1),
     ])
     .areas(frame.area());
+    let chart = if with_chart {
+        chart
+    } else {
+        ratatui::layout::Rect::default()
+    };
     let bold = Style::default().add_modifier(Modifier::BOLD);
     let s = st.last.as_ref();
     let num = |f: &dyn Fn(&Sample) -> f64| s.map_or(f64::NAN, f);
@@ -215,11 +244,12 @@ pub fn draw(frame: &mut Frame, st: &LiveState) {
     let t = num(&|s| s.t_s);
     let mut status = vec![
         Span::styled(format!("phase {phase}"), bold),
-        Span::raw(format!(
-            "  ·  mode {mode}  ·  {} since MORPH",
-            val(t, 1, "s")
-        )),
+        Span::raw(format!("  ·  mode {mode}")),
     ];
+    // Time since MORPH only for a morph this morphctl sent; `watch` saw no MORPH.
+    if st.started {
+        status.push(Span::raw(format!("  ·  {} since MORPH", val(t, 1, "s"))));
+    }
     if st.morphing() {
         if let Some(left) = st.phase_time_left_s() {
             status.push(Span::raw(format!("  ·  phase timeout in {left:.0} s")));
@@ -238,7 +268,9 @@ pub fn draw(frame: &mut Frame, st: &LiveState) {
         None => Line::from(status),
     };
     frame.render_widget(
-        Paragraph::new(head_text).block(Block::bordered().title(st.title.as_str())),
+        Paragraph::new(head_text)
+            .wrap(ratatui::widgets::Wrap { trim: true })
+            .block(Block::bordered().title(st.title.as_str())),
         head,
     );
 
@@ -325,9 +357,9 @@ pub fn draw(frame: &mut Frame, st: &LiveState) {
     frame.render_widget(
         Paragraph::new(Line::from(vec![
             Span::raw(format!("target {}", val(num(&|s| s.target_mm), 2, "mm"))),
-            Span::raw(format!("   ·   controller's estimate {estimate}")),
+            Span::raw(format!("  ·  controller's estimate {estimate}")),
             Span::raw(format!(
-                "   ·   true (simulator) {}",
+                "  ·  true (sim) {}",
                 val(num(&|s| s.radius_mm), 2, "mm")
             )),
         ]))
@@ -412,7 +444,11 @@ pub fn draw(frame: &mut Frame, st: &LiveState) {
         Chart::new(sets)
             .legend_position(Some(LegendPosition::TopLeft))
             .hidden_legend_constraints((Constraint::Ratio(1, 2), Constraint::Ratio(2, 3)))
-            .block(Block::bordered().title("temperature (°C) against time since MORPH (s)"))
+            .block(Block::bordered().title(if st.started {
+                "temperature (°C) against time since MORPH (s)"
+            } else {
+                "temperature (°C) against time since watch began (s)"
+            }))
             .x_axis(
                 Axis::default()
                     .bounds([t_lo, t_hi])
@@ -427,9 +463,12 @@ pub fn draw(frame: &mut Frame, st: &LiveState) {
     );
 
     // Events.
+    // The newest that fit, at the bottom.
+    let fit = events.height.saturating_sub(2) as usize;
     let lines: Vec<Line> = st
         .events
         .iter()
+        .skip(st.events.len().saturating_sub(fit))
         .map(|e| match classify(e) {
             LineKind::Alarm => Line::styled(e.clone(), Style::default().fg(Color::Red)),
             LineKind::Done => Line::styled(e.clone(), Style::default().fg(Color::Green)),
@@ -500,8 +539,10 @@ pub fn run(
                 None => start.elapsed().as_secs_f64(),
             };
             let s = Sample::from_status(t_s, &status, sim.map_or(f64::NAN, |x| x.1));
-            record(&s);
-            st.sample(s);
+            // The record ends with the morph: the view stays until `q`, the log does not.
+            if st.sample(s.clone()) {
+                record(&s);
+            }
             if st.started && st.morphing() && t_s > st.timeout_s {
                 return LiveEnd::TimedOut;
             }
@@ -546,7 +587,11 @@ mod tests {
     }
 
     fn screen(st: &LiveState) -> String {
-        let mut t = Terminal::new(TestBackend::new(110, 40)).unwrap();
+        screen_of(st, 110, 40)
+    }
+
+    fn screen_of(st: &LiveState, w: u16, h: u16) -> String {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
         t.draw(|f| draw(f, st)).unwrap();
         let buf = t.backend().buffer();
         let w = buf.area.width as usize;
@@ -673,7 +718,7 @@ mod tests {
             "supply 12.00 V",
             "target 38.00 mm",
             "controller's estimate at done",
-            "true (simulator) 44.50 mm",
+            "true (sim) 44.50 mm",
             "event: phase bend t=3.4",
             "PLA target",
             "a: abort   q: quit (aborts the morph)",
@@ -694,8 +739,88 @@ mod tests {
         ));
         let s = screen(&st);
         assert!(
-            s.contains("true (simulator) -") && s.contains("target          -"),
+            s.contains("true (sim) -") && s.contains("target          -"),
             "{s}"
         );
+        // watch sent no MORPH: no time since one.
+        assert!(!s.contains("since MORPH"), "{s}");
+    }
+
+    #[test]
+    fn every_reading_fits_an_80_by_24_terminal() {
+        let t = "pla_target_c=75.00 tca_target_c=57.50 mode=closed";
+        let mut st = LiveState::new(
+            "MORPH 37.5 auto on morph-sim (plant hifi)".into(),
+            true,
+            900.0,
+        );
+        st.line("event: phase soften t=0.0 power_w=5.000");
+        st.line("event: phase bend t=3.4 power_w=0.698");
+        st.sample(Sample::from_status(
+            4.0,
+            &status("bend", 70.12, 2.5, t),
+            37.46,
+        ));
+        let s = screen_of(&st, 80, 24);
+        for want in [
+            "phase bend",
+            "70.1 °C",
+            "PLA heater 2.50 W of 5.0 W",
+            // The TCA's row, its power and the ambient row were cut off at 80×24.
+            "50.0 °C",
+            "target    57.5 °C",
+            "TCA heater 1.00 W of 2.0 W",
+            "ambient",
+            "22.0 °C",
+            "supply 12.00 V",
+            "target 38.00 mm",
+            // Was cut to `37.` at 80 columns.
+            "true (sim) 37.46 mm",
+            "event: phase bend t=3.4",
+            "a: abort   q: quit (aborts the morph)",
+        ] {
+            assert!(s.contains(want), "`{want}` not on an 80×24 screen:\n{s}");
+        }
+    }
+
+    #[test]
+    fn the_record_ends_with_the_morph_the_view_does_not() {
+        let t = "pla_target_c=75.00 tca_target_c=57.50 mode=closed";
+        let mut st = LiveState::new("MORPH 38 auto on test".into(), true, 900.0);
+        assert!(st.sample(Sample::from_status(
+            0.0,
+            &status("soften", 22.0, 5.0, t),
+            53.0
+        )));
+        assert!(st.sample(Sample::from_status(
+            20.0,
+            &status("lock", 60.0, 0.0, t),
+            38.0
+        )));
+        st.line("event: done t=20.3 radius_mm=38.01");
+        // The sample that shows the end is the record's last.
+        assert!(st.sample(Sample::from_status(
+            20.5,
+            &status("idle", 59.0, 0.0, ""),
+            38.0
+        )));
+        for i in 0..300 {
+            let later = Sample::from_status(21.0 + i as f64, &status("idle", 50.0, 0.0, ""), 38.0);
+            assert!(!st.sample(later), "sample {i} after done was recorded");
+        }
+        assert_eq!(
+            st.last.as_ref().unwrap().t_s,
+            320.0,
+            "the view still follows"
+        );
+        // watch records on (it has no morph of its own to end).
+        let mut w = LiveState::new("watch".into(), false, f64::INFINITY);
+        for i in 0..3 {
+            assert!(w.sample(Sample::from_status(
+                i as f64,
+                &status("idle", 22.0, 0.0, ""),
+                f64::NAN
+            )));
+        }
     }
 }

@@ -59,12 +59,17 @@ struct Cli {
     /// Talk to the simulated link: start morph-sim as a child over pipes.
     #[arg(long)]
     sim: bool,
-    /// morph-sim speed, a factor of real time.
-    #[arg(long, default_value_t = DEFAULT_SIM_SPEED)]
+    /// morph-sim speed, a factor of real time (also `--speed`, before or after the command).
+    #[arg(long, global = true, visible_alias = "speed", value_name = "FACTOR",
+          default_value_t = DEFAULT_SIM_SPEED, value_parser = parse_sim_speed)]
     sim_speed: f64,
-    /// The morph-sim executable (default: beside morphctl, else on the PATH).
-    #[arg(long)]
-    sim_program: Option<PathBuf>,
+    /// The morph-sim program, with arguments if any, split as a shell would
+    /// (`--sim-program "morph-sim --seed 3"`; default: beside morphctl, else on the PATH).
+    #[arg(long, value_name = "PROGRAM [ARGS]")]
+    sim_program: Option<String>,
+    /// morph-sim's plant: `lumped` (its default) or `hifi` (its `--plant`).
+    #[arg(long, requires = "sim", value_name = "NAME")]
+    sim_plant: Option<String>,
     /// Keep morph-sim's settings flash in this file (its `--flash-file`), so `config save`
     /// survives a restart. A path morph-sim would refuse (a FIFO, a directory, a read-only
     /// file) is refused before the simulator starts.
@@ -158,6 +163,46 @@ enum Cmd {
     },
 }
 
+/// `--sim-speed`: a factor of real time. `max` is morph-sim's own (as fast as it can): morphctl
+/// paces its polls by the factor, so it needs a number.
+fn parse_sim_speed(s: &str) -> Result<f64, String> {
+    if s.eq_ignore_ascii_case("max") {
+        return Err("morphctl needs a factor of real time (it paces its STATUS polls by it), e.g. --sim-speed 100; `max` is morph-sim's own".into());
+    }
+    let f: f64 = s
+        .parse()
+        .map_err(|_| format!("a factor of real time, e.g. 10, not `{s}`"))?;
+    morphlink_host::speed::check("--sim-speed", f)
+}
+
+/// Refuses a file morphctl could not write at the end of a run (`--plot`), before anything is
+/// sent: its directory must exist and take a new file.
+fn check_writable(path: &Path, what: &str) -> Result<(), String> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(format!(
+            "{what} {}: the directory {} does not exist",
+            path.display(),
+            dir.display()
+        ));
+    }
+    let probe = dir.join(format!(".morphctl-write-check-{}", std::process::id()));
+    match File::create(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => Err(format!(
+            "{what} {}: cannot write in {}: {e}",
+            path.display(),
+            dir.display()
+        )),
+    }
+}
+
 fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(code) => code,
@@ -175,6 +220,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
     } = &cli.cmd
     {
         plot::Format::of(path)?;
+        check_writable(path, "--plot")?;
     }
     // The live view needs a terminal to draw on, known before anything is sent.
     if matches!(cli.cmd, Cmd::Morph { live: true, .. } | Cmd::Watch { .. }) {
@@ -200,7 +246,6 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
         Cmd::Run { file, .. } => Some(script::read(file)?),
         _ => None,
     };
-    morphlink_host::speed::check("--sim-speed", cli.sim_speed)?;
     morphlink_host::speed::check("--tcp-speed", cli.tcp_speed)?;
     // morph-sim refuses such a file too, but its stderr is not shown here: say why first.
     if let Some(f) = &cli.sim_flash_file {
@@ -208,8 +253,19 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
             .map_err(|why| format!("--sim-flash-file {}: {why}", f.display()))?;
     }
     let target = if cli.sim {
+        let (program, args) = match &cli.sim_program {
+            Some(line) => {
+                let words = shlex::split(line).filter(|w| !w.is_empty()).ok_or(format!(
+                    "--sim-program `{line}`: unbalanced quotes or empty"
+                ))?;
+                (PathBuf::from(&words[0]), words[1..].to_vec())
+            }
+            None => (default_sim_program(), Vec::new()),
+        };
         Target::Sim {
-            program: cli.sim_program.clone().unwrap_or_else(default_sim_program),
+            program,
+            args,
+            plant: cli.sim_plant.clone(),
             speed: cli.sim_speed,
             flash_file: cli.sim_flash_file.clone(),
         }
@@ -281,7 +337,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 None => None,
             };
             let mut samples = Vec::new();
-            let code = if live {
+            let mut code = if live {
                 morph_live(&mut link, &opts, &mut samples, &mut csv)
             } else {
                 let end = morph(&mut link, &opts, &mut samples, &mut csv);
@@ -294,13 +350,16 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 }
             }
             if let Some(path) = plot {
-                let title = telemetry::title(opts.radius_mm, &opts.mode, &samples, &link.name);
+                let title = telemetry::title(opts.radius_mm, &opts.mode, &samples, &link.device());
                 if samples.is_empty() {
                     println!("plot: skipped, no samples were logged");
                 } else {
                     match telemetry::plot(&samples, &title, &path) {
                         Ok(()) => println!("plot: {}", path.display()),
-                        Err(e) => eprintln!("morphctl: plot: {e}"),
+                        Err(e) => {
+                            eprintln!("morphctl: plot {}: {e}", path.display());
+                            code = ExitCode::FAILURE;
+                        }
                     }
                 }
             }
@@ -375,7 +434,8 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
         Cmd::Plot { .. } => unreachable!("handled above"),
         Cmd::Tune => {
             let speed = if link.simulated { cli.sim_speed } else { 1.0 };
-            Ok(tune::tune(&mut link, speed))
+            let keep = tune::Keep::of(&target);
+            Ok(tune::tune(&mut link, speed, &keep))
         }
         Cmd::Calibrate {
             radii,
@@ -384,7 +444,8 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
         } => {
             let speed = if link.simulated { cli.sim_speed } else { 1.0 };
             let poll = Duration::from_secs_f64(DEFAULT_POLL_MS as f64 / 1000.0 / speed);
-            tune::calibrate(&mut link, &radii, &measured, &mode, poll)
+            let keep = tune::Keep::of(&target);
+            tune::calibrate(&mut link, &radii, &measured, &mode, poll, &keep)
         }
     }
 }
@@ -593,6 +654,9 @@ fn morph_live(
     csv: &mut Option<CsvLog>,
 ) -> ExitCode {
     let mut events: Vec<String> = Vec::new();
+    if let Err(e) = wait_for_sensors(link, &mut |l| events.push(l.to_string())) {
+        return finish(link, e);
+    }
     let line = format!("MORPH {} {}", o.radius_mm, o.mode);
     let reply = match link.command(&line, REPLY_TIMEOUT_S, &mut |l| events.push(l.to_string())) {
         Ok((_, reply)) => reply,
@@ -602,7 +666,7 @@ fn morph_live(
     if reply != morphlink::protocol::OK {
         return finish(link, MorphEnd::Failed(format!("MORPH refused: {reply}")));
     }
-    let title = format!("{line} on {}", link.name);
+    let title = format!("{line} on {}", link.device());
     let mut st = live::LiveState::new(title, true, o.timeout_s);
     let end = match LiveTerminal::open() {
         Ok(mut view) => live::run(&mut view.0, link, &mut st, o.poll, events, &mut |s| {
@@ -701,6 +765,54 @@ fn heaters_off(status: &str) -> bool {
         && is("phase", &["idle", "fault"])
 }
 
+/// Longest morphctl waits for a device's first sensor reading before MORPH or TUNE, s of wall
+/// time: the emulated image reads its first frame within a tick of booting, a board within a
+/// second of its port opening (a USB CDC reset).
+const SENSOR_WAIT_S: f64 = 5.0;
+
+/// Polls STATUS until it shows a PLA temperature (a device that just booted refuses MORPH with
+/// `error: busy no sensor reading yet`), at most [`SENSOR_WAIT_S`]; a device whose STATUS is
+/// refused or not parsed is left to answer MORPH itself.
+fn wait_for_sensors(link: &mut Link, on_event: &mut dyn FnMut(&str)) -> Result<(), MorphEnd> {
+    let start = Instant::now();
+    let mut said = false;
+    loop {
+        let (_, status) = link.command_where("STATUS", REPLY_TIMEOUT_S, on_event, &|l| {
+            field(l, "phase").is_some() || classify(l) == LineKind::Error
+        })?;
+        let read = field(&status, "t_pla_c").and_then(|v| v.parse::<f64>().ok());
+        if classify(&status) != LineKind::Ok || field(&status, "t_pla_c").is_none() {
+            return Ok(());
+        }
+        if read.is_some_and(f64::is_finite) {
+            if said {
+                println!(
+                    "{}: sensors read after {:.1} s",
+                    link.name,
+                    start.elapsed().as_secs_f64()
+                );
+            }
+            return Ok(());
+        }
+        if start.elapsed().as_secs_f64() >= SENSOR_WAIT_S {
+            return Err(MorphEnd::Failed(format!(
+                "{} has no sensor reading after {SENSOR_WAIT_S} s (STATUS: `{status}`); check the thermistors' wiring, or retry once it has booted",
+                link.name
+            )));
+        }
+        if !said {
+            println!(
+                "{}: waiting for the first sensor reading (at most {SENSOR_WAIT_S} s)",
+                link.name
+            );
+            said = true;
+        }
+        if let Some(l) = link.recv(Duration::from_millis(100))? {
+            on_event(&l);
+        }
+    }
+}
+
 /// Runs one morph: MORPH, then STATUS polls until `done` or an alarm; prints the phases and
 /// appends each sample to `samples` and the log.
 fn morph(
@@ -710,6 +822,9 @@ fn morph(
     csv: &mut Option<CsvLog>,
 ) -> MorphEnd {
     let mut events: Vec<String> = Vec::new();
+    if let Err(e) = wait_for_sensors(link, &mut |l| events.push(l.to_string())) {
+        return e;
+    }
     let line = format!("MORPH {} {}", o.radius_mm, o.mode);
     let reply = match link.command(&line, REPLY_TIMEOUT_S, &mut |l| events.push(l.to_string())) {
         Ok((_, reply)) => reply,
@@ -739,9 +854,19 @@ fn follow(
     let sim_start = sim_time_and_radius(link, &mut |l| events.push(l.to_string()))?.map(|x| x.0);
     let mut outcome = None;
     let mut last_line = Instant::now();
+    // On a terminal the running line is redrawn in place (`\r`); into a pipe or a file (`tee`)
+    // each poll is a line of its own.
+    let tty = {
+        use std::io::IsTerminal;
+        std::io::stdout().is_terminal()
+    };
     while outcome.is_none() {
         for e in events.drain(..) {
-            println!("\r{e:<78}");
+            if tty {
+                println!("\r{e:<78}");
+            } else {
+                println!("{e}");
+            }
             match classify(&e) {
                 LineKind::Done => outcome = Some(ExitCode::SUCCESS),
                 LineKind::Alarm => outcome = Some(ExitCode::FAILURE),
@@ -757,10 +882,15 @@ fn follow(
         };
         let s = Sample::from_status(t_s, &status, sim.map(|x| x.1).unwrap_or(f64::NAN));
         if last_line.elapsed() >= Duration::from_millis(200) || outcome.is_some() {
-            print!(
-                "\r{:>6.1} s  {:<8} PLA {:>6.1} °C  TCA {:>6.1} °C  power {:.2} / {:.2} W   ",
+            let running = format!(
+                "{:>6.1} s  {:<8} PLA {:>6.1} °C  TCA {:>6.1} °C  power {:.2} / {:.2} W",
                 s.t_s, s.phase, s.temps_c[0], s.temps_c[1], s.powers_w[0], s.powers_w[1]
             );
+            if tty {
+                print!("\r{running}   ");
+            } else {
+                println!("{running}");
+            }
             let _ = std::io::stdout().flush();
             last_line = Instant::now();
         }
@@ -775,7 +905,9 @@ fn follow(
                 events.push(l);
                 continue;
             }
-            println!();
+            if tty {
+                println!();
+            }
             return Err(MorphEnd::Failed(format!(
                 "the morph stopped in phase {phase} without a done event"
             )));
@@ -792,7 +924,9 @@ fn follow(
             }
         }
     }
-    println!();
+    if tty {
+        println!();
+    }
     Ok(outcome.unwrap_or(ExitCode::FAILURE))
 }
 

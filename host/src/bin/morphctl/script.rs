@@ -2,9 +2,13 @@
 //! simulator for the whole script with `--sim`), every line sent and received logged with its
 //! time.
 //!
-//! A script has one step a line: a protocol line to send (`MORPH 38`, `SIM FAULT tca-open`),
+//! A script has one step a line: a protocol line to send (`MORPH 38`, `SIM FAULT heater-open tca`),
 //! `wait done [<s>]`, `wait alarm [<s>]`, `sleep <s>`; `#` starts a comment, blank lines are
-//! skipped. The whole script is parsed before anything is sent, so a typo changes nothing.
+//! skipped. The whole script is checked before anything is sent (every line a script word or a
+//! line the core's protocol parser accepts), so a typo changes nothing.
+//!
+//! Two clocks: `sleep` and `wait` count link time (the simulator's, sped up by `--sim-speed`);
+//! the log's bracketed times (`[wall 12.345 s]`) are wall-clock seconds since the script began.
 
 use crate::link::{Link, LinkError, REPLY_TIMEOUT_S};
 use morphlink::protocol::client::{classify, LineKind};
@@ -25,7 +29,8 @@ pub const MAX_WAIT_S: f64 = 3600.0;
 pub enum Step {
     /// Send this protocol line and wait for its final reply; an `error:` reply fails the script.
     Send(String),
-    /// Wait for `event: done` (an alarm first fails the script), at most this long, s.
+    /// Wait for `event: done` or `event: tune done` (an alarm or `event: tune failed` first
+    /// fails the script), at most this long, s.
     WaitDone(f64),
     /// Wait for an `alarm:` (a `done` first fails the script), at most this long, s.
     WaitAlarm(f64),
@@ -82,7 +87,18 @@ pub fn parse(text: &str) -> Result<Vec<Line>, String> {
                 [_, s] => Step::Sleep(seconds(s, "sleep").map_err(err)?),
                 _ => return Err(err("`sleep` takes one number of seconds".into())),
             },
-            _ => Step::Send(words.join(" ")),
+            _ => {
+                let line = words.join(" ");
+                // The core's own parser: a line the device would refuse as unknown or
+                // malformed (`slep 3`, `MORPH`) is refused here, before anything is sent.
+                if let Err(e) = morphlink::protocol::parse_line(&line) {
+                    return Err(err(format!(
+                        "`{line}` is neither a script step (`wait done|alarm [<s>]`, `sleep <s>`) nor a protocol line the device accepts: {}",
+                        e.text.trim_end_matches('.')
+                    )));
+                }
+                Step::Send(line)
+            }
         };
         out.push(Line { number, step });
     }
@@ -121,10 +137,11 @@ impl Log {
         })
     }
 
-    /// Writes one entry: `[  12.345 s] <mark> <text>`.
+    /// Writes one entry: `[wall   12.345 s] <mark> <text>`, wall-clock seconds since the
+    /// script began (not link time, which `sleep` and `wait` count).
     pub fn entry(&mut self, mark: char, text: &str) {
         let line = format!(
-            "[{:>9.3} s] {mark} {text}",
+            "[wall {:>9.3} s] {mark} {text}",
             self.start.elapsed().as_secs_f64()
         );
         println!("{line}");
@@ -166,6 +183,28 @@ impl From<LinkError> for Stop {
     }
 }
 
+/// How a morph or a tune ended, as a script's `wait` sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum End {
+    /// `event: done` or `event: tune done`.
+    Done,
+    /// An `alarm:` line.
+    Alarm,
+    /// `event: tune failed`.
+    TuneFailed,
+}
+
+/// The end a line announces, if any.
+fn end_of(l: &str) -> Option<End> {
+    match classify(l) {
+        LineKind::Done => Some(End::Done),
+        LineKind::Alarm => Some(End::Alarm),
+        LineKind::Event if l.starts_with("event: tune done") => Some(End::Done),
+        LineKind::Event if l.starts_with("event: tune failed") => Some(End::TuneFailed),
+        _ => None,
+    }
+}
+
 /// Plays `steps` on `link`; link seconds pass `speed` times faster than host seconds.
 pub fn play(link: &mut Link, steps: &[Line], speed: f64, log: &mut Log) -> Result<(), Stop> {
     // Lines that arrived but not yet logged: events during a command.
@@ -173,12 +212,13 @@ pub fn play(link: &mut Link, steps: &[Line], speed: f64, log: &mut Log) -> Resul
     // The last `done` or alarm seen outside a wait and not yet waited for (a morph may end
     // during a `sleep`); a new MORPH forgets it.
     let mut unclaimed: Option<String> = None;
-    let outcome = |l: &str| matches!(classify(l), LineKind::Done | LineKind::Alarm);
+    let outcome = |l: &str| end_of(l).is_some();
     for Line { number, step } in steps {
         let fail = |why: String| Stop::Failed(format!("line {number}: {why}"));
         match step {
             Step::Send(line) => {
-                if line.to_ascii_uppercase().starts_with("MORPH") {
+                let verb = line.split(' ').next().unwrap_or("").to_ascii_uppercase();
+                if verb == "MORPH" || verb == "TUNE" {
                     unclaimed = None;
                 }
                 log.sent(line);
@@ -199,7 +239,7 @@ pub fn play(link: &mut Link, steps: &[Line], speed: f64, log: &mut Log) -> Resul
                 }
             }
             Step::Sleep(s) => {
-                log.note(&format!("sleep {s} s"));
+                log.note(&format!("sleep {s} s of link time"));
                 let until = Instant::now() + Duration::from_secs_f64(s / speed);
                 while let Some(left) = until.checked_duration_since(Instant::now()) {
                     if let Some(l) = link.recv(left)? {
@@ -212,20 +252,16 @@ pub fn play(link: &mut Link, steps: &[Line], speed: f64, log: &mut Log) -> Resul
             }
             Step::WaitDone(limit) | Step::WaitAlarm(limit) => {
                 let want = if matches!(step, Step::WaitDone(_)) {
-                    LineKind::Done
+                    End::Done
                 } else {
-                    LineKind::Alarm
+                    End::Alarm
                 };
-                let name = if want == LineKind::Done {
-                    "done"
-                } else {
-                    "alarm"
-                };
-                log.note(&format!("wait {name} (at most {limit} s)"));
+                let name = if want == End::Done { "done" } else { "alarm" };
+                log.note(&format!("wait {name} (at most {limit} s of link time)"));
                 let until = Instant::now() + Duration::from_secs_f64(limit / speed);
                 let got = loop {
                     if let Some(l) = unclaimed.take() {
-                        break (classify(&l), l);
+                        break (end_of(&l), l);
                     }
                     let Some(left) = until.checked_duration_since(Instant::now()) else {
                         return Err(fail(format!("no {name} within {limit} s")));
@@ -233,10 +269,10 @@ pub fn play(link: &mut Link, steps: &[Line], speed: f64, log: &mut Log) -> Resul
                     let Some(l) = link.recv(left)? else { continue };
                     log.got(&l);
                     if outcome(&l) {
-                        break (classify(&l), l);
+                        break (end_of(&l), l);
                     }
                 };
-                if got.0 != want {
+                if got.0 != Some(want) {
                     return Err(fail(format!("waited for {name}, got `{}`", got.1)));
                 }
             }
@@ -253,7 +289,7 @@ mod tests {
     #[test]
     fn scripts_parse_steps_comments_and_waits_and_name_the_bad_line() {
         let s = parse(
-            "# a fault, then a morph\n\nSIM FAULT tca-open   # inject\nMORPH 38\nwait alarm 60\n\
+            "# a fault, then a morph\n\nSIM FAULT heater-open tca   # inject\nMORPH 38\nwait alarm 60\n\
              RESET\nsleep 5\nwait DONE\n",
         )
         .unwrap();
@@ -261,7 +297,7 @@ mod tests {
         assert_eq!(
             steps,
             [
-                (3, Step::Send("SIM FAULT tca-open".into())),
+                (3, Step::Send("SIM FAULT heater-open tca".into())),
                 (4, Step::Send("MORPH 38".into())),
                 (5, Step::WaitAlarm(60.0)),
                 (6, Step::Send("RESET".into())),
@@ -278,6 +314,15 @@ mod tests {
             ("wait idle", "line 1: `wait` needs"),
             ("wait done 5 6", "at most two words"),
             ("# nothing\n", "no steps"),
+            (
+                "MORPH 38\nslep 3\n",
+                "line 2: `slep 3` is neither a script step",
+            ),
+            ("MORPH\n", "line 1: `MORPH` is neither"),
+            (
+                "SIM FAULT nonsense tca\n",
+                "line 1: `SIM FAULT nonsense tca`",
+            ),
         ] {
             let e = parse(bad).unwrap_err();
             assert!(e.contains(want), "{bad:?}: {e}");
@@ -315,6 +360,22 @@ mod tests {
         match play(&mut l, &steps, 1.0, &mut log) {
             Err(Stop::Failed(why)) => {
                 assert!(why.contains("waited for done, got `alarm:"), "{why}")
+            }
+            other => panic!("{other:?}"),
+        }
+        // `wait done` also ends at a tune's end; a failed tune fails it.
+        let tune = parse("TUNE\nwait done 300\nSAVE").unwrap();
+        let mut l = link_from_text(
+            "ok total_s=170\nevent: tune step\nevent: tune done tau_s=1\nok saved bytes=90\n",
+        );
+        play(&mut l, &tune, 1.0, &mut log).unwrap();
+        let mut l = link_held_open("ok total_s=170\nevent: tune failed no-rise\n");
+        match play(&mut l, &tune, 1.0, &mut log) {
+            Err(Stop::Failed(why)) => {
+                assert!(
+                    why.contains("waited for done, got `event: tune failed"),
+                    "{why}"
+                )
             }
             other => panic!("{other:?}"),
         }

@@ -151,8 +151,34 @@ pub fn title(radius_mm: f32, asked_mode: &str, samples: &[Sample], device: &str)
 /// Plot size, px: three panels one above the other, readable when shared at full size.
 const PLOT_SIZE_PX: (u32, u32) = (1100, 900);
 /// Height of a phase name above the panel's foot, a fraction of the panel's span (the
-/// text hangs down from it).
+/// text hangs down from it); each further row of names is as much higher.
 const MARK_TEXT_RISE: f64 = 0.08;
+/// Width of the plotting area, px, about: the plot's width less the y labels and margins.
+const PLOT_AREA_PX: f64 = 1000.0;
+/// Width of one character of a phase name, px (13 px DejaVu Sans, a little over its mean).
+const MARK_CHAR_PX: f64 = 8.0;
+
+/// The row of each phase name (0 at the foot): a name that would run into an earlier one in
+/// its row goes up a row (`soften` then `bend` 0.4 s later on a 35 s plot read `softbend`).
+pub fn label_rows(marks: &[(f64, String)], t0: f64, t_end: f64) -> Vec<usize> {
+    let per_s = PLOT_AREA_PX / (t_end - t0).max(1e-9);
+    // Where each row is free again, px.
+    let mut free: Vec<f64> = Vec::new();
+    marks
+        .iter()
+        .map(|(t, name)| {
+            let x = (t - t0) * per_s;
+            let end = x + (name.chars().count() + 1) as f64 * MARK_CHAR_PX;
+            let row = free.iter().position(|&f| f <= x).unwrap_or(free.len());
+            if row == free.len() {
+                free.push(end);
+            } else {
+                free[row] = end;
+            }
+            row
+        })
+        .collect()
+}
 /// Room above the curves of the temperature and power panels, a fraction of their span: the
 /// legend sits there instead of over the data.
 const LEGEND_ROOM: f64 = 0.35;
@@ -253,6 +279,9 @@ impl Figure for RunPlot<'_> {
         };
         let frame = Frame::new(16, 10, 40, 60);
         let marks = phase_marks(s);
+        let rows = label_rows(&marks, t0, t_end);
+        // Foot room for the rows of phase names.
+        let rise = MARK_TEXT_RISE * (rows.iter().max().map_or(0, |r| r + 1)).max(1) as f64;
         let time = "time since MORPH (s)";
         let colours = [TAB_RED, TAB_BLUE, RGBColor(90, 90, 90)];
 
@@ -264,10 +293,7 @@ impl Figure for RunPlot<'_> {
             (10.0, 100.0),
         );
         // Head room for the legend above the curves, foot room for the phase names.
-        let (lo, hi) = (
-            lo - (hi - lo) * MARK_TEXT_RISE,
-            hi + (hi - lo) * LEGEND_ROOM,
-        );
+        let (lo, hi) = (lo - (hi - lo) * rise, hi + (hi - lo) * LEGEND_ROOM);
         let mut chart = frame
             .builder(&areas[0], None)
             .build_cartesian_2d(t0..t_end, lo..hi)?;
@@ -283,7 +309,7 @@ impl Figure for RunPlot<'_> {
                 line(&mut chart, pts, style, (k == 0).then_some(*name))?;
             }
         }
-        named_marks(&mut chart, &marks, lo, hi)?;
+        named_marks(&mut chart, &marks, &rows, lo, hi)?;
         legend(&mut chart, SeriesLabelPosition::UpperRight)?;
 
         // The radius (simulator truth) and the target.
@@ -294,7 +320,7 @@ impl Figure for RunPlot<'_> {
                 1.0,
                 (30.0, 50.0),
             );
-            let lo = lo - (hi - lo) * MARK_TEXT_RISE;
+            let lo = lo - (hi - lo) * rise;
             let mut chart = frame
                 .builder(&areas[1], None)
                 .build_cartesian_2d(t0..t_end, lo..hi)?;
@@ -314,7 +340,7 @@ impl Figure for RunPlot<'_> {
                     Some("target radius"),
                 )?;
             }
-            named_marks(&mut chart, &marks, lo, hi)?;
+            named_marks(&mut chart, &marks, &rows, lo, hi)?;
             legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         }
 
@@ -333,7 +359,7 @@ impl Figure for RunPlot<'_> {
                 Some(name),
             )?;
         }
-        named_marks(&mut chart, &marks, 0.0, p_hi)?;
+        named_marks(&mut chart, &marks, &rows, 0.0, p_hi)?;
         legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         Ok(())
     }
@@ -355,6 +381,7 @@ fn steps_of(run: &[(f64, f64)]) -> Vec<(f64, f64)> {
 fn named_marks<DB, CT>(
     chart: &mut ChartContext<'_, DB, CT>,
     marks: &[(f64, String)],
+    rows: &[usize],
     lo: f64,
     hi: f64,
 ) -> PlotResult
@@ -364,8 +391,8 @@ where
 {
     plot::marks(chart, marks.iter().map(|m| m.0), lo, hi)?;
     // At the foot of the panel, clear of the legend at the top right.
-    let y = lo + (hi - lo) * MARK_TEXT_RISE;
-    for (t, name) in marks {
+    for ((t, name), row) in marks.iter().zip(rows) {
+        let y = lo + (hi - lo) * MARK_TEXT_RISE * (row + 1) as f64;
         chart.draw_series(std::iter::once(Text::new(
             format!(" {name}"),
             (*t, y),
@@ -449,6 +476,28 @@ mod tests {
         let m = phase_marks(&samples());
         let names: Vec<(f64, &str)> = m.iter().map(|(t, n)| (*t, n.as_str())).collect();
         assert_eq!(names, [(0.0, "soften"), (2.0, "bend"), (3.0, "lock")]);
+    }
+
+    #[test]
+    fn phase_names_close_together_go_up_a_row_instead_of_overlapping() {
+        let marks: Vec<(f64, String)> = [
+            (0.0, "soften"),
+            (0.4, "bend"),
+            (12.0, "lock"),
+            (34.0, "idle"),
+        ]
+        .iter()
+        .map(|(t, n)| (*t, n.to_string()))
+        .collect();
+        assert_eq!(label_rows(&marks, 0.0, 36.4), [0, 1, 0, 0]);
+        // Far apart, one row.
+        assert_eq!(label_rows(&marks[..1], 0.0, 36.4), [0]);
+        let spread: Vec<(f64, String)> = marks
+            .iter()
+            .enumerate()
+            .map(|(i, (_, n))| (i as f64 * 10.0, n.clone()))
+            .collect();
+        assert_eq!(label_rows(&spread, 0.0, 36.4), [0, 0, 0, 0]);
     }
 
     #[test]

@@ -6,6 +6,7 @@ use super::{finish, morph, MorphEnd, MorphOpts};
 use crate::link::{field, Link, LinkError, REPLY_TIMEOUT_S};
 use morphlink::protocol::client::{classify, LineKind};
 use std::io::BufRead;
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
@@ -20,15 +21,92 @@ pub const TUNE_WAIT_FACTOR: f64 = 1.5;
 /// MEASURED that counted; a device without settings storage answers `error: unsupported`.
 pub const SAVE_LINE: Option<&str> = Some("SAVE");
 
+/// Where a tune's or a calibration's result can be kept.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Keep {
+    /// A board or the emulated image: `SAVE` stores it in the device's flash.
+    Device,
+    /// morph-sim with `--sim-flash-file`: `SAVE` writes that file.
+    SimFlash(PathBuf),
+    /// morph-sim without a flash file: the result lives in the simulator and ends with it.
+    DiesWithSim,
+}
+
+impl Keep {
+    /// Where `target` keeps a result.
+    pub fn of(target: &crate::link::Target) -> Keep {
+        use crate::link::Target;
+        match target {
+            Target::Sim {
+                flash_file: Some(f),
+                ..
+            } => Keep::SimFlash(f.clone()),
+            Target::Sim { .. } => Keep::DiesWithSim,
+            _ => Keep::Device,
+        }
+    }
+}
+
+/// What is said of a result that is not stored because the simulator has no flash file.
+pub const DIES_WITH_SIM: &str = "not saved: this morph-sim has no flash file, so the result is     held by the simulator only and ends with it when morphctl exits (--sim-flash-file FILE keeps     it, as SAVE does on a board)";
+
 /// Runs TUNE and follows its events to `event: tune done` (exit 0), `event: tune failed` or an
-/// alarm (exit 1, heaters already off); anything else ends in ABORT.
-pub fn tune(link: &mut Link, speed: f64) -> ExitCode {
+/// alarm (exit 1, heaters already off); anything else ends in ABORT. A finished tune is saved to
+/// a simulator's flash file; otherwise morphctl says where the fit is (not) kept.
+pub fn tune(link: &mut Link, speed: f64, keep: &Keep) -> ExitCode {
+    if *keep == Keep::DiesWithSim {
+        println!("tune: {DIES_WITH_SIM}");
+    }
     let end = run_tune(link, speed);
-    finish(link, end)
+    let done = matches!(&end, MorphEnd::Finished(c) if *c == ExitCode::SUCCESS);
+    let code = finish(link, end);
+    if !done {
+        return code;
+    }
+    match keep {
+        Keep::Device => {
+            println!("tune: the fit is in use, not saved: `morphctl config save` stores it");
+            code
+        }
+        Keep::DiesWithSim => {
+            println!("tune: the fit is in use, {DIES_WITH_SIM}");
+            code
+        }
+        Keep::SimFlash(f) => match save(link) {
+            Ok(reply) => {
+                println!(
+                    "tune: saved to the simulator's flash file {} ({reply})",
+                    f.display()
+                );
+                code
+            }
+            Err(e) => {
+                eprintln!("morphctl: tune: the fit is in use but not saved: {e}");
+                ExitCode::FAILURE
+            }
+        },
+    }
+}
+
+/// Sends SAVE: Ok(the reply) if it was stored, Err(why) if not.
+fn save(link: &mut Link) -> Result<String, String> {
+    let (_, reply) = link
+        .command("SAVE", super::config::SAVE_TIMEOUT_S, &mut |l| {
+            println!("{l}")
+        })
+        .map_err(String::from)?;
+    if classify(&reply) == LineKind::Ok {
+        Ok(reply)
+    } else {
+        Err(format!("SAVE answered `{reply}`"))
+    }
 }
 
 fn run_tune(link: &mut Link, speed: f64) -> MorphEnd {
     let mut events: Vec<String> = Vec::new();
+    if let Err(e) = super::wait_for_sensors(link, &mut |l| events.push(l.to_string())) {
+        return e;
+    }
     let reply = match link.command("TUNE", REPLY_TIMEOUT_S, &mut |l| events.push(l.to_string())) {
         Ok((_, r)) => r,
         Err(LinkError::Closed(e)) => return MorphEnd::Failed(e),
@@ -74,8 +152,21 @@ fn run_tune(link: &mut Link, speed: f64) -> MorphEnd {
     }
 }
 
+/// Throws away what was typed on the terminal before the prompt (keys pressed during a morph
+/// would otherwise answer it); nothing when stdin is not a terminal (piped answers are meant).
+fn discard_typed_ahead() {
+    use std::io::IsTerminal;
+    if std::io::stdin().is_terminal() {
+        // SAFETY: tcflush on fd 0 only discards the terminal's pending input.
+        unsafe {
+            libc::tcflush(libc::STDIN_FILENO, libc::TCIFLUSH);
+        }
+    }
+}
+
 /// Reads one line from stdin in a thread, so a signal still ends the wait.
 fn ask(link: &Link, prompt: &str) -> Result<Option<String>, String> {
+    discard_typed_ahead();
     println!("{prompt}");
     let (tx, rx) = mpsc::channel();
     std::thread::spawn(move || {
@@ -105,6 +196,7 @@ pub fn calibrate(
     measured: &[f32],
     mode: &str,
     poll: Duration,
+    keep: &Keep,
 ) -> Result<ExitCode, String> {
     let radii: Vec<f32> = if radii.is_empty() {
         let (_, range) = link
@@ -136,37 +228,62 @@ pub fn calibrate(
         if !finished_ok {
             return Ok(code);
         }
-        let value = match measured.get(i) {
-            Some(v) => Some(v.to_string()),
-            None => ask(
-                link,
-                &format!("measured radius of this morph, mm (target {r}; empty to skip):"),
-            )?,
-        };
-        let Some(value) = value.filter(|v| !v.is_empty()) else {
-            println!("calibrate: skipped");
-            continue;
-        };
-        let (_, reply) = link
-            .command(&format!("MEASURED {value}"), REPLY_TIMEOUT_S, &mut |l| {
-                println!("{l}")
-            })
-            .map_err(String::from)?;
-        println!("{reply}");
-        if classify(&reply) == LineKind::Ok {
-            counted += 1;
+        // An answer typed in that is not a radius, or that the device refuses, is asked
+        // again (empty skips); one given with --measured is sent once.
+        let typed = measured.get(i).is_none();
+        let mut prompt = format!("measured radius of this morph, mm (target {r}; empty to skip):");
+        loop {
+            let value = match measured.get(i) {
+                Some(v) => Some(v.to_string()),
+                None => ask(link, &prompt)?,
+            };
+            let Some(value) = value.filter(|v| !v.is_empty()) else {
+                println!("calibrate: skipped");
+                break;
+            };
+            if typed && !value.parse::<f32>().is_ok_and(|v| v.is_finite() && v > 0.0) {
+                prompt = format!(
+                    "`{value}` is not a radius in mm (a number with a point, e.g. {r:.1}); measured radius, mm (empty to skip):"
+                );
+                continue;
+            }
+            let (_, reply) = link
+                .command(&format!("MEASURED {value}"), REPLY_TIMEOUT_S, &mut |l| {
+                    println!("{l}")
+                })
+                .map_err(String::from)?;
+            println!("{reply}");
+            if classify(&reply) == LineKind::Ok {
+                counted += 1;
+                break;
+            }
+            if !typed {
+                break;
+            }
+            prompt =
+                format!("refused; measured radius of this morph, mm (target {r}; empty to skip):");
         }
     }
-    if let (Some(save), true) = (SAVE_LINE, counted > 0) {
-        let (_, reply) = link
-            .command(save, REPLY_TIMEOUT_S, &mut |l| println!("{l}"))
-            .map_err(String::from)?;
-        println!("{reply}");
-    }
     println!("calibrate: {counted} measured morph(s) counted");
-    Ok(if counted > 0 {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::FAILURE
-    })
+    if counted == 0 {
+        return Ok(ExitCode::FAILURE);
+    }
+    match (SAVE_LINE, keep) {
+        (None, _) => Ok(ExitCode::SUCCESS),
+        (Some(_), Keep::DiesWithSim) => {
+            println!("calibrate: in use, {DIES_WITH_SIM}");
+            Ok(ExitCode::SUCCESS)
+        }
+        (Some(_), _) => match save(link) {
+            Ok(reply) => {
+                println!("{reply}");
+                println!("calibrate: stored with the settings");
+                Ok(ExitCode::SUCCESS)
+            }
+            Err(e) => {
+                eprintln!("morphctl: calibrate: the calibration is in use but not stored: {e}");
+                Ok(ExitCode::FAILURE)
+            }
+        },
+    }
 }
