@@ -115,9 +115,11 @@ fn full_morphs_reach_their_targets_with_phases_in_order() {
             .filter_map(|l| l.strip_prefix("event: phase "))
             .map(|l| l.split(' ').next().unwrap())
             .collect();
+        // A link still warm from the previous morph rests first.
+        let heated = phases.strip_prefix(&["rest"][..]).unwrap_or(&phases);
         check!(
             emu,
-            phases == ["soften", "bend", "lock", "release"],
+            heated == ["soften", "bend", "lock", "release"],
             "phases {phases:?}"
         );
         // Let the TCA cool for 40 s of firmware time (2 s of wall time at 20×, longer on a
