@@ -1145,7 +1145,11 @@ impl Supervisor {
             let (r_own, other_w) = (own_r_k_per_w(heater), cmd.of(heater.other()));
             let own_k = r_own * cmd.of(heater);
             let steady_k = own_k + R_TP_K_PER_W * other_w;
-            let Some(mut off_k) = e.update(dt_s, own_k, steady_k, rise_k) else {
+            // Heat flows from hot to cold: the hotter part of the link may warm this sensor up
+            // to what the other heated sensor reads, whatever the heaters do (a rod still hot
+            // after a trip or a morph, its heater off).
+            let neighbour_k = (self.live_c[heater.other().sensor().index()] - amb_c).max(0.0);
+            let Some(mut off_k) = e.update(dt_s, own_k, steady_k, neighbour_k, rise_k) else {
                 continue;
             };
             off_k = if off_k > 0.0 {
@@ -1504,17 +1508,25 @@ impl Expectation {
     }
 
     /// Moves the envelope `dt_s` toward the model's steady rise: the ceiling toward `steady_k`
-    /// (both heaters' shares, K), the floor toward `own_k` (the own heater's alone: the hifi
+    /// (both heaters' shares, K) but never under `neighbour_k` (the other heated sensor's rise,
+    /// K: the heat it can pass on), the floor toward `own_k` (the own heater's alone: the hifi
     /// link couples the heaters less than the model, so the other's share is no floor), and
     /// returns how far `rise_k` (the reading's rise above ambient, K) lies outside it widened by
     /// [`PLAUS_MARGIN_K`] (negative below, 0 inside), or `None` on the first reading.
-    pub fn update(&mut self, dt_s: f32, own_k: f32, steady_k: f32, rise_k: f32) -> Option<f32> {
+    pub fn update(
+        &mut self,
+        dt_s: f32,
+        own_k: f32,
+        steady_k: f32,
+        neighbour_k: f32,
+        rise_k: f32,
+    ) -> Option<f32> {
         let Some((hi, lo1, lo)) = self.envelope_k.as_mut() else {
             self.envelope_k = Some((rise_k.max(0.0), rise_k, rise_k));
             return None;
         };
         let approach = |x: &mut f32, to: f32, tau_s: f32| *x = lag(*x, to, dt_s, tau_s);
-        let to_hi = PLAUS_HIGH_GAIN * steady_k;
+        let to_hi = (PLAUS_HIGH_GAIN * steady_k).max(neighbour_k);
         let tau_hi = if to_hi > *hi {
             PLAUS_TAU_FAST_S
         } else {
@@ -1890,6 +1902,28 @@ mod tests {
         assert!((FROZEN_WINDOW_S..FROZEN_WINDOW_S + 0.3).contains(&s), "{s}");
     }
 
+    /// Heaters off after a trip with the rod still hot: the TCA's bead warmed by it (rising
+    /// from 5 K towards the rod's 20 K over a minute) is plausible; one that climbs past the
+    /// rod's reading is not. (A MORPH that rests on a warm link, heaters off, tripped
+    /// `sensor-implausible tca` 0.8 K over an envelope that knew only the heaters.)
+    #[test]
+    fn a_sensor_warmed_by_its_hotter_neighbour_is_plausible_and_one_past_it_is_not() {
+        let run = |to_k: f32| {
+            let mut e = Expectation::default();
+            let dt_s = 0.1;
+            let mut worst = 0.0f32;
+            for k in 0..900 {
+                let t_s = k as f32 * dt_s;
+                let rise_k = to_k + (5.0 - to_k) * crate::mathf::exp(-t_s / 20.0);
+                let off = e.update(dt_s, 0.0, 0.0, 20.0, rise_k).unwrap_or(0.0);
+                worst = worst.max(off);
+            }
+            worst
+        };
+        assert_eq!(run(19.0), 0.0);
+        assert!(run(20.0 + 3.0 * PLAUS_MARGIN_K) > 0.0);
+    }
+
     #[test]
     fn the_expectation_holds_a_healthy_first_order_sensor_and_rejects_a_drift() {
         let dt_s = 0.1;
@@ -1903,12 +1937,14 @@ mod tests {
             let own_k = if t_s < 100.0 { R_TT_K_PER_W } else { 0.0 };
             rise_k += (0.6 * own_k - rise_k) * dt_s / 3.0;
             assert_eq!(
-                healthy.update(dt_s, own_k, own_k, rise_k).unwrap_or(0.0),
+                healthy
+                    .update(dt_s, own_k, own_k, 0.0, rise_k)
+                    .unwrap_or(0.0),
                 0.0,
                 "{t_s}"
             );
             let off = drifting
-                .update(dt_s, own_k, own_k, rise_k - 0.2 * t_s)
+                .update(dt_s, own_k, own_k, 0.0, rise_k - 0.2 * t_s)
                 .unwrap_or(0.0);
             if off < 0.0 && tripped_s.is_none() {
                 tripped_s = Some(t_s);
