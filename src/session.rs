@@ -236,14 +236,7 @@ mod tests {
                 apply.push(a.apply_now);
             }
         }
-        let mut text = String::new();
-        while s.has_output() {
-            let chunk = s.output();
-            text.push_str(core::str::from_utf8(chunk).unwrap());
-            let n = chunk.len();
-            s.sent(n);
-        }
-        (text, apply)
+        (drain(s), apply)
     }
 
     #[test]

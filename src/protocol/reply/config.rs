@@ -244,6 +244,7 @@ pub fn config_defaults_event(l: &mut OutLine, reason: &str, setting: Option<&str
 mod tests {
     use super::*;
     use crate::protocol::format_error;
+    use crate::protocol::reply::line;
 
     const TIMEOUT: SettingRow = SettingRow {
         name: "soften_timeout_s",
@@ -265,12 +266,6 @@ mod tests {
         decimals: 0,
         choices: &["paper", "gated", "boost", "closed"],
     };
-
-    fn line(f: impl FnOnce(&mut OutLine)) -> OutLine {
-        let mut l = OutLine::new();
-        f(&mut l);
-        l
-    }
 
     #[test]
     fn settings_lines_name_the_setting_unit_and_range() {

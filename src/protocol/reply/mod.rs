@@ -132,16 +132,18 @@ fn ok_with(l: &mut OutLine, fields: fmt::Arguments<'_>) {
     let _ = write!(l, "{OK} {fields}");
 }
 
+/// The line `f` writes: the reply tests' one way to build a line.
+#[cfg(test)]
+pub(crate) fn line(f: impl FnOnce(&mut OutLine)) -> OutLine {
+    let mut l = OutLine::new();
+    f(&mut l);
+    l
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::protocol::format_error;
-
-    fn line(f: impl FnOnce(&mut OutLine)) -> OutLine {
-        let mut l = OutLine::new();
-        f(&mut l);
-        l
-    }
 
     #[test]
     fn data_text_is_the_data_line_of_its_text() {

@@ -152,12 +152,7 @@ pub fn sim_drift_out_of_range(l: &mut OutLine, max_k_per_s: f32) {
 mod tests {
     use super::*;
     use crate::protocol::format_error;
-
-    fn line(f: impl FnOnce(&mut OutLine)) -> OutLine {
-        let mut l = OutLine::new();
-        f(&mut l);
-        l
-    }
+    use crate::protocol::reply::line;
 
     #[test]
     fn sim_replies() {

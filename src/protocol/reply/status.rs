@@ -274,12 +274,7 @@ pub const ERR_BUSY_HEATING: ProtoError = ProtoError {
 mod tests {
     use super::*;
     use crate::protocol::format_error;
-
-    fn line(f: impl FnOnce(&mut OutLine)) -> OutLine {
-        let mut l = OutLine::new();
-        f(&mut l);
-        l
-    }
+    use crate::protocol::reply::line;
 
     #[test]
     fn boot_line_with_a_panic_reason_stays_in_bounds() {
