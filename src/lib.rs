@@ -10,8 +10,8 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 #![allow(clippy::needless_range_loop)]
 
-#[cfg(feature = "sim")]
 pub mod activity;
+#[cfg(feature = "sim")]
 pub mod bench;
 pub mod calibration;
 pub mod controller;
