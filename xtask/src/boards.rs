@@ -9,7 +9,18 @@
 //!   code (the part's flash less its settings area) and [`SMALL_PART_RAM_BYTES`] of RAM;
 //! - every hardware board's `memory.x` has a `SETTINGS` region right after `FLASH` (the code
 //!   is linked into `FLASH`, so it can never overlap the settings; its own `ASSERT` says so
-//!   again at link time), of two or more erase units.
+//!   again at link time), of two or more erase units;
+//! - every hardware board's image is at most [`HW_FLASH_BUDGET_BYTES`] of flash and
+//!   [`HW_RAM_BUDGET_BYTES`] of static RAM (the emulated image carries the simulated link and a
+//!   RAM flash in their place, so it only has to fit its board);
+//! - no hardware image holds software double-precision arithmetic ([`is_soft_double`]: the
+//!   Cortex-M4F FPU is single precision, every f64 operation is a library call) or `core`'s
+//!   float text machinery ([`is_float_text`]: the core formats and parses numbers with
+//!   `morphlink::fixed`).
+//!
+//! For the default board it also prints where the flash goes: per crate and the largest
+//! symbols (from the ELF's symbol table; code generic over a task's future is named after the
+//! crate of the generic, e.g. `embassy_executor`, though the body inlined in it is ours).
 use morphlink_host::workspace::Workspace;
 use object::elf::{SHF_ALLOC, SHF_WRITE, SHT_NOBITS};
 use object::{Object, ObjectSection, ObjectSymbol, SectionFlags};
@@ -37,6 +48,19 @@ pub const SMALL_PART_RAM_BYTES: u64 = 22 * 1024;
 /// not a measurement: stable Rust cannot report stack sizes.
 pub const STACK_RESERVE_BYTES: u64 = 4 * 1024;
 
+/// Flash every hardware board's image must fit, bytes: the issue's goal, 96 KiB.
+pub const HW_FLASH_TARGET_BYTES: u64 = 96 * 1024;
+/// Static RAM every hardware board's image must fit, bytes: the issue's goal, 16 KiB.
+pub const HW_RAM_TARGET_BYTES: u64 = 16 * 1024;
+/// The flash budget enforced on hardware boards today, bytes (equal to
+/// [`HW_FLASH_TARGET_BYTES`] once the images reach it; until then the level reached, so an
+/// image can only shrink).
+pub const HW_FLASH_BUDGET_BYTES: u64 = HW_FLASH_TARGET_BYTES;
+/// The static-RAM budget enforced on hardware boards today, bytes (as [`HW_FLASH_BUDGET_BYTES`]).
+pub const HW_RAM_BUDGET_BYTES: u64 = HW_RAM_TARGET_BYTES;
+/// How many of the largest symbols the default board's report lists.
+pub const TOP_SYMBOLS: usize = 15;
+
 /// One board's image.
 struct Image {
     board: String,
@@ -44,6 +68,218 @@ struct Image {
     ram_bytes: u64,
     flash_size: u64,
     ram_size: u64,
+    soft_double: Vec<String>,
+    float_text: Vec<String>,
+}
+
+/// A defined symbol of an image: its name (demangled), size, and whether it takes flash
+/// (code, read-only data, initial values) and RAM (`.data`, `.bss`, `.uninit`).
+#[derive(Clone, Debug)]
+pub struct Symbol {
+    /// Demangled name, without the hash.
+    pub name: String,
+    /// Size, bytes.
+    pub size: u64,
+    /// In flash (a section with contents).
+    pub flash: bool,
+    /// In RAM (a writable section).
+    pub ram: bool,
+}
+
+/// The image's sized symbols in allocated sections.
+pub fn symbols(elf: &[u8]) -> Result<Vec<Symbol>, String> {
+    let file = object::File::parse(elf).map_err(|e| format!("not an ELF: {e}"))?;
+    let mut out = Vec::new();
+    for sym in file.symbols() {
+        let (Some(index), Ok(name)) = (sym.section_index(), sym.name()) else {
+            continue;
+        };
+        if sym.size() == 0 {
+            continue;
+        }
+        let Ok(section) = file.section_by_index(index) else {
+            continue;
+        };
+        let SectionFlags::Elf { sh_type, sh_flags } = section.flags() else {
+            continue;
+        };
+        if (sh_flags.0 & SHF_ALLOC.0) == 0 {
+            continue;
+        }
+        out.push(Symbol {
+            name: demangle(name),
+            size: sym.size(),
+            flash: sh_type != SHT_NOBITS,
+            ram: (sh_flags.0 & SHF_WRITE.0) != 0,
+        });
+    }
+    Ok(out)
+}
+
+/// Demangles a Rust legacy symbol (`_ZN4core3fmt9Formatter3pad17h…E` → `core::fmt::Formatter::pad`),
+/// dropping the hash; other names are returned as they are.
+pub fn demangle(name: &str) -> String {
+    let Some(mut rest) = name.strip_prefix("_ZN") else {
+        return name.to_string();
+    };
+    let mut parts = Vec::new();
+    while let Some(end) = rest.find(|c: char| !c.is_ascii_digit()) {
+        if end == 0 {
+            break;
+        }
+        let Ok(len) = rest[..end].parse::<usize>() else {
+            break;
+        };
+        let Some(part) = rest.get(end..end + len) else {
+            break;
+        };
+        parts.push(part);
+        rest = &rest[end + len..];
+    }
+    if parts.is_empty() {
+        return name.to_string();
+    }
+    if parts.len() > 1
+        && parts
+            .last()
+            .is_some_and(|h| h.starts_with('h') && h.len() == 17)
+    {
+        parts.pop();
+    }
+    let mut joined = parts.join("::");
+    for (code, text) in [
+        ("$LT$", "<"),
+        ("$GT$", ">"),
+        ("$RF$", "&"),
+        ("$BP$", "*"),
+        ("$SP$", "@"),
+        ("$C$", ","),
+        ("$LP$", "("),
+        ("$RP$", ")"),
+        ("$u20$", " "),
+        ("$u27$", "'"),
+        ("$u5b$", "["),
+        ("$u5d$", "]"),
+        ("$u7b$", "{"),
+        ("$u7d$", "}"),
+        ("$u7e$", "~"),
+        ("..", "::"),
+    ] {
+        joined = joined.replace(code, text);
+    }
+    joined
+        .strip_prefix('_')
+        .filter(|j| j.starts_with('<'))
+        .map(str::to_string)
+        .unwrap_or(joined)
+}
+
+/// The crate a (demangled) symbol belongs to: the first path segment, inside a leading `<`
+/// for trait impls (`<morphlink::fixed::Fixed as core::fmt::Display>::fmt` → `morphlink`);
+/// compiler-builtins and C names (`__aeabi_*`, `memcpy`) as `compiler_builtins`, anonymous
+/// constants (`.Lanon.*`, string and table literals merged by the linker) as `(anonymous
+/// data)`.
+pub fn crate_of(name: &str) -> String {
+    if name.starts_with(".L") || name.starts_with("anon.") {
+        return "(anonymous data)".into();
+    }
+    let n = name.trim_start_matches(['<', '&', '*', ' ']);
+    let n = n.strip_prefix("mut ").unwrap_or(n);
+    match n.find("::") {
+        Some(i) if !n[..i].contains(['<', ' ']) => n[..i].to_string(),
+        _ if name.starts_with("__") || !name.contains("::") => "compiler_builtins / C".into(),
+        _ => "(other)".into(),
+    }
+}
+
+/// True for a software double-precision routine: compiler-builtins' `__*df*` (`__adddf3`,
+/// `__muldf3`, `__divdf3`, `__truncdfsf2`, `__extendsfdf2`, `__fixdfsi`, ...), the ARM EABI's
+/// `__aeabi_d*` and `__aeabi_*2d`, and libm's f64 functions (`libm::…::exp`, not `expf`).
+pub fn is_soft_double(name: &str) -> bool {
+    let last = name.rsplit("::").next().unwrap_or(name);
+    let eabi = last
+        .strip_prefix("__aeabi_")
+        .is_some_and(|r| r.starts_with('d') || r.ends_with("2d"));
+    let builtin = last.starts_with("__") && last.contains("df");
+    let libm = name.starts_with("libm::") && !last.ends_with('f') && !name.contains("::support");
+    eabi || builtin || libm
+}
+
+/// True for `core`'s float text machinery: `Display`/`Debug`/`FromStr` of `f32`/`f64` and what
+/// they call (`core::fmt::float`, `float_to_decimal_common_*`, `flt2dec`, `dec2flt`).
+pub fn is_float_text(name: &str) -> bool {
+    [
+        "flt2dec",
+        "dec2flt",
+        "fmt::float",
+        "float_to_decimal",
+        "float_to_exponential",
+        "<f32 as core::",
+        "<f64 as core::",
+    ]
+    .iter()
+    .any(|p| name.contains(p))
+}
+
+/// Flash and RAM per crate, largest flash first: `(crate, flash, ram)`; bytes no symbol
+/// covers (alignment, the vector table's padding, unsized labels) as `(unattributed)`.
+pub fn crate_table(syms: &[Symbol], flash_total: u64, ram_total: u64) -> Vec<(String, u64, u64)> {
+    let mut rows: Vec<(String, u64, u64)> = Vec::new();
+    for s in syms {
+        let c = crate_of(&s.name);
+        let i = match rows.iter().position(|r| r.0 == c) {
+            Some(i) => i,
+            None => {
+                rows.push((c, 0, 0));
+                rows.len() - 1
+            }
+        };
+        if s.flash {
+            rows[i].1 += s.size;
+        }
+        if s.ram {
+            rows[i].2 += s.size;
+        }
+    }
+    rows.sort_by_key(|r| (std::cmp::Reverse(r.1), std::cmp::Reverse(r.2), r.0.clone()));
+    let (f, r) = rows
+        .iter()
+        .fold((0, 0), |(f, r), row| (f + row.1, r + row.2));
+    rows.push((
+        "(unattributed)".into(),
+        flash_total.saturating_sub(f),
+        ram_total.saturating_sub(r),
+    ));
+    rows
+}
+
+/// Prints the per-crate table and the largest symbols.
+fn print_breakdown(board: &str, syms: &[Symbol], flash: u64, ram: u64) {
+    println!();
+    println!("{board}: flash and static RAM per crate");
+    println!();
+    println!("| crate | flash | static RAM |");
+    println!("| --- | ---: | ---: |");
+    for (c, f, r) in crate_table(syms, flash, ram) {
+        println!("| {c} | {f} | {r} |");
+    }
+    println!("| total | {flash} | {ram} |");
+    println!();
+    println!("{board}: the {TOP_SYMBOLS} largest symbols");
+    println!();
+    println!("| bytes | in | symbol |");
+    println!("| ---: | --- | --- |");
+    let mut by_size: Vec<&Symbol> = syms.iter().collect();
+    by_size.sort_by_key(|s| (std::cmp::Reverse(s.size), s.name.clone()));
+    for s in by_size.into_iter().take(TOP_SYMBOLS) {
+        let place = match (s.flash, s.ram) {
+            (true, true) => "flash+RAM",
+            (true, false) => "flash",
+            _ => "RAM",
+        };
+        let name: String = s.name.replace('|', "\\|").chars().take(110).collect();
+        println!("| {} | {place} | `{name}` |", s.size);
+    }
 }
 
 /// Boards: every folder in `boards/` with a `memory.x`, the default first.
@@ -222,7 +458,23 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
         if !board.ends_with("-emulated") {
             settings_region(&mem).map_err(|e| format!("{}: {e}", mem_path.display()))?;
         }
+        let syms = symbols(&elf)?;
+        if board == DEFAULT_BOARD {
+            print_breakdown(&board, &syms, flash_bytes, ram_bytes);
+        }
+        let named = |f: fn(&str) -> bool| {
+            let mut v: Vec<String> = syms
+                .iter()
+                .filter(|s| s.flash && f(&s.name))
+                .map(|s| s.name.clone())
+                .collect();
+            v.sort();
+            v.dedup();
+            v
+        };
         images.push(Image {
+            soft_double: named(is_soft_double),
+            float_text: named(is_float_text),
             board,
             flash_bytes,
             ram_bytes,
@@ -262,6 +514,34 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
                 i.board, i.ram_bytes, STACK_RESERVE_BYTES, i.ram_size
             ));
         }
+        if !i.board.ends_with("-emulated") {
+            if i.flash_bytes > HW_FLASH_BUDGET_BYTES {
+                errors.push(format!(
+                    "{}: flash {} > the hardware boards' budget of {}",
+                    i.board, i.flash_bytes, HW_FLASH_BUDGET_BYTES
+                ));
+            }
+            if i.ram_bytes > HW_RAM_BUDGET_BYTES {
+                errors.push(format!(
+                    "{}: static RAM {} > the hardware boards' budget of {}",
+                    i.board, i.ram_bytes, HW_RAM_BUDGET_BYTES
+                ));
+            }
+            if !i.soft_double.is_empty() {
+                errors.push(format!(
+                    "{}: software double precision in the image (the FPU is f32 only): {}",
+                    i.board,
+                    i.soft_double.join(", ")
+                ));
+            }
+            if !i.float_text.is_empty() {
+                errors.push(format!(
+                    "{}: core's float formatting or parsing in the image (use morphlink::fixed): {}",
+                    i.board,
+                    i.float_text.join(", ")
+                ));
+            }
+        }
         if i.board == DEFAULT_BOARD {
             if i.flash_bytes > SMALL_PART_FLASH_BYTES {
                 errors.push(format!(
@@ -277,7 +557,25 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
             }
         }
     }
+    for i in images.iter().filter(|i| !i.board.ends_with("-emulated")) {
+        if i.flash_bytes > HW_FLASH_TARGET_BYTES || i.ram_bytes > HW_RAM_TARGET_BYTES {
+            println!(
+                "{}: short of the goal of {} flash / {} static RAM by {} B / {} B",
+                i.board,
+                kib(HW_FLASH_TARGET_BYTES),
+                kib(HW_RAM_TARGET_BYTES),
+                i.flash_bytes.saturating_sub(HW_FLASH_TARGET_BYTES),
+                i.ram_bytes.saturating_sub(HW_RAM_TARGET_BYTES)
+            );
+        }
+    }
     if errors.is_empty() {
+        println!(
+            "hardware boards: at most {} flash and {} static RAM each, no software double \
+             precision, no core float text",
+            kib(HW_FLASH_BUDGET_BYTES),
+            kib(HW_RAM_BUDGET_BYTES)
+        );
         println!(
             "budgets ok: every image fits its board with {} of stack to spare; {} also fits \
              {} flash / {} RAM",
@@ -340,6 +638,59 @@ mod tests {
         let overlapping = "FLASH : ORIGIN = 0x08000000, LENGTH = 128K\nSETTINGS : ORIGIN = 0x0801F000, LENGTH = 4K\n";
         assert!(settings_region(overlapping).is_err());
         assert!(settings_region("FLASH : ORIGIN = 0x08000000, LENGTH = 128K\n").is_err());
+    }
+
+    #[test]
+    fn demangles_and_names_crates() {
+        assert_eq!(
+            demangle("_ZN4core3fmt9Formatter3pad17h0123456789abcdefE"),
+            "core::fmt::Formatter::pad"
+        );
+        let d = demangle(
+            "_ZN62_$LT$morphlink..fixed..Fixed$u20$as$u20$core..fmt..Display$GT$3fmt17h7a88df134df60cceE",
+        );
+        assert_eq!(d, "<morphlink::fixed::Fixed as core::fmt::Display>::fmt");
+        assert_eq!(crate_of(&d), "morphlink");
+        assert_eq!(crate_of("__aeabi_dadd"), "compiler_builtins / C");
+        assert_eq!(crate_of(".Lanon.29ad.100"), "(anonymous data)");
+        assert_eq!(demangle("memcpy"), "memcpy");
+    }
+
+    #[test]
+    fn names_soft_double_and_float_text() {
+        for n in [
+            "__aeabi_dadd",
+            "__aeabi_d2f",
+            "__aeabi_f2d",
+            "__aeabi_i2d",
+            "compiler_builtins::float::add::__adddf3",
+            "__truncdfsf2",
+            "libm::math::exp::exp",
+            "libm::math::log::log",
+        ] {
+            assert!(is_soft_double(n), "{n}");
+        }
+        for n in [
+            "__aeabi_fadd",
+            "__aeabi_f2lz",
+            "__aeabi_uldivmod",
+            "libm::math::expf::expf",
+            "memcpy",
+            "morphlink::mathf::exp",
+        ] {
+            assert!(!is_soft_double(n), "{n}");
+        }
+        assert!(is_float_text(
+            "core::fmt::float::float_to_decimal_common_exact"
+        ));
+        assert!(is_float_text(
+            "core::num::flt2dec::strategy::grisu::format_shortest"
+        ));
+        assert!(is_float_text("<f32 as core::fmt::Display>::fmt"));
+        assert!(is_float_text("core::num::dec2flt::parse"));
+        assert!(!is_float_text(
+            "<morphlink::fixed::Fixed as core::fmt::Display>::fmt"
+        ));
     }
 
     #[test]
