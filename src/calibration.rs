@@ -28,8 +28,7 @@ use crate::link::{
     CONVECTION_RANGE_W_M2K, LINK, R_AT_HIGHEST_CONVECTION_K_PER_W, R_AT_LOWEST_CONVECTION_K_PER_W,
     R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W,
 };
-use morphlink_model::thermal::{resistance_matrix, ResistanceMatrix};
-use morphlink_model::LinkParams;
+use crate::lumped::{resistance_matrix, ResistanceMatrix};
 
 /// One calibration field's description: its name (the settings key), unit and allowed range.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -122,9 +121,9 @@ const _: () = assert!(
 /// The model's rises at the link file's convection (still water), K/W: the build's
 /// `R_TT_K_PER_W`, `R_PP_K_PER_W`, `R_TP_K_PER_W`.
 pub const WATER_RESISTANCES: ResistanceMatrix = ResistanceMatrix {
-    r_tt: R_TT_K_PER_W as f64,
-    r_pp: R_PP_K_PER_W as f64,
-    r_tp: R_TP_K_PER_W as f64,
+    r_tt: R_TT_K_PER_W,
+    r_pp: R_PP_K_PER_W,
+    r_tp: R_TP_K_PER_W,
 };
 
 /// Decimals a calibration range is kept to: `CONFIG` prints them with three, and a printed end
@@ -475,26 +474,15 @@ impl Calibration {
         }
     }
 
-    /// The link's parameters as the model runs them: the link file's, at
-    /// [`Calibration::model_convection_w_m2k`] (untouched at the link file's own convection).
-    pub fn model_params(&self) -> LinkParams {
-        let mut p = LINK;
-        let h = self.model_convection_w_m2k();
-        if h != LINK.surroundings.h_w_m2k as f32 {
-            p.surroundings.h_w_m2k = h as f64;
-        }
-        p
-    }
-
     /// The model's steady rises per watt at [`Calibration::model_convection_w_m2k`], K/W: what
     /// the rises of a thermistor that reads its whole node are ([`WATER_RESISTANCES`], built
     /// in, at the link file's convection).
     pub fn model_resistances(&self) -> ResistanceMatrix {
-        let p = self.model_params();
-        if p.surroundings.h_w_m2k == LINK.surroundings.h_w_m2k {
+        let h = self.model_convection_w_m2k();
+        if h == LINK.surroundings.h_w_m2k as f32 {
             return WATER_RESISTANCES;
         }
-        resistance_matrix(&p)
+        resistance_matrix(h)
     }
 
     /// Whether every rise is the share [`SHARE_RULE`] allows of the model's own at
@@ -892,7 +880,7 @@ mod tests {
         let mut air = water;
         air.set(13, 20.0).unwrap();
         let r = air.model_resistances();
-        assert!(r.r_pp > 1.5 * R_PP_K_PER_W as f64 && r.r_tp > 3.0 * R_TP_K_PER_W as f64);
+        assert!(r.r_pp > 1.5 * R_PP_K_PER_W && r.r_tp > 3.0 * R_TP_K_PER_W);
         assert!(
             air.sensor_gain(Heater::Pla) < 0.7,
             "{}",

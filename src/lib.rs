@@ -18,6 +18,7 @@ pub mod controller;
 pub mod fixed;
 pub mod heater;
 pub mod link;
+pub mod lumped;
 pub mod mathf;
 pub mod part_limit;
 pub mod protocol;
