@@ -491,7 +491,7 @@ impl Calibration {
         let r = self.model_resistances();
         let model = [r.r_pp, r.r_tt, r.r_tp, r.r_tp];
         for (k, &(i, allowed)) in SHARE_RULE.iter().enumerate() {
-            let share = self.value(i) / model[k] as f32;
+            let share = self.value(i) / model[k];
             if !(share >= allowed.0 && share <= allowed.1) {
                 return Err(Inconsistent {
                     field: FIELDS[i],
@@ -509,8 +509,8 @@ impl Calibration {
     pub fn sensor_gain(&self, heater: crate::vocab::Heater) -> f32 {
         let r = self.model_resistances();
         let (fit, model) = match heater {
-            crate::vocab::Heater::Pla => (self.pla_rise_k_per_w, r.r_pp as f32),
-            crate::vocab::Heater::Tca => (self.tca_rise_k_per_w, r.r_tt as f32),
+            crate::vocab::Heater::Pla => (self.pla_rise_k_per_w, r.r_pp),
+            crate::vocab::Heater::Tca => (self.tca_rise_k_per_w, r.r_tt),
         };
         let g = fit / model;
         if g.is_finite() {
@@ -527,7 +527,7 @@ impl Calibration {
             crate::vocab::Heater::Pla => self.tca_to_pla_k_per_w,
             crate::vocab::Heater::Tca => self.pla_to_tca_k_per_w,
         };
-        let g = fit / self.model_resistances().r_tp as f32;
+        let g = fit / self.model_resistances().r_tp;
         if g.is_finite() {
             g.clamp(0.0, 3.0)
         } else {
@@ -886,7 +886,7 @@ mod tests {
             "{}",
             air.sensor_gain(Heater::Pla)
         );
-        air.pla_rise_k_per_w = r.r_pp as f32;
+        air.pla_rise_k_per_w = r.r_pp;
         assert!((air.sensor_gain(Heater::Pla) - 1.0).abs() < 1e-4);
         // Outside its range the field is refused; a value that got in anyway runs the water model.
         assert!(air.set(13, 5.0).is_err());

@@ -245,7 +245,6 @@ impl<S: NorFlash> SettingsStore<S> {
             }
         }
         let erases = map.flash().erases;
-        drop(map);
         self.newest = Newest::Known(Some(tag(bytes)));
         Ok(SaveReport {
             bytes: bytes.len() as u32,
