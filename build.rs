@@ -1,7 +1,7 @@
 //! Build script: generates the link's constants and the power/radius table from `link.toml`
 //! (or the file named by `MORPHLINK_LINK`), and puts the selected board's `memory.x` on the
 //! linker path.
-use morphlink_model::{file, table, thermal};
+use morphlink_model::{file, mechanics, table, thermal};
 use std::{env, fmt::Write as _, fs, path::PathBuf};
 
 /// Rim convection a calibration may set, W/(m² K): 10 is half the model's still air, 200
@@ -86,6 +86,59 @@ fn main() {
         )
         .unwrap();
     }
+    // The constants of the core's f32 model (`crate::lumped`) that the f64 model computes once
+    // for the link: what does not depend on the convection or a temperature.
+    let net = thermal::Network::new(&p);
+    let f = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{:?}", *x as f32))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    writeln!(
+        s,
+        "/// Heat capacities of the five-node network (TCA, its shell, PLA, its shell, bulk), J/K."
+    )
+    .unwrap();
+    writeln!(
+        s,
+        "pub const NETWORK_CAPACITY_J_K: [f32; 5] = [{}];",
+        f(&net.capacity_j_k)
+    )
+    .unwrap();
+    writeln!(
+        s,
+        "/// Conductances TCA→its shell and PLA→its shell, W/K (independent of the convection)."
+    )
+    .unwrap();
+    writeln!(
+        s,
+        "pub const NETWORK_SHELL_CONDUCTANCE_W_K: [f32; 2] = [{}];",
+        f(&[net.conductance_w_k[0], net.conductance_w_k[2]])
+    )
+    .unwrap();
+    writeln!(
+        s,
+        "/// Soft-link bending stiffness of the link's geometry, N m²."
+    )
+    .unwrap();
+    writeln!(
+        s,
+        "pub const BENDING_STIFFNESS_NM2: f32 = {:?};",
+        mechanics::bending_stiffness_nm2(&p) as f32
+    )
+    .unwrap();
+    writeln!(
+        s,
+        "/// Second moment of the PLA rod about the link's axis, m⁴."
+    )
+    .unwrap();
+    writeln!(
+        s,
+        "pub const PLA_SECOND_MOMENT_ABOUT_AXIS_M4: f32 = {:?};",
+        mechanics::pla_second_moment_about_axis_m4(&p) as f32
+    )
+    .unwrap();
     writeln!(s, "/// PLA power that keeps the rod soft while bending, W.").unwrap();
     writeln!(
         s,

@@ -28,8 +28,7 @@ use crate::link::{
     CONVECTION_RANGE_W_M2K, LINK, R_AT_HIGHEST_CONVECTION_K_PER_W, R_AT_LOWEST_CONVECTION_K_PER_W,
     R_PP_K_PER_W, R_TP_K_PER_W, R_TT_K_PER_W,
 };
-use morphlink_model::thermal::{resistance_matrix, ResistanceMatrix};
-use morphlink_model::LinkParams;
+use crate::lumped::{resistance_matrix, ResistanceMatrix};
 
 /// One calibration field's description: its name (the settings key), unit and allowed range.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -121,9 +120,9 @@ const _: () = assert!(
 /// The model's rises at the link file's convection (still water), K/W: the build's
 /// `R_TT_K_PER_W`, `R_PP_K_PER_W`, `R_TP_K_PER_W`.
 pub const WATER_RESISTANCES: ResistanceMatrix = ResistanceMatrix {
-    r_tt: R_TT_K_PER_W as f64,
-    r_pp: R_PP_K_PER_W as f64,
-    r_tp: R_TP_K_PER_W as f64,
+    r_tt: R_TT_K_PER_W,
+    r_pp: R_PP_K_PER_W,
+    r_tp: R_TP_K_PER_W,
 };
 
 /// Decimals a calibration range is kept to: `CONFIG` prints them with three, and a printed end
@@ -474,26 +473,15 @@ impl Calibration {
         }
     }
 
-    /// The link's parameters as the model runs them: the link file's, at
-    /// [`Calibration::model_convection_w_m2k`] (untouched at the link file's own convection).
-    pub fn model_params(&self) -> LinkParams {
-        let mut p = LINK;
-        let h = self.model_convection_w_m2k();
-        if h != LINK.surroundings.h_w_m2k as f32 {
-            p.surroundings.h_w_m2k = h as f64;
-        }
-        p
-    }
-
     /// The model's steady rises per watt at [`Calibration::model_convection_w_m2k`], K/W: what
     /// the rises of a thermistor that reads its whole node are ([`WATER_RESISTANCES`], built
     /// in, at the link file's convection).
     pub fn model_resistances(&self) -> ResistanceMatrix {
-        let p = self.model_params();
-        if p.surroundings.h_w_m2k == LINK.surroundings.h_w_m2k {
+        let h = self.model_convection_w_m2k();
+        if h == LINK.surroundings.h_w_m2k as f32 {
             return WATER_RESISTANCES;
         }
-        resistance_matrix(&p)
+        resistance_matrix(h)
     }
 
     /// Whether every rise is the share [`SHARE_RULE`] allows of the model's own at
@@ -502,7 +490,7 @@ impl Calibration {
         let r = self.model_resistances();
         let model = [r.r_pp, r.r_tt, r.r_tp, r.r_tp];
         for (k, &(i, allowed)) in SHARE_RULE.iter().enumerate() {
-            let share = self.value(i) / model[k] as f32;
+            let share = self.value(i) / model[k];
             if !(share >= allowed.0 && share <= allowed.1) {
                 return Err(Inconsistent {
                     field: FIELDS[i],
@@ -520,8 +508,8 @@ impl Calibration {
     pub fn sensor_gain(&self, heater: crate::vocab::Heater) -> f32 {
         let r = self.model_resistances();
         let (fit, model) = match heater {
-            crate::vocab::Heater::Pla => (self.pla_rise_k_per_w, r.r_pp as f32),
-            crate::vocab::Heater::Tca => (self.tca_rise_k_per_w, r.r_tt as f32),
+            crate::vocab::Heater::Pla => (self.pla_rise_k_per_w, r.r_pp),
+            crate::vocab::Heater::Tca => (self.tca_rise_k_per_w, r.r_tt),
         };
         let g = fit / model;
         if g.is_finite() {
@@ -538,7 +526,7 @@ impl Calibration {
             crate::vocab::Heater::Pla => self.tca_to_pla_k_per_w,
             crate::vocab::Heater::Tca => self.pla_to_tca_k_per_w,
         };
-        let g = fit / self.model_resistances().r_tp as f32;
+        let g = fit / self.model_resistances().r_tp;
         if g.is_finite() {
             g.clamp(0.0, 3.0)
         } else {
@@ -891,13 +879,13 @@ mod tests {
         let mut air = water;
         air.set(13, 20.0).unwrap();
         let r = air.model_resistances();
-        assert!(r.r_pp > 1.5 * R_PP_K_PER_W as f64 && r.r_tp > 3.0 * R_TP_K_PER_W as f64);
+        assert!(r.r_pp > 1.5 * R_PP_K_PER_W && r.r_tp > 3.0 * R_TP_K_PER_W);
         assert!(
             air.sensor_gain(Heater::Pla) < 0.7,
             "{}",
             air.sensor_gain(Heater::Pla)
         );
-        air.pla_rise_k_per_w = r.r_pp as f32;
+        air.pla_rise_k_per_w = r.r_pp;
         assert!((air.sensor_gain(Heater::Pla) - 1.0).abs() < 1e-4);
         // Outside its range the field is refused; a value that got in anyway runs the water model.
         assert!(air.set(13, 5.0).is_err());

@@ -172,8 +172,11 @@ pub struct Controller {
     events: Deque<Event, EVENT_QUEUE>,
     timing: Option<LoopTiming>,
     /// The faults alarmed since the last RESET (code and subject): each alarms once, however
-    /// long it stays present.
-    alarmed: heapless::Vec<(FaultCode, Subject), ALARMED_MAX>,
+    /// long it stays present. A ring: the newest replaces the oldest (a shifting list would
+    /// put the 1.5 KiB `memmove` in the image for it).
+    alarmed: [Option<(FaultCode, Subject)>; ALARMED_MAX],
+    /// Where in `alarmed` the next fault goes: the oldest once the ring is full.
+    alarmed_next: usize,
     /// The live settings (what the next morph runs with).
     settings: Settings,
     /// Whether the shell has settings storage (SAVE is then passed to it).
@@ -242,7 +245,8 @@ impl Controller {
             supply_v: f32::NAN,
             events: Deque::new(),
             timing: None,
-            alarmed: heapless::Vec::new(),
+            alarmed: [None; ALARMED_MAX],
+            alarmed_next: 0,
             settings: Settings::DEFAULT,
             storage: false,
             save_request: None,
@@ -380,13 +384,11 @@ impl Controller {
     /// Raises `fault`'s alarm unless the same code and subject has alarmed since RESET.
     fn alarm_once(&mut self, fault: Fault) {
         let key = (fault.code, fault.subject);
-        if self.alarmed.contains(&key) {
+        if self.alarmed.contains(&Some(key)) {
             return;
         }
-        if self.alarmed.is_full() {
-            self.alarmed.remove(0);
-        }
-        let _ = self.alarmed.push(key);
+        self.alarmed[self.alarmed_next] = Some(key);
+        self.alarmed_next = (self.alarmed_next + 1) % ALARMED_MAX;
         self.push(Event::Alarm(fault));
     }
 
@@ -706,7 +708,8 @@ impl Controller {
             Ok(()) => {
                 self.fault = None;
                 self.sup.rearm();
-                self.alarmed.clear();
+                self.alarmed = [None; ALARMED_MAX];
+                self.alarmed_next = 0;
                 reply::reset_cleared(&mut l, latched.code);
                 out(&l);
             }

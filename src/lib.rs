@@ -10,14 +10,15 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 #![allow(clippy::needless_range_loop)]
 
-#[cfg(feature = "sim")]
 pub mod activity;
+#[cfg(feature = "sim")]
 pub mod bench;
 pub mod calibration;
 pub mod controller;
 pub mod fixed;
 pub mod heater;
 pub mod link;
+pub mod lumped;
 pub mod mathf;
 pub mod part_limit;
 pub mod protocol;

@@ -66,8 +66,17 @@ mod firmware {
     /// The controller, shared by the two tasks. Both run in the same thread-mode executor, so
     /// the lock never contends and never masks interrupts (the UART interrupt keeps running
     /// while the control task steps).
-    static CONTROLLER: Mutex<ThreadModeRawMutex, RefCell<Option<Controller>>> =
-        Mutex::new(RefCell::new(None));
+    static CONTROLLER: Mutex<ThreadModeRawMutex, RefCell<Slot>> =
+        Mutex::new(RefCell::new(Slot::Empty));
+
+    /// The controller's place: empty until `main` sets it up. An explicit zero tag (not
+    /// `Option`, whose niche made the empty value non-zero) lets the 3.5 KiB static start
+    /// zeroed in `.bss` instead of being an image in flash copied to `.data`.
+    #[repr(u8)]
+    enum Slot {
+        Empty = 0,
+        Ready(Controller) = 1,
+    }
 
     /// Control → serial: new event or alarm lines may be queued.
     static EVENTS: Signal<ThreadModeRawMutex, ()> = Signal::new();
@@ -77,7 +86,10 @@ mod firmware {
 
     /// Runs `f` on the controller, briefly holding the lock.
     fn with_controller<R>(f: impl FnOnce(&mut Controller) -> R) -> R {
-        CONTROLLER.lock(|c| f(c.borrow_mut().as_mut().expect("set up in main")))
+        CONTROLLER.lock(|c| match &mut *c.borrow_mut() {
+            Slot::Ready(c) => f(c),
+            Slot::Empty => panic!("set up in main"),
+        })
     }
 
     /// The settings flash: the chip's own; on the emulated board the firmware's RAM flash
@@ -132,8 +144,12 @@ mod firmware {
             cause.as_str()
         );
 
-        let mut ctrl = Controller::new(Config::DEFAULT);
-        ctrl.enable_timing(LoopTiming::new(board::CPU_HZ, TICK_MS as u32 * 1000, cause));
+        // Built in its static, not in `main`'s future: held across the settings load below it
+        // would take its 3.5 KiB again in the task's RAM.
+        CONTROLLER.lock(|c| *c.borrow_mut() = Slot::Ready(Controller::new(Config::DEFAULT)));
+        with_controller(|c| {
+            c.enable_timing(LoopTiming::new(board::CPU_HZ, TICK_MS as u32 * 1000, cause))
+        });
         // The stored settings, range-checked, or the defaults and why; before the control task
         // starts, and heaters stay off whatever it finds.
         let mut store = settings_store(parts.settings_flash);
@@ -141,11 +157,13 @@ mod firmware {
             Some(s) => s.load().await,
             None => Err(LoadError::Flash),
         };
-        ctrl.load_settings(loaded);
-        if store.is_some() {
-            ctrl.enable_storage();
-        }
-        CONTROLLER.lock(|c| *c.borrow_mut() = Some(ctrl));
+        let storage = store.is_some();
+        with_controller(|c| {
+            c.load_settings(loaded);
+            if storage {
+                c.enable_storage();
+            }
+        });
 
         let mut boot = OutLine::new();
         write_boot_line(&mut boot, cause, board::NAME);

@@ -123,8 +123,41 @@ fn pow2(k: i32) -> f32 {
     f32::from_bits(((k + 127) as u32) << 23)
 }
 
+/// `x` limited to `[lo, hi]`, NaN staying NaN: [`f32::clamp`] for `lo <= hi`, without its
+/// check. `core`'s asserts `lo <= hi` and formats both bounds with `f32`'s `Debug` when it
+/// fails, which puts the float formatting machinery (several KiB) in the image wherever the
+/// compiler cannot prove the bounds ordered; for unordered bounds this returns one of them.
+pub fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
+    if x < lo {
+        lo
+    } else if x > hi {
+        hi
+    } else {
+        x
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn clamp_is_f32_clamp_for_ordered_bounds() {
+        for x in [
+            -2.0f32,
+            -0.0,
+            0.0,
+            0.5,
+            1.0,
+            3.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        ] {
+            for (lo, hi) in [(0.0f32, 1.0f32), (-1.0, -1.0), (0.3, 2.0)] {
+                assert_eq!(super::clamp(x, lo, hi), x.clamp(lo, hi), "{x} {lo} {hi}");
+            }
+        }
+        assert!(super::clamp(f32::NAN, 0.0, 1.0).is_nan());
+    }
+
     use super::*;
     use proptest::prelude::*;
 

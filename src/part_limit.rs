@@ -54,7 +54,7 @@ pub fn estimate_c(bead_c: f32, amb_c: f32, share: f32) -> f32 {
         AMB_FALLBACK_C
     };
     let share = if share.is_finite() {
-        share.clamp(FIT_MIN_SHARE, 1.0)
+        crate::mathf::clamp(share, FIT_MIN_SHARE, 1.0)
     } else {
         FIT_MIN_SHARE
     };
@@ -71,8 +71,11 @@ pub fn estimate_c(bead_c: f32, amb_c: f32, share: f32) -> f32 {
 /// high, and it may only make the estimate stricter.
 pub fn limit_shares(cal: &Calibration) -> [f32; 2] {
     Heater::ALL.map(|h| {
-        cal.sensor_gain(h)
-            .clamp(FIT_MIN_SHARE, UNTUNED_BEAD_SHARES[h.index()])
+        crate::mathf::clamp(
+            cal.sensor_gain(h),
+            FIT_MIN_SHARE,
+            UNTUNED_BEAD_SHARES[h.index()],
+        )
     })
 }
 

@@ -428,7 +428,7 @@ impl Settings {
             return spec;
         };
         let r = self.cal.model_resistances();
-        let model = [r.r_pp, r.r_tt, r.r_tp, r.r_tp][k] as f32;
+        let model = [r.r_pp, r.r_tt, r.r_tp, r.r_tp][k];
         let (lo, hi) = SHARE_RULE[k].1;
         let scale = decimal_scale(spec.decimals);
         let min = ((lo * model * scale) as i64 + 1) as f32 / scale;

@@ -157,7 +157,13 @@ impl<S: NorFlash> SettingsStore<S> {
         self.newest = Newest::Unknown;
         let mut buf = Buffer([0; BUFFER_BYTES]);
         let config = MapConfig::try_new(self.area.clone()).map_err(|_| LoadError::Flash)?;
-        let mut map = MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
+        // Through the erase-counting flash, by value, as SAVE writes: one copy of the map's
+        // code on the target, not one per flash type (some 5 KiB).
+        let flash = Counting {
+            flash: &mut self.flash,
+            erases: 0,
+        };
+        let mut map = MapStorage::<u8, _, _>::new(flash, config, Cache::new_uncached());
         let record: Option<&[u8]> = map
             .fetch_item(&mut buf.0, &SAVE_RECORD_KEY)
             .await
@@ -194,12 +200,16 @@ impl<S: NorFlash> SettingsStore<S> {
         // The blob a load finds now: the one it would fall back to were this SAVE's damaged.
         let replaced = match self.newest {
             Newest::Known(t) => t,
-            // Through the plain flash, as `load` does: the same map code, no more on the target.
+            // Through the counting flash, as `load` does: the same map code, no more on the
+            // target.
             Newest::Unknown => {
                 let config =
                     MapConfig::try_new(self.area.clone()).map_err(|_| StoreError::BadArea)?;
-                let mut map =
-                    MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
+                let flash = Counting {
+                    flash: &mut self.flash,
+                    erases: 0,
+                };
+                let mut map = MapStorage::<u8, _, _>::new(flash, config, Cache::new_uncached());
                 match map.fetch_item::<&[u8]>(&mut buf.0, &SETTINGS_KEY).await {
                     Ok(found) => found.map(tag),
                     Err(_) => None,
@@ -208,11 +218,11 @@ impl<S: NorFlash> SettingsStore<S> {
         };
         self.newest = Newest::Unknown;
         let config = MapConfig::try_new(self.area.clone()).map_err(|_| StoreError::BadArea)?;
-        let mut counting = Counting {
+        let counting = Counting {
             flash: &mut self.flash,
             erases: 0,
         };
-        let mut map = MapStorage::<u8, _, _>::new(&mut counting, config, Cache::new_uncached());
+        let mut map = MapStorage::<u8, _, _>::new(counting, config, Cache::new_uncached());
         let mut record = [0; RECORD_MAX];
         let record = SaveRecord {
             saved: tag(bytes),
@@ -234,11 +244,11 @@ impl<S: NorFlash> SettingsStore<S> {
                     .map_err(|()| StoreError::Flash)?;
             }
         }
-        drop(map);
+        let erases = map.flash().erases;
         self.newest = Newest::Known(Some(tag(bytes)));
         Ok(SaveReport {
             bytes: bytes.len() as u32,
-            erases: counting.erases,
+            erases,
         })
     }
 

@@ -34,10 +34,10 @@ pub mod fit;
 use crate::calibration::{Calibration, FieldInfo, FIELDS, SHARE_RULE, TAU_RANGE_S};
 use crate::heater::HeaterConfig;
 use crate::link::{CONVECTION_RANGE_W_M2K, LINK};
+use crate::lumped::ResistanceMatrix;
 use crate::supervisor::HEATING_MIN_POWER_FRACTION;
 use crate::vocab::{Heater, Measurements, Powers};
 use fit::{Method, StepFit};
-use morphlink_model::thermal::ResistanceMatrix;
 
 /// Heaters off before the first step, s: the baseline is the mean over it.
 pub const TUNE_SETTLE_S: f32 = 5.0;
@@ -360,7 +360,7 @@ fn judged(what: Fitted, r: &ResistanceMatrix) -> FieldInfo {
         Fitted::TcaToPla => (3, r.r_tp),
     };
     let (i, (lo, hi)) = SHARE_RULE[k];
-    let (model, f) = (model as f32, FIELDS[i]);
+    let (model, f) = (model, FIELDS[i]);
     FieldInfo {
         min: (lo * model).max(f.min),
         max: (hi * model).min(f.max),
@@ -698,10 +698,10 @@ impl Tune {
         let mut cal = self.cal;
         cal.convection_w_m2k = TUNE_STILL_AIR_W_M2K;
         let r = cal.model_resistances();
-        cal.pla_rise_k_per_w = r.r_pp as f32;
-        cal.tca_rise_k_per_w = r.r_tt as f32;
-        cal.pla_to_tca_k_per_w = r.r_tp as f32;
-        cal.tca_to_pla_k_per_w = r.r_tp as f32;
+        cal.pla_rise_k_per_w = r.r_pp;
+        cal.tca_rise_k_per_w = r.r_tt;
+        cal.pla_to_tca_k_per_w = r.r_tp;
+        cal.tca_to_pla_k_per_w = r.r_tp;
         self.cal = cal;
         emit(TuneEvent::StillAir { rise_k, t_s });
         self.fitted = true;

@@ -9,7 +9,18 @@
 //!   code (the part's flash less its settings area) and [`SMALL_PART_RAM_BYTES`] of RAM;
 //! - every hardware board's `memory.x` has a `SETTINGS` region right after `FLASH` (the code
 //!   is linked into `FLASH`, so it can never overlap the settings; its own `ASSERT` says so
-//!   again at link time), of two or more erase units.
+//!   again at link time), of two or more erase units;
+//! - every hardware board's image is at most [`HW_FLASH_BUDGET_BYTES`] of flash and
+//!   [`HW_RAM_BUDGET_BYTES`] of static RAM (the emulated image carries the simulated link and a
+//!   RAM flash in their place, so it only has to fit its board);
+//! - no hardware image holds software double-precision arithmetic ([`is_soft_double`]: the
+//!   Cortex-M4F FPU is single precision, every f64 operation is a library call) or `core`'s
+//!   float text machinery ([`is_float_text`]: the core formats and parses numbers with
+//!   `morphlink::fixed`).
+//!
+//! For the default board it also prints where the flash goes: per crate and the largest
+//! symbols (from the ELF's symbol table; code generic over a task's future is named after the
+//! crate of the generic, e.g. `embassy_executor`, though the body inlined in it is ours).
 use morphlink_host::workspace::Workspace;
 use object::elf::{SHF_ALLOC, SHF_WRITE, SHT_NOBITS};
 use object::{Object, ObjectSection, ObjectSymbol, SectionFlags};
@@ -37,6 +48,23 @@ pub const SMALL_PART_RAM_BYTES: u64 = 22 * 1024;
 /// not a measurement: stable Rust cannot report stack sizes.
 pub const STACK_RESERVE_BYTES: u64 = 4 * 1024;
 
+/// Flash every hardware board's image must fit, bytes: the issue's goal, 96 KiB.
+pub const HW_FLASH_TARGET_BYTES: u64 = 96 * 1024;
+/// Static RAM every hardware board's image must fit, bytes: the issue's goal, 16 KiB.
+pub const HW_RAM_TARGET_BYTES: u64 = 16 * 1024;
+/// The flash budget enforced on hardware boards today, bytes (equal to
+/// [`HW_FLASH_TARGET_BYTES`] once the images reach it; until then the level reached, so an
+/// image can only shrink).
+pub const HW_FLASH_BUDGET_BYTES: u64 = HW_FLASH_TARGET_BYTES;
+/// The static-RAM budget enforced on hardware boards today, bytes (as [`HW_FLASH_BUDGET_BYTES`]).
+pub const HW_RAM_BUDGET_BYTES: u64 = HW_RAM_TARGET_BYTES;
+/// Software double-precision routines a hardware image may hold: none (the goal, reached:
+/// the core runs its model in `f32`, `morphlink::lumped`). A list, so a routine that cannot be
+/// avoided yet can be named here with its reason instead of switching the check off.
+pub const SOFT_DOUBLE_TOLERATED: &[&str] = &[];
+/// How many of the largest symbols the default board's report lists.
+pub const TOP_SYMBOLS: usize = 15;
+
 /// One board's image.
 struct Image {
     board: String,
@@ -44,6 +72,279 @@ struct Image {
     ram_bytes: u64,
     flash_size: u64,
     ram_size: u64,
+    soft_double: Vec<String>,
+    float_text: Vec<String>,
+}
+
+/// A defined symbol of an image: its name (demangled), size, and whether it takes flash
+/// (code, read-only data, initial values) and RAM (`.data`, `.bss`, `.uninit`).
+#[derive(Clone, Debug)]
+pub struct Symbol {
+    /// Demangled name, without the hash.
+    pub name: String,
+    /// Size, bytes.
+    pub size: u64,
+    /// In flash (a section with contents).
+    pub flash: bool,
+    /// In RAM (a writable section).
+    pub ram: bool,
+}
+
+/// The image's sized symbols in allocated sections.
+pub fn symbols(elf: &[u8]) -> Result<Vec<Symbol>, String> {
+    let file = object::File::parse(elf).map_err(|e| format!("not an ELF: {e}"))?;
+    // Symbols without a size (the machine outliner's `OUTLINED_FUNCTION_n`) reach to the next
+    // symbol of their section.
+    let mut starts: Vec<(object::SectionIndex, u64)> = file
+        .symbols()
+        .filter(|s| !s.name().is_ok_and(|n| n.starts_with('$')))
+        .filter_map(|s| Some((s.section_index()?, s.address())))
+        .collect();
+    starts.sort_by_key(|&(i, a)| (i.0, a));
+    let mut out = Vec::new();
+    for sym in file.symbols() {
+        let (Some(index), Ok(name)) = (sym.section_index(), sym.name()) else {
+            continue;
+        };
+        let size = if sym.size() == 0 && name.starts_with("OUTLINED_FUNCTION") {
+            let next = starts
+                .iter()
+                .find(|&&(i, a)| i == index && a > sym.address())
+                .map(|&(_, a)| a);
+            let end = file
+                .section_by_index(index)
+                .map(|s| s.address() + s.size())
+                .unwrap_or(sym.address());
+            next.unwrap_or(end).min(end) - sym.address()
+        } else {
+            sym.size()
+        };
+        if size == 0 {
+            continue;
+        }
+        let Ok(section) = file.section_by_index(index) else {
+            continue;
+        };
+        let SectionFlags::Elf { sh_type, sh_flags } = section.flags() else {
+            continue;
+        };
+        if (sh_flags.0 & SHF_ALLOC.0) == 0 {
+            continue;
+        }
+        out.push(Symbol {
+            name: demangle(name),
+            size,
+            flash: sh_type != SHT_NOBITS,
+            ram: (sh_flags.0 & SHF_WRITE.0) != 0,
+        });
+    }
+    Ok(out)
+}
+
+/// Demangles a Rust legacy symbol (`_ZN4core3fmt9Formatter3pad17h…E` → `core::fmt::Formatter::pad`),
+/// dropping the hash; other names are returned as they are.
+pub fn demangle(name: &str) -> String {
+    if let Some(v0) = name.strip_prefix("_R") {
+        return demangle_v0_path(v0).unwrap_or_else(|| name.to_string());
+    }
+    let Some(mut rest) = name.strip_prefix("_ZN") else {
+        return name.to_string();
+    };
+    let mut parts = Vec::new();
+    while let Some(end) = rest.find(|c: char| !c.is_ascii_digit()) {
+        if end == 0 {
+            break;
+        }
+        let Ok(len) = rest[..end].parse::<usize>() else {
+            break;
+        };
+        let Some(part) = rest.get(end..end + len) else {
+            break;
+        };
+        parts.push(part);
+        rest = &rest[end + len..];
+    }
+    if parts.is_empty() {
+        return name.to_string();
+    }
+    if parts.len() > 1
+        && parts
+            .last()
+            .is_some_and(|h| h.starts_with('h') && h.len() == 17)
+    {
+        parts.pop();
+    }
+    let mut joined = parts.join("::");
+    for (code, text) in [
+        ("$LT$", "<"),
+        ("$GT$", ">"),
+        ("$RF$", "&"),
+        ("$BP$", "*"),
+        ("$SP$", "@"),
+        ("$C$", ","),
+        ("$LP$", "("),
+        ("$RP$", ")"),
+        ("$u20$", " "),
+        ("$u27$", "'"),
+        ("$u5b$", "["),
+        ("$u5d$", "]"),
+        ("$u7b$", "{"),
+        ("$u7d$", "}"),
+        ("$u7e$", "~"),
+        ("..", "::"),
+    ] {
+        joined = joined.replace(code, text);
+    }
+    joined
+        .strip_prefix('_')
+        .filter(|j| j.starts_with('<'))
+        .map(str::to_string)
+        .unwrap_or(joined)
+}
+
+/// The path of a Rust v0 symbol (`_RNvNtCs…_4core3f325clamp` → `core::f32::clamp`; `core` is
+/// built with them): its identifiers in order, without generic arguments' types, impl
+/// qualifiers or disambiguators. Enough to name the crate and the function, not a full
+/// demangling.
+fn demangle_v0_path(s: &str) -> Option<String> {
+    let b = s.as_bytes();
+    let (mut i, mut parts) = (0, Vec::new());
+    while i < b.len() {
+        match b[i] {
+            // Crate root or disambiguator (`Cs<base62>_`, `s<base62>_`) and back-references
+            // (`B<base62>_`): skip to the `_` that ends them.
+            b'C' | b's' | b'B' if b.get(i + 1).is_some_and(|c| c.is_ascii_alphanumeric()) => {
+                if b[i] == b'C' && b.get(i + 1).is_some_and(u8::is_ascii_digit) {
+                    i += 1;
+                    continue;
+                }
+                i += b[i..].iter().position(|&c| c == b'_')? + 1;
+            }
+            c if c.is_ascii_digit() => {
+                let end = i + b[i..].iter().position(|c| !c.is_ascii_digit())?;
+                let len: usize = s[i..end].parse().ok()?;
+                let start = end + usize::from(b.get(end) == Some(&b'_'));
+                parts.push(s.get(start..start + len)?);
+                i = start + len;
+            }
+            _ => i += 1,
+        }
+    }
+    (!parts.is_empty()).then(|| parts.join("::"))
+}
+
+/// The crate a (demangled) symbol belongs to: the first path segment, inside a leading `<`
+/// for trait impls (`<morphlink::fixed::Fixed as core::fmt::Display>::fmt` → `morphlink`);
+/// unmangled names (`__aeabi_*`, `memcpy`, interrupt handlers) as `compiler_builtins / C`, the
+/// outliner's shared code sequences on their own, anonymous
+/// constants (`.Lanon.*`, string and table literals merged by the linker) as `(anonymous
+/// data)`.
+pub fn crate_of(name: &str) -> String {
+    if name.starts_with(".L") || name.starts_with("anon.") {
+        return "(anonymous data)".into();
+    }
+    if name.starts_with("OUTLINED_FUNCTION") {
+        return "(outlined code, shared by callers)".into();
+    }
+    let n = name.trim_start_matches(['<', '&', '*', ' ']);
+    let n = n.strip_prefix("mut ").unwrap_or(n);
+    match n.find("::") {
+        Some(i) if !n[..i].contains(['<', ' ']) => n[..i].to_string(),
+        _ if name.starts_with("__") || !name.contains("::") => "compiler_builtins / C".into(),
+        _ => "(other)".into(),
+    }
+}
+
+/// True for a software double-precision routine: compiler-builtins' `__*df*` (`__adddf3`,
+/// `__muldf3`, `__divdf3`, `__truncdfsf2`, `__extendsfdf2`, `__fixdfsi`, ...), the ARM EABI's
+/// `__aeabi_d*` and `__aeabi_*2d`, and libm's f64 functions (`libm::…::exp`, not `expf`).
+pub fn is_soft_double(name: &str) -> bool {
+    let last = name.rsplit("::").next().unwrap_or(name);
+    let eabi = last
+        .strip_prefix("__aeabi_")
+        .is_some_and(|r| r.starts_with('d') || r.ends_with("2d"));
+    let builtin = last.starts_with("__") && last.contains("df");
+    let libm = name.starts_with("libm::") && !last.ends_with('f') && !name.contains("::support");
+    eabi || builtin || libm
+}
+
+/// True for `core`'s float text machinery: `Display`/`Debug`/`FromStr` of `f32`/`f64` and what
+/// they call (`core::fmt::float`, `float_to_decimal_common_*`, `flt2dec`, `dec2flt`).
+pub fn is_float_text(name: &str) -> bool {
+    [
+        "flt2dec",
+        "dec2flt",
+        "fmt::float",
+        "float_to_decimal",
+        "float_to_exponential",
+        "<f32 as core::fmt",
+        "<f64 as core::fmt",
+        "<f32 as core::str",
+        "<f64 as core::str",
+    ]
+    .iter()
+    .any(|p| name.contains(p))
+}
+
+/// Flash and RAM per crate, largest flash first: `(crate, flash, ram)`; bytes no symbol
+/// covers (string literals, alignment) as `(no symbol: string literals, padding)`.
+pub fn crate_table(syms: &[Symbol], flash_total: u64, ram_total: u64) -> Vec<(String, u64, u64)> {
+    let mut rows: Vec<(String, u64, u64)> = Vec::new();
+    for s in syms {
+        let c = crate_of(&s.name);
+        let i = match rows.iter().position(|r| r.0 == c) {
+            Some(i) => i,
+            None => {
+                rows.push((c, 0, 0));
+                rows.len() - 1
+            }
+        };
+        if s.flash {
+            rows[i].1 += s.size;
+        }
+        if s.ram {
+            rows[i].2 += s.size;
+        }
+    }
+    rows.sort_by_key(|r| (std::cmp::Reverse(r.1), std::cmp::Reverse(r.2), r.0.clone()));
+    let (f, r) = rows
+        .iter()
+        .fold((0, 0), |(f, r), row| (f + row.1, r + row.2));
+    rows.push((
+        "(no symbol: string literals, padding)".into(),
+        flash_total.saturating_sub(f),
+        ram_total.saturating_sub(r),
+    ));
+    rows
+}
+
+/// Prints the per-crate table and the largest symbols.
+fn print_breakdown(board: &str, syms: &[Symbol], flash: u64, ram: u64) {
+    println!();
+    println!("{board}: flash and static RAM per crate");
+    println!();
+    println!("| crate | flash | static RAM |");
+    println!("| --- | ---: | ---: |");
+    for (c, f, r) in crate_table(syms, flash, ram) {
+        println!("| {c} | {f} | {r} |");
+    }
+    println!("| total | {flash} | {ram} |");
+    println!();
+    println!("{board}: the {TOP_SYMBOLS} largest symbols");
+    println!();
+    println!("| bytes | in | symbol |");
+    println!("| ---: | --- | --- |");
+    let mut by_size: Vec<&Symbol> = syms.iter().collect();
+    by_size.sort_by_key(|s| (std::cmp::Reverse(s.size), s.name.clone()));
+    for s in by_size.into_iter().take(TOP_SYMBOLS) {
+        let place = match (s.flash, s.ram) {
+            (true, true) => "flash+RAM",
+            (true, false) => "flash",
+            _ => "RAM",
+        };
+        let name: String = s.name.replace('|', "\\|").chars().take(110).collect();
+        println!("| {} | {place} | `{name}` |", s.size);
+    }
 }
 
 /// Boards: every folder in `boards/` with a `memory.x`, the default first.
@@ -199,8 +500,17 @@ fn kib(bytes: u64) -> String {
 pub fn run(ws: &Workspace) -> Result<(), String> {
     let root = ws.root.as_path();
     let mut images = Vec::new();
+    let mut failed = Vec::new();
     for board in boards(root)? {
-        let elf_path = build(ws, &board)?;
+        // A board that does not build (or link: an image over its FLASH region) is reported
+        // with the others' table, not instead of it.
+        let elf_path = match build(ws, &board) {
+            Ok(p) => p,
+            Err(e) => {
+                failed.push(format!("{board}: {e}"));
+                continue;
+            }
+        };
         let elf = std::fs::read(&elf_path).map_err(|e| e.to_string())?;
         let (flash_bytes, ram_bytes) = image_sizes(&elf)?;
         let mem_path = memory_x(root, &board);
@@ -222,7 +532,23 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
         if !board.ends_with("-emulated") {
             settings_region(&mem).map_err(|e| format!("{}: {e}", mem_path.display()))?;
         }
+        let syms = symbols(&elf)?;
+        if board == DEFAULT_BOARD {
+            print_breakdown(&board, &syms, flash_bytes, ram_bytes);
+        }
+        let named = |f: fn(&str) -> bool| {
+            let mut v: Vec<String> = syms
+                .iter()
+                .filter(|s| s.flash && f(&s.name))
+                .map(|s| s.name.clone())
+                .collect();
+            v.sort();
+            v.dedup();
+            v
+        };
         images.push(Image {
+            soft_double: named(is_soft_double),
+            float_text: named(is_float_text),
             board,
             flash_bytes,
             ram_bytes,
@@ -248,7 +574,7 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
     }
     println!();
 
-    let mut errors = Vec::new();
+    let mut errors = failed;
     for i in &images {
         if i.flash_bytes > i.flash_size {
             errors.push(format!(
@@ -261,6 +587,40 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
                 "{}: RAM {} + {} stack > {}",
                 i.board, i.ram_bytes, STACK_RESERVE_BYTES, i.ram_size
             ));
+        }
+        if !i.board.ends_with("-emulated") {
+            if i.flash_bytes > HW_FLASH_BUDGET_BYTES {
+                errors.push(format!(
+                    "{}: flash {} > the hardware boards' budget of {}",
+                    i.board, i.flash_bytes, HW_FLASH_BUDGET_BYTES
+                ));
+            }
+            if i.ram_bytes > HW_RAM_BUDGET_BYTES {
+                errors.push(format!(
+                    "{}: static RAM {} > the hardware boards' budget of {}",
+                    i.board, i.ram_bytes, HW_RAM_BUDGET_BYTES
+                ));
+            }
+            let new: Vec<&str> = i
+                .soft_double
+                .iter()
+                .map(String::as_str)
+                .filter(|n| !SOFT_DOUBLE_TOLERATED.contains(n))
+                .collect();
+            if !new.is_empty() {
+                errors.push(format!(
+                    "{}: software double precision in the image (the FPU is f32 only): {}",
+                    i.board,
+                    new.join(", ")
+                ));
+            }
+            if !i.float_text.is_empty() {
+                errors.push(format!(
+                    "{}: core's float formatting or parsing in the image (use morphlink::fixed): {}",
+                    i.board,
+                    i.float_text.join(", ")
+                ));
+            }
         }
         if i.board == DEFAULT_BOARD {
             if i.flash_bytes > SMALL_PART_FLASH_BYTES {
@@ -277,7 +637,32 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
             }
         }
     }
+    for i in images.iter().filter(|i| !i.board.ends_with("-emulated")) {
+        if !i.soft_double.is_empty() {
+            println!(
+                "{}: {} software double-precision routines left (the goal is none)",
+                i.board,
+                i.soft_double.len()
+            );
+        }
+        if i.flash_bytes > HW_FLASH_TARGET_BYTES || i.ram_bytes > HW_RAM_TARGET_BYTES {
+            println!(
+                "{}: short of the goal of {} flash / {} static RAM by {} B / {} B",
+                i.board,
+                kib(HW_FLASH_TARGET_BYTES),
+                kib(HW_RAM_TARGET_BYTES),
+                i.flash_bytes.saturating_sub(HW_FLASH_TARGET_BYTES),
+                i.ram_bytes.saturating_sub(HW_RAM_TARGET_BYTES)
+            );
+        }
+    }
     if errors.is_empty() {
+        println!(
+            "hardware boards: at most {} flash and {} static RAM each, no software double \
+             precision beyond the tolerated list, no core float text",
+            kib(HW_FLASH_BUDGET_BYTES),
+            kib(HW_RAM_BUDGET_BYTES)
+        );
         println!(
             "budgets ok: every image fits its board with {} of stack to spare; {} also fits \
              {} flash / {} RAM",
@@ -340,6 +725,69 @@ mod tests {
         let overlapping = "FLASH : ORIGIN = 0x08000000, LENGTH = 128K\nSETTINGS : ORIGIN = 0x0801F000, LENGTH = 4K\n";
         assert!(settings_region(overlapping).is_err());
         assert!(settings_region("FLASH : ORIGIN = 0x08000000, LENGTH = 128K\n").is_err());
+    }
+
+    #[test]
+    fn demangles_and_names_crates() {
+        assert_eq!(
+            demangle("_ZN4core3fmt9Formatter3pad17h0123456789abcdefE"),
+            "core::fmt::Formatter::pad"
+        );
+        let d = demangle(
+            "_ZN62_$LT$morphlink..fixed..Fixed$u20$as$u20$core..fmt..Display$GT$3fmt17h7a88df134df60cceE",
+        );
+        assert_eq!(d, "<morphlink::fixed::Fixed as core::fmt::Display>::fmt");
+        assert_eq!(crate_of(&d), "morphlink");
+        assert_eq!(crate_of("__aeabi_dadd"), "compiler_builtins / C");
+        assert_eq!(crate_of(".Lanon.29ad.100"), "(anonymous data)");
+        assert_eq!(demangle("memcpy"), "memcpy");
+        assert_eq!(
+            demangle("_RNvMNtCs7ldSeZOOJos_4core3f32f5clamp"),
+            "core::f32::clamp"
+        );
+        let d = demangle("_RNvXs2_NtNtCs7ldSeZOOJos_4core3fmt5floatfNtB7_5Debug3fmt");
+        assert_eq!(d, "core::fmt::float::Debug::fmt");
+        assert!(is_float_text(&d));
+        assert!(is_float_text(&demangle(
+            "_RINvNtNtCs7ldSeZOOJos_4core3fmt5float29float_to_decimal_common_exactfEB6_"
+        )));
+    }
+
+    #[test]
+    fn names_soft_double_and_float_text() {
+        for n in [
+            "__aeabi_dadd",
+            "__aeabi_d2f",
+            "__aeabi_f2d",
+            "__aeabi_i2d",
+            "compiler_builtins::float::add::__adddf3",
+            "__truncdfsf2",
+            "libm::math::exp::exp",
+            "libm::math::log::log",
+        ] {
+            assert!(is_soft_double(n), "{n}");
+        }
+        for n in [
+            "__aeabi_fadd",
+            "__aeabi_f2lz",
+            "__aeabi_uldivmod",
+            "libm::math::expf::expf",
+            "memcpy",
+            "morphlink::mathf::exp",
+        ] {
+            assert!(!is_soft_double(n), "{n}");
+        }
+        assert!(is_float_text(
+            "core::fmt::float::float_to_decimal_common_exact"
+        ));
+        assert!(is_float_text(
+            "core::num::flt2dec::strategy::grisu::format_shortest"
+        ));
+        assert!(is_float_text("<f32 as core::fmt::Display>::fmt"));
+        assert!(is_float_text("core::num::dec2flt::parse"));
+        assert!(!is_float_text(
+            "<morphlink::fixed::Fixed as core::fmt::Display>::fmt"
+        ));
     }
 
     #[test]

@@ -102,6 +102,10 @@ fn demo(qemu: &Path, image: &Path, radius_mm: f32) -> Result<(), String> {
     for l in emu.command("SIM STATE", Duration::from_secs(5))? {
         println!("{l}");
     }
+    // The control loop's timing over the morph (docs/firmware.md, "Tick time under QEMU").
+    for l in emu.command("STATS", Duration::from_secs(5))? {
+        println!("{l}");
+    }
     eprintln!(
         "morph took {:.1} s of wall time ({} s of firmware time at the emulated build's speed-up); {:.1} s in all",
         morph_wall.as_secs_f64(),

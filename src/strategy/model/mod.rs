@@ -75,7 +75,7 @@ const _: () = assert!(STALL_AFTER_S > HEATING_WINDOW_S);
 /// Power a heater delivers when asked for `w` (W) at the measured supply: capped by the
 /// heater and by full duty (`V²/R`); unknown supply assumes the request is met.
 fn deliverable_w(heater: &HeaterConfig, w: f32, supply_v: f32) -> f32 {
-    let w = w.clamp(0.0, heater.max_power_w);
+    let w = crate::mathf::clamp(w, 0.0, heater.max_power_w);
     if supply_v.is_finite() && supply_v > 0.0 {
         w.min(supply_v * supply_v / heater.resistance_ohm)
     } else {
@@ -143,7 +143,7 @@ impl ModelDrive {
                     s.cal.cross_gain(HeatedNode::Pla),
                     s.cal.cross_gain(HeatedNode::Tca),
                 ],
-                s.cal.model_params(),
+                s.cal.model_convection_w_m2k(),
             ),
             tca_target_c,
             pla_target_c,

@@ -3,8 +3,8 @@
 //! Two uses: as a **feed-forward** predictor (the `boost` strategy drives the model, not the
 //! thermistors, to the target temperatures), and as an **observer** (the `closed` strategy
 //! corrects the model's temperatures with what the lagging thermistors read). The model is the
-//! five-node network of `morphlink_model::thermal` built from the link's built-in parameters;
-//! the surroundings are the measured ambient temperature.
+//! five-node network of `morphlink_model::thermal` built from the link's built-in parameters,
+//! run in `f32` ([`crate::lumped`]); the surroundings are the measured ambient temperature.
 //!
 //! Observer: each heated node `i` has a modelled thermistor (first-order lag of
 //! [`SENSOR_TAU_S`]) and an output disturbance `d_i` that follows
@@ -14,7 +14,7 @@
 //! resistance, ambient).
 
 use crate::link::LINK;
-use morphlink_model::thermal::{lag_remaining, node, Network};
+use crate::lumped::{lag_remaining, node, Network};
 
 /// Thermistor time constant the observer assumes, s: the bead is embedded in silicone against
 /// the heater (3 s; the same value the simulated link uses for its nominal sensors).
@@ -55,17 +55,17 @@ fn model_nodes(n: HeatedNode) -> (usize, usize, usize) {
 #[derive(Clone, Copy, Debug)]
 pub struct Observer {
     net: Network,
-    sensor_c: [f64; 2],
-    disturbance_k: [f64; 2],
-    ambient_c: f64,
-    smooth_c: [[f64; 2]; 2],
+    sensor_c: [f32; 2],
+    disturbance_k: [f32; 2],
+    ambient_c: f32,
+    smooth_c: [[f32; 2]; 2],
     /// Share of its node's rise above the surroundings each thermistor reads (PLA, TCA): the
     /// link's calibration ([`crate::calibration::Calibration::sensor_gain`]), 1 by default.
-    sensor_gain: [f64; 2],
+    sensor_gain: [f32; 2],
     /// Share of the other heater's part of its node's rise each thermistor reads (PLA, TCA):
     /// [`crate::calibration::Calibration::cross_gain`]; a bead beside one heater sees the
     /// other's heat at another share than its own heater's.
-    cross_gain: [f64; 2],
+    cross_gain: [f32; 2],
     /// The same network driven by each heater alone (PLA, TCA), from the surroundings: the
     /// other heater's part of each node's rise.
     alone: [Network; 2],
@@ -83,7 +83,7 @@ impl Observer {
         sensor_c: [0.0; 2],
         disturbance_k: [0.0; 2],
         ambient_c: 0.0,
-        smooth_c: [[f64::NAN; 2]; 2],
+        smooth_c: [[f32::NAN; 2]; 2],
         sensor_gain: [1.0; 2],
         cross_gain: [1.0; 2],
         alone: [Network {
@@ -95,21 +95,21 @@ impl Observer {
 
     /// A model at rest at `ambient_c` (°C) with the built-in link parameters.
     pub fn new(ambient_c: f32) -> Self {
-        Self::with_params(ambient_c, LINK)
+        Self::with_convection(ambient_c, LINK.surroundings.h_w_m2k as f32)
     }
 
-    /// As [`Observer::new`], with the link's parameters `p` (the calibration's
-    /// [`crate::calibration::Calibration::model_params`]: in still air the model rises about
-    /// five times as far per watt as under water, and over minutes rather than seconds).
-    pub fn with_params(ambient_c: f32, mut p: morphlink_model::LinkParams) -> Self {
-        p.surroundings.ambient_c = ambient_c as f64;
-        let net = Network::new(&p);
+    /// As [`Observer::new`], at rim convection `h_w_m2k`, W/(m² K) (the calibration's
+    /// [`crate::calibration::Calibration::model_convection_w_m2k`]: in still air the model
+    /// rises about five times as far per watt as under water, and over minutes rather than
+    /// seconds).
+    pub fn with_convection(ambient_c: f32, h_w_m2k: f32) -> Self {
+        let net = Network::new(h_w_m2k, ambient_c);
         Observer {
             net,
-            sensor_c: [ambient_c as f64; 2],
+            sensor_c: [ambient_c; 2],
             disturbance_k: [0.0; 2],
-            ambient_c: ambient_c as f64,
-            smooth_c: [[f64::NAN; 2]; 2],
+            ambient_c,
+            smooth_c: [[f32::NAN; 2]; 2],
             sensor_gain: [1.0; 2],
             cross_gain: [1.0; 2],
             alone: [net; 2],
@@ -120,12 +120,19 @@ impl Observer {
     /// `t_pla_c`, the TCA's side at `t_tca_c`, the bulk at their mean. Used at MORPH, when the
     /// link may still be warm from a previous morph.
     pub fn from_measured(t_pla_c: f32, t_tca_c: f32, t_amb_c: f32) -> Self {
-        Self::from_measured_with_gains(t_pla_c, t_tca_c, t_amb_c, [1.0, 1.0], [1.0, 1.0], LINK)
+        Self::from_measured_with_gains(
+            t_pla_c,
+            t_tca_c,
+            t_amb_c,
+            [1.0, 1.0],
+            [1.0, 1.0],
+            LINK.surroundings.h_w_m2k as f32,
+        )
     }
 
     /// As [`Observer::from_measured`], for thermistors that read `gains` (PLA, TCA) of their
     /// own heater's part of their node's rise above the surroundings and `cross` of the other
-    /// heater's, with the model of the link's parameters `params` ([`Observer::with_params`]):
+    /// heater's, with the model at rim convection `h_w_m2k` ([`Observer::with_convection`]):
     /// the nodes start at the rise the readings imply.
     pub fn from_measured_with_gains(
         t_pla_c: f32,
@@ -133,30 +140,18 @@ impl Observer {
         t_amb_c: f32,
         gains: [f32; 2],
         cross: [f32; 2],
-        params: morphlink_model::LinkParams,
+        h_w_m2k: f32,
     ) -> Self {
-        let mut o = Observer::with_params(t_amb_c, params);
-        let g = gains.map(|g| {
-            if g.is_finite() && g > 0.1 {
-                g as f64
-            } else {
-                1.0
-            }
-        });
+        let mut o = Observer::with_convection(t_amb_c, h_w_m2k);
+        let g = gains.map(|g| if g.is_finite() && g > 0.1 { g } else { 1.0 });
         o.sensor_gain = g;
-        o.cross_gain = cross.map(|g| {
-            if g.is_finite() && g >= 0.0 {
-                g as f64
-            } else {
-                1.0
-            }
-        });
+        o.cross_gain = cross.map(|g| if g.is_finite() && g >= 0.0 { g } else { 1.0 });
         let amb = if t_amb_c.is_finite() {
-            t_amb_c as f64
+            t_amb_c
         } else {
             o.ambient_c
         };
-        let (sp, st) = (t_pla_c as f64, t_tca_c as f64);
+        let (sp, st) = (t_pla_c, t_tca_c);
         let (p, t) = (amb + (sp - amb) / g[0], amb + (st - amb) / g[1]);
         o.net.temp_c = [t, t, p, p, 0.5 * (p + t)];
         o.sensor_c = [sp, st];
@@ -167,12 +162,11 @@ impl Observer {
     /// measured ambient (°C).
     pub fn predict(&mut self, dt_s: f32, pla_w: f32, tca_w: f32, ambient_c: f32) {
         if ambient_c.is_finite() {
-            self.ambient_c = ambient_c as f64;
+            self.ambient_c = ambient_c;
         }
-        let dt = dt_s as f64;
-        let (tca_w, pla_w) = (tca_w.max(0.0) as f64, pla_w.max(0.0) as f64);
-        // One call site for the three networks (the firmware's f64 is soft-float: one copy of
-        // the step, not three inlined).
+        let dt = dt_s;
+        let (tca_w, pla_w) = (tca_w.max(0.0), pla_w.max(0.0));
+        // One call site for the three networks: one copy of the step, not three inlined.
         let [pla_alone, tca_alone] = &mut self.alone;
         for (net, t_w, p_w) in [
             (&mut self.net, tca_w, pla_w),
@@ -181,7 +175,7 @@ impl Observer {
         ] {
             net.advance(dt, t_w, p_w, self.ambient_c);
         }
-        let keep = lag_remaining(dt, SENSOR_TAU_S as f64);
+        let keep = lag_remaining(dt, SENSOR_TAU_S);
         for n in [HeatedNode::Pla, HeatedNode::Tca] {
             let i = n.index();
             let at = model_nodes(n).0;
@@ -201,19 +195,18 @@ impl Observer {
     /// Corrects the disturbance estimates with the thermistor readings (°C) after `dt_s`.
     /// Non-finite readings are ignored (the supervisor deals with broken sensors).
     pub fn correct(&mut self, dt_s: f32, t_pla_c: f32, t_tca_c: f32) {
-        let dt = dt_s as f64;
-        let gain = 1.0 - lag_remaining(dt, DISTURBANCE_TAU_S as f64);
+        let dt = dt_s;
+        let gain = 1.0 - lag_remaining(dt, DISTURBANCE_TAU_S);
         for (i, m) in [t_pla_c, t_tca_c].into_iter().enumerate() {
             if m.is_finite() {
-                let m = m as f64;
                 let sm = &mut self.smooth_c[i];
                 for (k, tau) in [RATE_FILTER_S.0, RATE_FILTER_S.1].into_iter().enumerate() {
                     if sm[k].is_nan() {
                         sm[k] = m;
                     }
-                    sm[k] = m + (sm[k] - m) * lag_remaining(dt, tau as f64);
+                    sm[k] = m + (sm[k] - m) * lag_remaining(dt, tau);
                 }
-                if !(self.rate_k_per_s_of(i).abs() <= LEARN_MAX_RATE_K_PER_S as f64) {
+                if !(self.rate_k_per_s_of(i).abs() <= LEARN_MAX_RATE_K_PER_S) {
                     continue;
                 }
                 let err = m - self.sensor_c[i] - self.disturbance_k[i];
@@ -222,9 +215,9 @@ impl Observer {
         }
     }
 
-    fn rate_k_per_s_of(&self, i: usize) -> f64 {
+    fn rate_k_per_s_of(&self, i: usize) -> f32 {
         let sm = &self.smooth_c[i];
-        (sm[0] - sm[1]) / (RATE_FILTER_S.1 - RATE_FILTER_S.0) as f64
+        (sm[0] - sm[1]) / (RATE_FILTER_S.1 - RATE_FILTER_S.0)
     }
 
     /// How far a heated node's thermistor (smoothed over [`RATE_FILTER_S`]`.0`) is from what
@@ -236,33 +229,33 @@ impl Observer {
         if m.is_nan() {
             return 0.0;
         }
-        (m - self.sensor_c[i] - self.disturbance_k[i]) as f32
+        m - self.sensor_c[i] - self.disturbance_k[i]
     }
 
     /// How fast a heated node's thermistor is changing (smoothed), K/s.
     pub fn measured_rate_k_per_s(&self, n: HeatedNode) -> f32 {
-        self.rate_k_per_s_of(n.index()) as f32
+        self.rate_k_per_s_of(n.index())
     }
 
     /// The model's temperature of a heated node, °C (feed-forward: no correction).
     pub fn model_c(&self, n: HeatedNode) -> f32 {
-        self.net.temp_c[model_nodes(n).0] as f32
+        self.net.temp_c[model_nodes(n).0]
     }
 
     /// The observer's estimate of a heated node's true temperature, °C.
     pub fn estimate_c(&self, n: HeatedNode) -> f32 {
-        (self.net.temp_c[model_nodes(n).0] + self.node_disturbance_k(n.index())) as f32
+        self.net.temp_c[model_nodes(n).0] + self.node_disturbance_k(n.index())
     }
 
     /// The disturbance learnt in the thermistor's space, taken to the node's (divided by the
     /// thermistor's gain), K.
-    fn node_disturbance_k(&self, i: usize) -> f64 {
+    fn node_disturbance_k(&self, i: usize) -> f32 {
         self.disturbance_k[i] / self.sensor_gain[i]
     }
 
     /// Current disturbance estimate of a heated node, K (estimate − model).
     pub fn disturbance_k(&self, n: HeatedNode) -> f32 {
-        self.node_disturbance_k(n.index()) as f32
+        self.node_disturbance_k(n.index())
     }
 
     /// Heater power, W, that brings the model's node `n` to `target_c` (°C) within about
@@ -272,12 +265,12 @@ impl Observer {
     pub fn power_to_reach_w(&self, n: HeatedNode, target_c: f32, max_w: f32) -> f32 {
         let (i, shell, g) = model_nodes(n);
         let t = self.net.temp_c[i];
-        let tgt = target_c as f64;
+        let tgt = target_c;
         let g = self.net.conductance_w_k[g];
         let c = self.net.capacity_j_k[i];
-        let p = g * (tgt - self.net.temp_c[shell]) + c * (tgt - t) / APPROACH_S as f64;
+        let p = g * (tgt - self.net.temp_c[shell]) + c * (tgt - t) / APPROACH_S;
         if p.is_finite() {
-            (p as f32).clamp(0.0, max_w.max(0.0))
+            crate::mathf::clamp(p, 0.0, max_w.max(0.0))
         } else {
             0.0
         }
@@ -346,13 +339,13 @@ mod tests {
     fn innovation_is_small_while_the_model_follows_the_link_and_large_when_it_runs_ahead() {
         // 8 s of soften at 5 W, then the PLA at 1.5 W: a thermistor that reads the model's
         // own, and one that sees 60 % of the rise (a rod heating slower than the model's).
-        let run = |share: f64, ticks: usize| {
+        let run = |share: f32, ticks: usize| {
             let mut o = Observer::new(22.0);
             for k in 0..ticks {
                 let w = if k < 80 { 5.0 } else { 1.5 };
                 o.predict(0.1, w, 0.0, 22.0);
                 let sensed = 22.0 + share * (o.sensor_c[0] - 22.0);
-                o.correct(0.1, sensed as f32, 22.0);
+                o.correct(0.1, sensed, 22.0);
             }
             o.innovation_k(HeatedNode::Pla)
         };

@@ -8,16 +8,14 @@
 //! (spring-back); [`lock_temp_for_final_radius_c`] aims the lock so that the shape after
 //! release is the target.
 
-use crate::link::LINK;
-use morphlink_model::mechanics::{
-    curvature_per_m, curvature_with_extra_per_m, pla_extra_stiffness_nm2,
-};
+use crate::lumped::{curvature_per_m, curvature_with_extra_per_m, pla_extra_stiffness_nm2};
 
 /// Highest TCA temperature a target may ask for, °C: 20 K under the supervisor's 130 °C limit,
 /// and above every temperature the table's 1.5 W reaches (about 86 °C in 30 °C water).
 pub const TARGET_MAX_C: f32 = 110.0;
-/// Bisection steps of the inversion: the bracket is under 110 K wide, so 30 steps give better
-/// than 1e-6 K.
+/// Bisection steps of the inversion: the bracket is under 110 K wide, so 30 steps narrow it to
+/// 1e-7 K, below the resolution of an `f32` temperature (some 8e-6 K at 100 °C), where it
+/// stops.
 const BISECT_STEPS: usize = 30;
 // 20 K under the supervisor's limit, as claimed above.
 const _: () = assert!(TARGET_MAX_C + 20.0 <= crate::supervisor::TCA_LIMITS.max_c);
@@ -31,21 +29,21 @@ const _: () = assert!(
 
 /// Curvature after release, 1/m, of a link that froze at curvature `lock_per_m` and whose TCA
 /// and PLA have cooled to `ambient_c` (°C).
-pub fn released_curvature_per_m(lock_per_m: f64, ambient_c: f64) -> f64 {
-    let extra = pla_extra_stiffness_nm2(&LINK, ambient_c);
-    curvature_with_extra_per_m(&LINK, ambient_c, extra, lock_per_m)
+pub fn released_curvature_per_m(lock_per_m: f32, ambient_c: f32) -> f32 {
+    let extra = pla_extra_stiffness_nm2(ambient_c);
+    curvature_with_extra_per_m(ambient_c, extra, lock_per_m)
 }
 
 /// TCA temperature, °C, at which the soft link bends to `radius_mm` (no spring-back).
 pub fn tca_temp_for_radius_c(radius_mm: f32) -> f32 {
-    temp_for_curvature_c(1e3 / radius_mm as f64)
+    temp_for_curvature_c(1e3 / radius_mm)
 }
 
 /// TCA temperature, °C, to hold while the PLA freezes so that the link ends at `radius_mm`
 /// after release into surroundings at `ambient_c` (°C): the spring-back compensated target.
 pub fn lock_temp_for_final_radius_c(radius_mm: f32, ambient_c: f32) -> f32 {
-    let want = 1e3 / radius_mm as f64;
-    let amb = ambient_c as f64;
+    let want = 1e3 / radius_mm;
+    let amb = ambient_c;
     // The released curvature is linear in the frozen one: solve a + b·κ_lock = want.
     let a = released_curvature_per_m(0.0, amb);
     let b = released_curvature_per_m(1.0, amb) - a;
@@ -58,8 +56,8 @@ pub fn lock_temp_for_final_radius_c(radius_mm: f32, ambient_c: f32) -> f32 {
 /// Radius after release, mm, for a lock at TCA temperature `lock_tca_c` into surroundings at
 /// `ambient_c` (°C): the estimate reported with `done`.
 pub fn final_radius_mm(lock_tca_c: f32, ambient_c: f32) -> f32 {
-    let lock = curvature_per_m(&LINK, lock_tca_c as f64);
-    (1e3 / released_curvature_per_m(lock, ambient_c as f64)) as f32
+    let lock = curvature_per_m(lock_tca_c);
+    1e3 / released_curvature_per_m(lock, ambient_c)
 }
 
 /// The estimate's TCA temperature, °C, to aim at so that the link is at `need_c` (°C), through
@@ -84,29 +82,29 @@ pub fn calibrated_final_radius_mm(map: (f32, f32), estimate_c: f32, ambient_c: f
 
 /// TCA temperature, °C, at which the soft link has curvature `kappa_per_m`, clamped to
 /// [0 °C, [`TARGET_MAX_C`]] (curvature grows with temperature over that range).
-fn temp_for_curvature_c(kappa_per_m: f64) -> f32 {
-    let (mut lo, mut hi) = (0.0f64, TARGET_MAX_C as f64);
-    if !kappa_per_m.is_finite() || curvature_per_m(&LINK, lo) >= kappa_per_m {
-        return lo as f32;
+fn temp_for_curvature_c(kappa_per_m: f32) -> f32 {
+    let (mut lo, mut hi) = (0.0f32, TARGET_MAX_C);
+    if !kappa_per_m.is_finite() || curvature_per_m(lo) >= kappa_per_m {
+        return lo;
     }
-    if curvature_per_m(&LINK, hi) <= kappa_per_m {
-        return hi as f32;
+    if curvature_per_m(hi) <= kappa_per_m {
+        return hi;
     }
     for _ in 0..BISECT_STEPS {
         let mid = 0.5 * (lo + hi);
-        if curvature_per_m(&LINK, mid) < kappa_per_m {
+        if curvature_per_m(mid) < kappa_per_m {
             lo = mid;
         } else {
             hi = mid;
         }
     }
-    (0.5 * (lo + hi)) as f32
+    0.5 * (lo + hi)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::link::TABLE;
+    use crate::link::{LINK, TABLE};
 
     #[test]
     fn soft_target_agrees_with_the_table() {
