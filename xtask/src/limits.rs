@@ -25,7 +25,7 @@ use std::fmt::Write as _;
 /// Strategies run.
 pub const MODES: [&str; 4] = ["paper", "gated", "boost", "closed"];
 /// Longest a morph runs, s: past the longest phase timeouts the ranges allow.
-pub const MORPH_MAX_S: u64 = 1_300;
+pub const MORPH_MAX_S: u64 = 2_000;
 /// How far a true peak may pass its limit, K: the supervisor stops a heater once its estimate
 /// of the part reaches the limit; the heat already in the part and in its wrap carries the mean
 /// on for a moment after the cut.

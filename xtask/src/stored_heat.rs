@@ -43,9 +43,9 @@ pub const WATCH_S: u64 = 60;
 pub const REMORPH_ABORTS_S: [u64; 3] = [4, 10, 20];
 /// The second pass: delays between the ABORT and the next MORPH, s.
 pub const REMORPH_DELAYS_S: [u64; 4] = [0, 3, 10, 30];
-/// Longest a second morph is run for, s: past the longest the phase timeouts allow (60 s
-/// soften, 120 s bend, 600 s lock, 10 s release).
-pub const MORPH_MAX_S: u64 = 800;
+/// Longest a second morph is run for, s: past the longest its rest and the phase timeouts
+/// allow (900 s rest, 60 s soften, 120 s bend, 600 s lock, 10 s release).
+pub const MORPH_MAX_S: u64 = 1_700;
 /// The lumped link's bead time constants tried, s (the ensemble draws 2–6 s; nominal 3 s).
 pub const LUMPED_BEAD_TAUS_S: [f64; 3] = [2.0, 3.0, 6.0];
 

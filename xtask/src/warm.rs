@@ -19,8 +19,8 @@ use morphlink_sim::Rig;
 pub const WARM_AIM_PP: f64 = 0.5;
 /// Rest after a morph before its radius is read, s: the TCA cools and the link springs back.
 pub const SETTLE_S: u64 = 60;
-/// Longest a morph runs, s (every phase to its timeout).
-pub const MORPH_MAX_S: u64 = 800;
+/// Longest a morph runs, s (its rest and every phase to its timeout).
+pub const MORPH_MAX_S: u64 = 1_700;
 
 /// Options of the task.
 #[derive(clap::Args, Debug)]
