@@ -158,7 +158,7 @@ const fn field_info(
         unit,
         min,
         max,
-        doc,
+        doc: crate::settings::doc_text(doc),
     }
 }
 

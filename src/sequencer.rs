@@ -268,7 +268,10 @@ impl Sequencer {
         }
     }
 
-    /// Starts the strategy from the measurements `m` and enters soften.
+    /// Starts the strategy from the measurements `m` and enters soften. Called from MORPH and
+    /// from the end of a rest: kept out of line so the strategy's construction is in the image
+    /// once.
+    #[inline(never)]
     fn heat(&mut self, now_ms: u64, p: Pending, m: &Measurements, emit: &mut impl FnMut(SeqEvent)) {
         let start = Start {
             now_ms,
