@@ -145,6 +145,17 @@ const fn inward(min: f32, max: f32) -> (f32, f32) {
     (lo, hi)
 }
 
+/// `doc` on the host, `""` in the firmware image: the calibration fields' and the settings'
+/// one-line docs are read by the host's tools and tests only, and in the image they would take
+/// flash.
+pub const fn doc_text(doc: &'static str) -> &'static str {
+    if cfg!(target_os = "none") {
+        ""
+    } else {
+        doc
+    }
+}
+
 /// A field of `name` with the range `(min, max)` rounded [`inward`].
 const fn field_info(
     name: &'static str,
@@ -158,7 +169,7 @@ const fn field_info(
         unit,
         min,
         max,
-        doc: crate::settings::doc_text(doc),
+        doc: doc_text(doc),
     }
 }
 

@@ -44,18 +44,8 @@ pub struct Spec {
     /// For a choice, its words (the value is an index); empty for a number.
     pub choices: &'static [&'static str],
     /// One line: what it does (for the host's tools and docs; empty in the firmware, which
-    /// never shows it: [`doc_text`]).
+    /// never shows it: [`crate::calibration::doc_text`]).
     pub doc: &'static str,
-}
-
-/// `doc` on the host, `""` in the firmware image: the settings' and calibration fields' one-line
-/// docs are read by the host's tools and tests only, and in the image they would take flash.
-pub const fn doc_text(doc: &'static str) -> &'static str {
-    if cfg!(target_os = "none") {
-        ""
-    } else {
-        doc
-    }
 }
 
 impl Spec {
@@ -76,7 +66,7 @@ impl Spec {
             max,
             decimals,
             choices: &[],
-            doc: doc_text(doc),
+            doc: crate::calibration::doc_text(doc),
         }
     }
 
@@ -189,7 +179,7 @@ pub const MORPH_SPECS: [Spec; 7] = [
         max: (AUTO_MODE_CHOICES.len() - 1) as f32,
         decimals: 0,
         choices: &AUTO_MODE_CHOICES,
-        doc: doc_text("strategy MORPH runs without a mode and with auto"),
+        doc: crate::calibration::doc_text("strategy MORPH runs without a mode and with auto"),
     },
     Spec::number(
         "soft_threshold_c",
