@@ -413,9 +413,11 @@ impl Controller {
         };
     }
 
-    /// Hands the supervisor what it needs of the calibration (the beads' shares): after every
-    /// change of the settings.
-    fn sync_limits(&mut self) {
+    /// The calibration in force was replaced (TUNE done, CONFIG SET or RESET, settings loaded
+    /// or restored): a MEASURED report for an earlier morph no longer describes the link, and
+    /// the supervisor takes the beads' shares the parts' limits are judged with from it.
+    fn calibration_replaced(&mut self) {
+        self.cal_epoch = self.cal_epoch.wrapping_add(1);
         self.sup.set_shares(limit_shares(&self.settings.cal));
     }
 
@@ -480,7 +482,7 @@ impl Controller {
                     TuneTick::Run(p) => p,
                     TuneTick::Done(cal) => {
                         self.settings.cal = cal;
-                        self.cal_epoch = self.cal_epoch.wrapping_add(1);
+                        self.calibration_replaced();
                         ended = true;
                         Powers::default()
                     }
@@ -497,7 +499,6 @@ impl Controller {
         };
         if ended {
             self.activity.stop();
-            self.sync_limits();
         }
         for e in events {
             if let (Event::Seq(SeqEvent::Done { radius_mm, .. }), Some(last)) =
@@ -592,7 +593,6 @@ impl Controller {
             Command::Tune => self.start_tune(now_ms, out),
             Command::Measured { radius_mm } => self.measured(radius_mm, out),
         }
-        self.sync_limits();
     }
 
     /// `HEAT`: refused during a morph, with a fault latched or before the first reading; a
@@ -808,8 +808,7 @@ impl Controller {
                 ConfigEvent::Defaults(why)
             }
         };
-        self.cal_epoch = self.cal_epoch.wrapping_add(1);
-        self.sync_limits();
+        self.calibration_replaced();
         self.push(Event::Config(e));
     }
 
@@ -850,14 +849,14 @@ impl Controller {
             }
             ConfigCommand::Reset => {
                 self.settings = Settings::DEFAULT;
-                self.cal_epoch = self.cal_epoch.wrapping_add(1);
+                self.calibration_replaced();
                 reply::config_reset(&mut l);
             }
             ConfigCommand::Set { name, value } => {
                 match self.settings.set_text(name.as_str(), value.as_str()) {
                     Ok((spec, v)) => {
                         if CALIBRATION_SPECS.iter().any(|c| c.name == spec.name) {
-                            self.cal_epoch = self.cal_epoch.wrapping_add(1);
+                            self.calibration_replaced();
                         }
                         reply::config_set(&mut l, &row(&spec, v))
                     }
@@ -936,7 +935,7 @@ impl Controller {
             }
         }
         self.settings.cal = cal;
-        self.sync_limits();
+        self.calibration_replaced();
         Ok(())
     }
 
