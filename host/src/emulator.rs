@@ -126,6 +126,7 @@ pub fn qemu_command(qemu: &Path, image: &Path, port: u16, clock: Clock) -> Comma
         .arg(format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on"))
         .arg("-kernel")
         .arg(image);
+    ends_with_its_parent(&mut c);
     if clock == Clock::Instructions {
         match std::env::var("MORPHLINK_QEMU_ICOUNT") {
             Ok(v) if v == "off" => {}
@@ -139,6 +140,30 @@ pub fn qemu_command(qemu: &Path, image: &Path, port: u16, clock: Clock) -> Comma
         }
     }
     c
+}
+
+/// Makes the kernel kill the child started by `command` (SIGKILL) when the thread that started
+/// it ends, however this process ends: a SIGTERM or SIGKILL to `cargo xtask emulate --morph`, a
+/// panicking test. QEMU runs on alone otherwise, at a whole core, with nobody reading its port.
+/// Linux only (`PR_SET_PDEATHSIG`); elsewhere [`Emulator`]'s drop and
+/// [`run_to_end_or_signal`] are all there is.
+pub fn ends_with_its_parent(command: &mut Command) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: the closure runs in the forked child before exec and only calls prctl,
+        // which is async-signal-safe.
+        unsafe {
+            command.pre_exec(|| {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = command;
 }
 
 /// How a child run by [`run_to_end_or_signal`] ended.
@@ -427,6 +452,27 @@ mod tests {
     use super::*;
     use std::sync::atomic::{AtomicUsize, Ordering};
 
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_child_dies_with_the_thread_that_started_it() {
+        // The parent here is a thread that ends at once without waiting, as xtask does when a
+        // signal or a kill ends it: its child must not run on.
+        let child = thread::spawn(|| {
+            let mut c = Command::new("sleep");
+            c.arg("30");
+            ends_with_its_parent(&mut c);
+            c.spawn().unwrap()
+        })
+        .join()
+        .unwrap();
+        let mut child = child;
+        let t0 = Instant::now();
+        let status = child.wait().unwrap();
+        use std::os::unix::process::ExitStatusExt;
+        assert_eq!(status.signal(), Some(libc::SIGKILL), "{status:?}");
+        assert!(t0.elapsed() < Duration::from_secs(5));
+    }
+
     #[test]
     fn a_signal_kills_and_reaps_the_child_instead_of_leaving_it_running() {
         let mut child = Command::new("sleep").arg("30").spawn().unwrap();
@@ -453,4 +499,62 @@ mod tests {
             Ended::Exited(s) if s.success()
         ));
     }
+}
+
+/// Longest wall time the demo morph may take.
+pub const DEMO_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// Wall times of a [`demo_morph`], for the reader (they vary run to run, so they are not part
+/// of its printed output).
+pub struct DemoTimes {
+    /// Boot to the first line.
+    pub boot: Duration,
+    /// MORPH sent to `event: done`.
+    pub morph: Duration,
+    /// The whole demo.
+    pub total: Duration,
+}
+
+/// The demo of `cargo xtask emulate --morph`: boots the image, morphs to `radius_mm`, asks
+/// `SIM STATE` and `STATS`, and hands every line the firmware sends to `out` (the docs test
+/// checks docs/emulation.md's block against exactly these lines).
+pub fn demo_morph(
+    qemu: &Path,
+    image: &Path,
+    radius_mm: f32,
+    out: &mut dyn FnMut(&str),
+) -> Result<DemoTimes, String> {
+    use morphlink::protocol::{classify, LineKind};
+    let started = Instant::now();
+    let mut emu = Emulator::boot(qemu, image)?;
+    out(&emu.transcript[0]);
+    emu.wait_ready(Duration::from_secs(5))?;
+    let morph_start = Instant::now();
+    for l in emu.command(&format!("MORPH {radius_mm}"), Duration::from_secs(5))? {
+        out(&l);
+        if classify(&l) == LineKind::Error {
+            return Err(format!("the firmware refused MORPH {radius_mm}"));
+        }
+    }
+    loop {
+        let l = emu.next_line(DEMO_TIMEOUT)?;
+        out(&l);
+        match classify(&l) {
+            LineKind::Alarm => return Err("the morph ended in a fault".into()),
+            LineKind::Done => break,
+            _ => {}
+        }
+    }
+    let morph = morph_start.elapsed();
+    // The control loop's timing over the morph (docs/firmware.md, "Tick time under QEMU").
+    for cmd in ["SIM STATE", "STATS"] {
+        for l in emu.command(cmd, Duration::from_secs(5))? {
+            out(&l);
+        }
+    }
+    Ok(DemoTimes {
+        boot: emu.boot_time,
+        morph,
+        total: started.elapsed(),
+    })
 }

@@ -14,8 +14,15 @@
 //! gives its standard input, `\n` for a newline), run from the workspace root; the expected text
 //! is their standard output then standard error, in order. `tol X` lets every number differ by up
 //! to X (for timings); without it numbers must match exactly. Lines of the block that start with
-//! `$ ` (a shown command) are not output. `MORPHLINK_BLESS=1 cargo test -p morphlink-host --test
-//! docs` rewrites each marked block with the output of today's commands.
+//! `$ ` (a shown command) are not output. A block line `...` stands for any lines (none
+//! included), and a line ending in ` ...` for any line that begins as it does. `wall` leaves out
+//! the seconds of morphctl's `[wall N s]` stamps (the wall clock is not reproducible).
+//! `file NAME` writes the here-document `cat > NAME <<'END' ... END` of the `sh` block before
+//! the marker into a scratch folder, and runs the block's commands there, so a script shown is
+//! the script run. `emulate --morph MM` is `cargo xtask emulate --morph MM` in-process (the
+//! real image under QEMU; skipped, loudly, with `MORPHLINK_SKIP_EMULATOR` and no QEMU).
+//! `MORPHLINK_BLESS=1 cargo test -p morphlink-host --test docs` rewrites each marked block with
+//! the output of today's commands.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -42,6 +49,10 @@ struct Block {
     line: usize,
     cmds: Vec<Cmd>,
     tol: f64,
+    /// Leave out the seconds of `[wall N s]` stamps.
+    wall: bool,
+    /// Files to write before the commands run (name, text), from `file NAME`.
+    files: Vec<(String, String)>,
     /// 0-based line range of the block's content (between the fences).
     body: std::ops::Range<usize>,
 }
@@ -78,12 +89,23 @@ fn blocks_in(file: &Path) -> Result<Vec<Block>, String> {
             continue;
         }
         let line = i + 1;
-        let (mut cmds, mut tol) = (Vec::new(), 0.0);
+        let (mut cmds, mut tol, mut wall, mut files) = (Vec::new(), 0.0, false, Vec::new());
         i += 1;
         while i < lines.len() && lines[i].trim() != "-->" {
             let l = lines[i].trim();
             if let Some(t) = l.strip_prefix("tol ") {
                 tol = t.parse().map_err(|e| format!("line {}: tol: {e}", i + 1))?;
+            } else if l == "wall" {
+                wall = true;
+            } else if let Some(name) = l.strip_prefix("file ") {
+                let text = heredoc(&lines[..line], name.trim()).ok_or_else(|| {
+                    format!(
+                        "{}:{}: no `cat > {name} <<'END'` here-document before the marker",
+                        file.display(),
+                        i + 1
+                    )
+                })?;
+                files.push((name.trim().to_string(), text));
             } else if !l.is_empty() {
                 cmds.push(parse_cmd(l).map_err(|e| format!("line {}: {e}", i + 1))?);
             }
@@ -105,6 +127,8 @@ fn blocks_in(file: &Path) -> Result<Vec<Block>, String> {
             line,
             cmds,
             tol,
+            wall,
+            files,
             body: start..end,
         });
         i = end + 1;
@@ -112,22 +136,72 @@ fn blocks_in(file: &Path) -> Result<Vec<Block>, String> {
     Ok(out)
 }
 
+/// The text of the last here-document `cat > NAME <<'END'` ... `END` in `lines`.
+fn heredoc(lines: &[&str], name: &str) -> Option<String> {
+    let open = format!("cat > {name} <<'END'");
+    let start = lines.iter().rposition(|l| l.trim() == open)? + 1;
+    let len = lines[start..].iter().position(|l| l.trim() == "END")?;
+    Some(lines[start..start + len].iter().map(|l| format!("{l}\n")).collect())
+}
+
 fn binary(name: &str) -> Option<&'static str> {
     match name {
         "morph-sim" => Some(env!("CARGO_BIN_EXE_morph-sim")),
         "morph-model" => Some(env!("CARGO_BIN_EXE_morph-model")),
+        "morphctl" => Some(env!("CARGO_BIN_EXE_morphctl")),
         _ => None,
     }
 }
 
-/// What the block's commands print now, stdout then stderr per command.
-fn run(b: &Block) -> Result<Vec<String>, String> {
+/// `emulate --morph MM`: the emulated image's demo morph, as `cargo xtask emulate` prints it;
+/// `None` when QEMU is missing and skipping the emulator was asked for.
+fn emulate(args: &[String]) -> Result<Option<Vec<String>>, String> {
+    use morphlink_host::emulator::{build_image, demo_morph, find_qemu};
+    let radius_mm: f32 = match args {
+        [flag, mm] if flag == "--morph" => mm.parse().map_err(|e| format!("--morph {mm}: {e}"))?,
+        _ => return Err(format!("emulate takes `--morph MM`, not {args:?}")),
+    };
+    let qemu = match find_qemu() {
+        Ok(q) => q,
+        Err(e) if std::env::var_os("MORPHLINK_SKIP_EMULATOR").is_some() => {
+            eprintln!("\n!!!!! EMULATED DOC BLOCK SKIPPED (MORPHLINK_SKIP_EMULATOR): {e} !!!!!\n");
+            return Ok(None);
+        }
+        Err(e) => return Err(format!("{e}\n(set MORPHLINK_SKIP_EMULATOR=1 to skip it)")),
+    };
+    let ws = morphlink_host::workspace::Workspace::containing(&root())?;
+    let image = build_image(&ws.root, &ws.target_dir.join("emulated"))?;
     let mut out = Vec::new();
+    demo_morph(&qemu, &image, radius_mm, &mut |l| out.push(l.to_string()))?;
+    Ok(Some(out))
+}
+
+/// What the block's commands print now, stdout then stderr per command; `None` for a block
+/// that cannot run here (the emulator skipped).
+fn run(b: &Block) -> Result<Option<Vec<String>>, String> {
+    let mut out = Vec::new();
+    let dir = if b.files.is_empty() {
+        root()
+    } else {
+        let d = std::env::temp_dir().join(format!("morphlink-docs-{}-{}", std::process::id(), b.line));
+        std::fs::create_dir_all(&d).map_err(|e| e.to_string())?;
+        for (name, text) in &b.files {
+            std::fs::write(d.join(name), text).map_err(|e| e.to_string())?;
+        }
+        d
+    };
     for c in &b.cmds {
+        if c.bin == "emulate" {
+            match emulate(&c.args)? {
+                Some(lines) => out.extend(lines),
+                None => return Ok(None),
+            }
+            continue;
+        }
         let bin = binary(&c.bin).ok_or_else(|| format!("no binary `{}` to check with", c.bin))?;
         let mut child = Command::new(bin)
             .args(&c.args)
-            .current_dir(root())
+            .current_dir(&dir)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -145,7 +219,10 @@ fn run(b: &Block) -> Result<Vec<String>, String> {
             out.extend(String::from_utf8_lossy(stream).lines().map(str::to_string));
         }
     }
-    Ok(out)
+    if !b.files.is_empty() {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    Ok(Some(out))
 }
 
 /// A line cut into text and numbers: the text must match, the numbers within a tolerance.
@@ -193,13 +270,46 @@ fn pieces(line: &str) -> Vec<Piece> {
 }
 
 fn lines_match(want: &str, got: &str, tol: f64) -> bool {
+    let num = |x: f64, y: f64| (x - y).abs() <= tol + 1e-9 * x.abs();
+    if let Some(prefix) = want.strip_suffix(" ...") {
+        // Every piece of the prefix as it is, the last text piece only as a beginning.
+        let (w, g) = (pieces(prefix), pieces(got));
+        return g.len() >= w.len()
+            && w.iter().zip(&g).enumerate().all(|(k, (a, b))| match (a, b) {
+                (Piece::Text(x), Piece::Text(y)) if k + 1 == w.len() => y.starts_with(x.as_str()),
+                (Piece::Text(x), Piece::Text(y)) => x == y,
+                (Piece::Num(x), Piece::Num(y)) => num(*x, *y),
+                _ => false,
+            });
+    }
     let (w, g) = (pieces(want), pieces(got));
     w.len() == g.len()
         && w.iter().zip(&g).all(|(a, b)| match (a, b) {
             (Piece::Text(x), Piece::Text(y)) => x == y,
-            (Piece::Num(x), Piece::Num(y)) => (x - y).abs() <= tol + 1e-9 * x.abs(),
+            (Piece::Num(x), Piece::Num(y)) => num(*x, *y),
             _ => false,
         })
+}
+
+/// `[wall 12.345 s]` as `[wall s]`: the wall clock's seconds are not compared.
+fn without_wall(line: &str) -> String {
+    match (line.find("[wall "), line.find(" s]")) {
+        (Some(a), Some(b)) if a < b => format!("{}[wall s]{}", &line[..a], &line[b + 3..]),
+        _ => line.to_string(),
+    }
+}
+
+/// The documented lines against the printed ones: `...` takes any lines (none included).
+fn block_matches(want: &[String], got: &[String], tol: f64) -> bool {
+    match want.split_first() {
+        None => got.is_empty(),
+        Some((w, rest)) if w.trim() == "..." => {
+            (0..=got.len()).any(|k| block_matches(rest, &got[k..], tol))
+        }
+        Some((w, rest)) => {
+            !got.is_empty() && lines_match(w, &got[0], tol) && block_matches(rest, &got[1..], tol)
+        }
+    }
 }
 
 fn doc_files() -> Vec<PathBuf> {
@@ -241,6 +351,19 @@ fn numbers_and_words_are_compared_apart() {
         pieces("fv96+cosserat -1.5"),
         vec![Piece::Text("fv96+cosserat ".into()), Piece::Num(-1.5)]
     );
+    // A line ending in ` ...` is a beginning; `...` alone any lines, none included.
+    assert!(lines_match("alarm: heater-not-heating tca ...", "alarm: heater-not-heating tca rose 1.2 K", 0.0));
+    assert!(!lines_match("alarm: heater-not-heating pla ...", "alarm: heater-not-heating tca rose 1.2 K", 0.0));
+    let v = |s: &[&str]| s.iter().map(|l| l.to_string()).collect::<Vec<_>>();
+    assert!(block_matches(&v(&["a", "...", "d"]), &v(&["a", "b", "c", "d"]), 0.0));
+    assert!(block_matches(&v(&["a", "...", "d"]), &v(&["a", "d"]), 0.0));
+    assert!(!block_matches(&v(&["a", "...", "d"]), &v(&["a", "b", "c"]), 0.0));
+    assert!(!block_matches(&v(&["a", "b"]), &v(&["a", "b", "c"]), 0.0));
+    assert_eq!(without_wall("[wall     0.930 s] > SIM CLEAR"), "[wall s] > SIM CLEAR");
+    assert_eq!(
+        heredoc(&["x", "cat > s.txt <<'END'", "MORPH 38", "wait done", "END", "y"], "s.txt").as_deref(),
+        Some("MORPH 38\nwait done\n")
+    );
     assert_eq!(
         parse_cmd(r#"morph-sim --speed max < "MORPH 38\n""#).unwrap(),
         Cmd {
@@ -266,7 +389,10 @@ fn documented_outputs_match_the_commands() {
         // From the last block up, so a rewrite keeps the earlier blocks' line numbers.
         for b in blocks.iter().rev() {
             checked += 1;
-            let got = run(b).unwrap_or_else(|e| panic!("{}:{}: {e}", file.display(), b.line));
+            let Some(got) = run(b).unwrap_or_else(|e| panic!("{}:{}: {e}", file.display(), b.line))
+            else {
+                continue;
+            };
             let shown: Vec<String> = lines[b.body.clone()]
                 .iter()
                 .filter(|l| l.starts_with("$ "))
@@ -276,8 +402,10 @@ fn documented_outputs_match_the_commands() {
                 .iter()
                 .filter(|l| !l.starts_with("$ "))
                 .collect();
-            let ok = want.len() == got.len()
-                && want.iter().zip(&got).all(|(w, g)| lines_match(w, g, b.tol));
+            let fix = |l: &String| if b.wall { without_wall(l) } else { l.clone() };
+            let want_cmp: Vec<String> = want.iter().map(|l| fix(l)).collect();
+            let got_cmp: Vec<String> = got.iter().map(fix).collect();
+            let ok = block_matches(&want_cmp, &got_cmp, b.tol);
             if !ok {
                 failures.push(format!(
                     "{}:{}: `{}` prints\n{}\nbut the doc shows\n{}",

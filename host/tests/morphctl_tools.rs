@@ -151,21 +151,23 @@ while IFS= read -r line; do
   esac
 done"#,
     );
-    let out = morphctl(&[
-        "--sim",
-        "--sim-program",
-        device.to_str().unwrap(),
-        "morph",
-        "38",
-    ]);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(0), "{stdout}{err}");
-    assert!(
-        stdout.contains("waiting for the first sensor reading"),
-        "{stdout}"
-    );
-    assert!(stdout.contains("event: done"), "{stdout}");
+    // As a simulator's child, and over TCP as the emulated image serves its USART1.
+    let (addr, server) = tcp_serve(device.clone(), Vec::new());
+    for args in [
+        vec!["--sim", "--sim-program", device.to_str().unwrap(), "morph", "38"],
+        vec!["--tcp", &addr, "morph", "38"],
+    ] {
+        let out = morphctl(&args);
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {stdout}{err}");
+        assert!(
+            stdout.contains("waiting for the first sensor reading"),
+            "{args:?}: {stdout}"
+        );
+        assert!(stdout.contains("event: done"), "{args:?}: {stdout}");
+    }
+    server.join().unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -486,14 +488,18 @@ fn sigint_during_a_script_sleep_ends_in_abort_and_heaters_off() {
 /// A TCP serial port in front of a fresh morph-sim per connection, as the emulated image
 /// serves its USART1: the address and the thread serving it.
 fn tcp_sim(speed: &str) -> (String, std::thread::JoinHandle<()>) {
+    tcp_serve(MORPH_SIM.into(), vec!["--speed".into(), speed.into()])
+}
+
+/// A TCP serial port in front of `program` (a fresh one for the one connection it takes).
+fn tcp_serve(program: PathBuf, args: Vec<String>) -> (String, std::thread::JoinHandle<()>) {
     use std::io::{Read, Write};
     let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
-    let speed = speed.to_string();
     let handle = std::thread::spawn(move || {
         let (mut sock, _) = listener.accept().unwrap();
-        let mut sim = Command::new(MORPH_SIM)
-            .args(["--speed", &speed])
+        let mut sim = Command::new(program)
+            .args(args)
             .stdin(std::process::Stdio::piped())
             .stdout(std::process::Stdio::piped())
             .spawn()
@@ -710,4 +716,53 @@ fn config_set_with_save_says_saved_once() {
     assert_eq!(out.status.code(), Some(1), "{stdout}");
     assert!(stdout.contains("(set, but not saved"), "{stdout}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn keys_typed_during_a_calibrate_morph_do_not_answer_its_prompt() {
+    use std::io::{BufRead, BufReader, Write};
+    use std::os::fd::{FromRawFd, OwnedFd};
+    // stdin a terminal (a pseudo-terminal), as at a lab's keyboard: an Enter pressed during
+    // the morph would skip its measurement if it reached the prompt.
+    let (mut master, mut slave) = (0, 0);
+    // SAFETY: openpty writes two new descriptors, owned below.
+    let rc = unsafe {
+        libc::openpty(
+            &mut master,
+            &mut slave,
+            std::ptr::null_mut(),
+            std::ptr::null(),
+            std::ptr::null(),
+        )
+    };
+    assert_eq!(rc, 0, "openpty: {}", std::io::Error::last_os_error());
+    // SAFETY: both descriptors were just opened and nothing else owns them.
+    let (master, slave) = unsafe { (OwnedFd::from_raw_fd(master), OwnedFd::from_raw_fd(slave)) };
+    let mut keys = std::fs::File::from(master);
+    let mut child = Command::new(MORPHCTL)
+        .args(["--sim", "--sim-speed", "50", "calibrate", "--radii", "38"])
+        .stdin(std::process::Stdio::from(slave))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut seen = String::new();
+    let mut typed_ahead = false;
+    for line in BufReader::new(child.stdout.take().unwrap()).lines() {
+        let line = line.unwrap();
+        seen.push_str(&line);
+        seen.push('\n');
+        if line.contains("event: phase bend") && !typed_ahead {
+            keys.write_all(b"\n").unwrap();
+            typed_ahead = true;
+        }
+        if line.starts_with("measured radius of this morph") {
+            keys.write_all(b"38.1\n").unwrap();
+        }
+    }
+    let status = child.wait().unwrap();
+    assert!(typed_ahead, "{seen}");
+    assert!(status.success(), "{seen}");
+    assert!(!seen.contains("calibrate: skipped"), "{seen}");
+    assert!(seen.contains("1 measured morph(s) counted"), "{seen}");
 }

@@ -1,13 +1,11 @@
 //! `cargo xtask emulate`: build the emulated firmware image and boot it under QEMU's
 //! b-l475e-iot01a machine, either serving USART1 on a loopback TCP port for any client, or
 //! running one morph and printing what the firmware says.
-use morphlink::protocol::{classify, LineKind};
 use morphlink_host::emulator::{
-    build_image, find_qemu, qemu_command, run_to_end_or_signal, Clock, Emulator, Ended,
+    build_image, demo_morph, find_qemu, qemu_command, run_to_end_or_signal, Clock, Ended,
 };
 use morphlink_host::workspace::Workspace;
 use std::path::Path;
-use std::time::{Duration, Instant};
 
 /// Options of `cargo xtask emulate`.
 #[derive(clap::Args)]
@@ -19,9 +17,6 @@ pub struct Args {
     #[arg(long, conflicts_with = "port")]
     morph: Option<f32>,
 }
-
-/// Longest wall time allowed for the demo morph.
-const DEMO_TIMEOUT: Duration = Duration::from_secs(120);
 
 /// Runs the task.
 pub fn run(args: &Args, ws: &Workspace) -> Result<(), String> {
@@ -77,40 +72,18 @@ fn serve(qemu: &Path, image: &Path, port: u16) -> Result<(), String> {
 }
 
 fn demo(qemu: &Path, image: &Path, radius_mm: f32) -> Result<(), String> {
-    let started = Instant::now();
-    let mut emu = Emulator::boot(qemu, image)?;
-    println!("{}", emu.transcript[0]);
-    eprintln!("booted in {:.0} ms", emu.boot_time.as_secs_f64() * 1000.0);
-    emu.wait_ready(Duration::from_secs(5))?;
-    let morph_start = Instant::now();
-    for l in emu.command(&format!("MORPH {radius_mm}"), Duration::from_secs(5))? {
+    let mut done_t = String::from("?");
+    let times = demo_morph(qemu, image, radius_mm, &mut |l| {
         println!("{l}");
-        if classify(&l) == LineKind::Error {
-            return Err(format!("the firmware refused MORPH {radius_mm}"));
+        if let Some(t) = l.strip_prefix("event: done t=").and_then(|r| r.split(' ').next()) {
+            done_t = t.to_string();
         }
-    }
-    loop {
-        let l = emu.next_line(DEMO_TIMEOUT)?;
-        println!("{l}");
-        match classify(&l) {
-            LineKind::Alarm => return Err("the morph ended in a fault".into()),
-            LineKind::Done => break,
-            _ => {}
-        }
-    }
-    let morph_wall = morph_start.elapsed();
-    for l in emu.command("SIM STATE", Duration::from_secs(5))? {
-        println!("{l}");
-    }
-    // The control loop's timing over the morph (docs/firmware.md, "Tick time under QEMU").
-    for l in emu.command("STATS", Duration::from_secs(5))? {
-        println!("{l}");
-    }
+    })?;
     eprintln!(
-        "morph took {:.1} s of wall time ({} s of firmware time at the emulated build's speed-up); {:.1} s in all",
-        morph_wall.as_secs_f64(),
-        emu.transcript.iter().rev().find_map(|l| l.strip_prefix("event: done t=").and_then(|r| r.split(' ').next())).unwrap_or("?"),
-        started.elapsed().as_secs_f64()
+        "booted in {:.0} ms; the morph took {:.1} s of wall time ({done_t} s of firmware time at the emulated build's speed-up); {:.1} s in all",
+        times.boot.as_secs_f64() * 1000.0,
+        times.morph.as_secs_f64(),
+        times.total.as_secs_f64()
     );
     Ok(())
 }
