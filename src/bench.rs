@@ -34,6 +34,7 @@ pub const SIM_DRIFT_MAX_K_PER_S: f32 = 10.0;
 pub const NOMINAL_LINK: LumpedSpec = LumpedSpec {
     params: crate::link::LINK,
     heater_ohm: [30.0, 6.5],
+    heater_tcr_per_k: morphlink_plant::lumped::HEATER_TCR_NOMINAL_PER_K,
     supply_v: 12.0,
     sensor_tau_s: [3.0, 3.0, 3.0],
 };

@@ -50,6 +50,10 @@ pub struct Sample {
     pub supply_v: f64,
     /// True bending radius of the link, mm.
     pub radius_mm: f64,
+    /// The heaters' true resistances at this step (PLA wrap, TCA), Ω: what a board that senses
+    /// its heaters' current measures. `None`: the plant does not say, and the board it runs on
+    /// senses no current (the paper's wiring).
+    pub heater_ohm: Option<[f64; 2]>,
 }
 
 /// Inside values a sensor cannot give: for `SIM STATE`, charts and the ensemble's peak checks.

@@ -20,14 +20,25 @@ use morphlink_model::LinkParams;
 pub struct LumpedSpec {
     /// The link's true physical parameters (h, ambient, fitted constants...).
     pub params: LinkParams,
-    /// True heater resistances, Ω: PLA wrap, TCA.
+    /// True heater resistances at [`HEATER_REF_C`], Ω: PLA wrap, TCA.
     pub heater_ohm: [f64; 2],
+    /// Temperature coefficients of the heaters' resistances, 1/K (PLA wrap, TCA): each heater's
+    /// resistance follows its own node's temperature, and its power with it.
+    pub heater_tcr_per_k: [f64; 2],
     /// True heater supply, V.
     pub supply_v: f64,
     /// Thermistor time constants (PLA, TCA, ambient), s. Datasheets give 6.5–12 s in still air
     /// for a bare bead; embedded in silicone against the heater it is faster: 3 s.
     pub sensor_tau_s: [f64; 3],
 }
+
+/// Temperature at which [`LumpedSpec::heater_ohm`] holds, °C.
+pub const HEATER_REF_C: f64 = 22.0;
+
+/// The heaters' nominal temperature coefficients, 1/K: the nichrome wrap's (Ni80Cr20, about
+/// 1e-4/K) and the silver-coated TCA's (1.5e-3/K, an estimate: docs/plant.md). The lumped
+/// TCA has no strain term: its resistance follows its temperature only.
+pub const HEATER_TCR_NOMINAL_PER_K: [f64; 2] = [1.0e-4, 1.5e-3];
 
 /// The lumped link's state.
 #[derive(Clone, Debug)]
@@ -68,12 +79,22 @@ impl Lumped {
         let v = self.spec.supply_v;
         duty.clamp(0.0, 1.0) * v * v / ohm
     }
+
+    /// Each heater's resistance at its node's temperature now, Ω (PLA wrap, TCA).
+    pub fn heater_ohm_now(&self) -> [f64; 2] {
+        let t = [self.net.temp_c[node::PLA], self.net.temp_c[node::TCA]];
+        core::array::from_fn(|i| {
+            let r = self.spec.heater_ohm[i];
+            (r * (1.0 + self.spec.heater_tcr_per_k[i] * (t[i] - HEATER_REF_C))).max(1e-3 * r)
+        })
+    }
 }
 
 impl Plant for Lumped {
     fn step(&mut self, dt_s: f64, duty: Duties) {
-        let p_pla = self.heater_power_w(self.spec.heater_ohm[0], duty.pla);
-        let p_tca = self.heater_power_w(self.spec.heater_ohm[1], duty.tca);
+        let [r_pla, r_tca] = self.heater_ohm_now();
+        let p_pla = self.heater_power_w(r_pla, duty.pla);
+        let p_tca = self.heater_power_w(r_tca, duty.tca);
         self.powers_w = [p_pla, p_tca];
         let amb = self.spec.params.surroundings.ambient_c;
         self.net.advance(dt_s, p_tca, p_pla, amb);
@@ -103,6 +124,7 @@ impl Plant for Lumped {
             t_amb_c,
             supply_v: self.spec.supply_v,
             radius_mm: 1e3 / self.kappa_per_m,
+            heater_ohm: Some(self.heater_ohm_now()),
         }
     }
 
@@ -140,6 +162,7 @@ mod tests {
         LumpedSpec {
             params: morphlink_model::LinkParams::DEFAULT,
             heater_ohm: [30.0, 6.5],
+            heater_tcr_per_k: [0.0; 2],
             supply_v: 12.0,
             sensor_tau_s: [3.0; 3],
         }

@@ -16,7 +16,7 @@
 //! | rig | `hello protocol=1 tick_s=<s>` | once, at start |
 //! | rig | `step dt_s=<s> pla_duty=<0..1> tca_duty=<0..1>` | hold these duties for `dt_s`, then reply |
 //! | rig | `set supply_v=<V>`, `set ambient_c=<°C>`, `set medium=<water\|air>` | a `SIM` change |
-//! | plant | `ok t_pla_c=<°C> t_tca_c=<°C> t_amb_c=<°C> supply_v=<V> radius_mm=<mm>` | to every line |
+//! | plant | `ok t_pla_c=<°C> t_tca_c=<°C> t_amb_c=<°C> supply_v=<V> radius_mm=<mm>` and optionally `r_pla_ohm=<Ω> r_tca_ohm=<Ω>` | to every line; the resistances (both or neither) are the heaters' true ones at this step, for a board that senses current |
 //! | plant | `error: <text>` | refused; `error: unsupported ...` to a `set` it cannot do |
 //!
 //! ```text
@@ -142,7 +142,11 @@ pub fn write_ok(w: &mut impl Write, s: &Sample) -> fmt::Result {
         w,
         "{OK} t_pla_c={} t_tca_c={} t_amb_c={} supply_v={} radius_mm={}",
         s.t_pla_c, s.t_tca_c, s.t_amb_c, s.supply_v, s.radius_mm
-    )
+    )?;
+    match s.heater_ohm {
+        Some([pla, tca]) => write!(w, " r_pla_ohm={pla} r_tca_ohm={tca}"),
+        None => Ok(()),
+    }
 }
 
 /// Writes `error: <text>`, without its `\n`.
@@ -272,7 +276,30 @@ pub fn parse_reply(line: &str) -> Result<Reply<'_>, ParseError> {
         t_amb_c: kv.number("t_amb_c")?,
         supply_v: kv.number("supply_v")?,
         radius_mm: kv.number("radius_mm")?,
+        heater_ohm: heater_ohm(kv)?,
     }))
+}
+
+/// The optional `r_pla_ohm=` and `r_tca_ohm=`: both, positive and finite, or neither (a plant
+/// that reports none runs on a board without current sense).
+fn heater_ohm(kv: KeyValues<'_>) -> Result<Option<[f64; 2]>, ParseError> {
+    let ohm = |key| -> Result<Option<f64>, ParseError> {
+        match kv.get(key) {
+            None => Ok(None),
+            Some(_) => kv
+                .number(key)
+                .ok()
+                .filter(|r| *r > 0.0)
+                .map(Some)
+                .ok_or(ParseError::BadValue(key)),
+        }
+    };
+    match (ohm("r_pla_ohm")?, ohm("r_tca_ohm")?) {
+        (Some(pla), Some(tca)) => Ok(Some([pla, tca])),
+        (None, None) => Ok(None),
+        (None, Some(_)) => Err(ParseError::Missing("r_pla_ohm")),
+        (Some(_), None) => Err(ParseError::Missing("r_tca_ohm")),
+    }
 }
 
 /// Writes the plant's one reply line (without its `\n`) to the request `line`: steps or sets
@@ -351,6 +378,7 @@ mod tests {
         t_amb_c: 22.0,
         supply_v: 11.999_999_999_9,
         radius_mm: 37.812_5,
+        heater_ohm: Some([30.000_000_1, 6.51]),
     };
 
     #[test]
@@ -406,9 +434,24 @@ mod tests {
                 t_tca_c: 23.5,
                 t_amb_c: 22.0,
                 supply_v: 12.0,
-                radius_mm: 46.25
+                radius_mm: 46.25,
+                heater_ohm: None,
             })),
             "ok t_pla_c=22 t_tca_c=23.5 t_amb_c=22 supply_v=12 radius_mm=46.25"
+        );
+        // The resistances: both or neither, positive.
+        assert_eq!(
+            parse_reply("ok t_pla_c=22 t_tca_c=23.5 t_amb_c=22 supply_v=12 radius_mm=46.25 r_tca_ohm=6.5 r_pla_ohm=30")
+                .map(|r| match r { Reply::Ok(s) => s.heater_ohm, _ => None }),
+            Ok(Some([30.0, 6.5]))
+        );
+        assert_eq!(
+            parse_reply("ok t_pla_c=22 t_tca_c=23.5 t_amb_c=22 supply_v=12 radius_mm=46.25 r_tca_ohm=6.5"),
+            Err(ParseError::Missing("r_pla_ohm"))
+        );
+        assert_eq!(
+            parse_reply("ok t_pla_c=22 t_tca_c=23.5 t_amb_c=22 supply_v=12 radius_mm=46.25 r_pla_ohm=0 r_tca_ohm=6.5"),
+            Err(ParseError::BadValue("r_pla_ohm"))
         );
         assert_eq!(reply(&Reply::Error("boom")), "error: boom");
         assert_eq!(parse_reply("error: boom\r\n"), Ok(Reply::Error("boom")));
@@ -429,7 +472,8 @@ mod tests {
                 t_tca_c: 30.0,
                 t_amb_c: 20.0,
                 supply_v: 12.0,
-                radius_mm: 40.0
+                radius_mm: 40.0,
+                heater_ohm: None,
             }))
         );
         assert_eq!(
@@ -530,6 +574,7 @@ mod tests {
         let spec = LumpedSpec {
             params: morphlink_model::LinkParams::DEFAULT,
             heater_ohm: [30.0, 6.5],
+            heater_tcr_per_k: crate::lumped::HEATER_TCR_NOMINAL_PER_K,
             supply_v: 12.0,
             sensor_tau_s: [3.0; 3],
         };

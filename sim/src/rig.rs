@@ -42,6 +42,7 @@ impl LinkSetup {
         Lumped::new(LumpedSpec {
             params: self.params,
             heater_ohm: self.heater_ohm,
+            heater_tcr_per_k: morphlink_plant::lumped::HEATER_TCR_NOMINAL_PER_K,
             supply_v: self.supply_v,
             sensor_tau_s: self.sensor_tau_s,
         })

@@ -57,6 +57,9 @@ pub struct Hifi {
     tca: Tca,
     beads: [Bead; 3],
     kappa_per_m: f64,
+    /// The curvature the TCA's resistance was measured at (the link as built), 1/m: its strain
+    /// counts from there.
+    kappa_ref_per_m: f64,
     powers_w: [f64; 2],
     time_s: f64,
 }
@@ -76,12 +79,14 @@ impl Hifi {
             tca,
             beads: [Bead { temp_c: amb }; 3],
             kappa_per_m: 0.0,
+            kappa_ref_per_m: 0.0,
             powers_w: [0.0; 2],
             time_s: 0.0,
         };
         let rest = hifi.balance_per_m(false);
         hifi.rod = Rod::new(hifi.section.grid(), rest);
         hifi.kappa_per_m = rest;
+        hifi.kappa_ref_per_m = rest;
         for (b, s) in hifi.beads.iter_mut().zip(&hifi.spec.beads) {
             let r = bead::resistance_ohm(s, amb);
             b.temp_c = amb + bead::self_heating_w(r) / s.dissipation_w_k;
@@ -162,6 +167,24 @@ impl Hifi {
             / (b_sil + b_pla + r * r * l * k)
     }
 
+    /// The TCA coil's strain now (shortening negative): it sits `tca_offset_m` off the axis,
+    /// on the side a tighter bend shortens.
+    pub fn tca_strain(&self) -> f64 {
+        -self.spec.params.geometry.tca_offset_m * (self.kappa_per_m - self.kappa_ref_per_m)
+    }
+
+    /// The heaters' true resistances now, Ω (PLA wrap at the rod's mean temperature; TCA at
+    /// its mean temperature and strain).
+    pub fn heater_ohm_now(&self) -> [f64; 2] {
+        let (t_tca, t_pla) = self.section.means_c();
+        let pla = self.spec.pla_heater_ohm
+            * (1.0 + self.spec.pla_heater_tcr_per_k * (t_pla - spec::TCA_R_REF_C));
+        [
+            pla.max(1e-3),
+            tca::resistance_ohm(&self.spec.tca, t_tca, self.tca_strain()),
+        ]
+    }
+
     fn supply_power_w(&self, ohm: f64, duty: f64) -> f64 {
         let d = if duty.is_finite() {
             duty.clamp(0.0, 1.0)
@@ -178,9 +201,9 @@ impl Plant for Hifi {
         if !(dt_s > 0.0) || !dt_s.is_finite() {
             return;
         }
-        let (t_tca0, _) = self.section.means_c();
-        let p_pla = self.supply_power_w(self.spec.pla_heater_ohm, duty.pla);
-        let p_tca = self.supply_power_w(tca::resistance_ohm(&self.spec.tca, t_tca0), duty.tca);
+        let [r_pla, r_tca] = self.heater_ohm_now();
+        let p_pla = self.supply_power_w(r_pla, duty.pla);
+        let p_tca = self.supply_power_w(r_tca, duty.tca);
         let amb = self.spec.ambient_c;
         if self.section.step(dt_s, p_tca, p_pla, amb).is_err() {
             return;
@@ -213,6 +236,7 @@ impl Plant for Hifi {
             t_amb_c: read(2),
             supply_v: self.spec.supply_v,
             radius_mm: 1e3 / self.kappa_per_m,
+            heater_ohm: Some(self.heater_ohm_now()),
         }
     }
 

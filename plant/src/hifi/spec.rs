@@ -57,9 +57,24 @@ pub const HEATER_OHM_NOMINAL: [f64; 2] = [30.0, 6.5];
 pub const TCA_R_REF_C: f64 = 22.0;
 /// Temperature coefficient of the TCA's resistance, 1/K: silver's is 3.8e-3/K, but the
 /// plated thread's resistance is partly contact resistance between filaments that does not
-/// follow the metal; 1.5e-3/K is an estimate (20 % more resistance at 150 °C). Nichrome's
-/// (1e-4/K) is left out: the wrap's resistance is constant.
+/// follow the metal; 1.5e-3/K is an estimate (20 % more resistance at 150 °C).
 pub const TCA_TCR_PER_K: f64 = 1.5e-3;
+/// Spread of the TCA's temperature coefficient over the ensemble, 1/K (estimate: half to one
+/// and a half times the nominal).
+pub const TCA_TCR_RANGE_PER_K: (f64, f64) = (0.75e-3, 2.25e-3);
+/// The TCA's resistance against its strain (gauge factor, ΔR/R per unit strain of the coil):
+/// bending the link towards the TCA shortens the coil (it sits `tca_offset_m` off the axis), and
+/// the plated thread's contacts between turns change with it. No source gives the number for
+/// this coil; 0.3 is an estimate, sign included (a coil drawn shorter closing its turns on each
+/// other would lower it: positive). A 12 mm change of radius around 40 mm strains the coil
+/// about 3 %, so 0.3 is 1 % of resistance, some 6 K of the temperature term's worth.
+pub const TCA_GAUGE: f64 = 0.3;
+/// Spread of the gauge factor over the ensemble, both signs (estimate).
+pub const TCA_GAUGE_RANGE: (f64, f64) = (-0.3, 0.9);
+/// Temperature coefficient of the nichrome wrap's resistance, 1/K (Ni80Cr20, about 1e-4/K).
+pub const PLA_HEATER_TCR_PER_K: f64 = 1.0e-4;
+/// Its spread over the ensemble, 1/K (alloys and datasheets give 0.5–1.7e-4/K).
+pub const PLA_HEATER_TCR_RANGE_PER_K: (f64, f64) = (0.5e-4, 1.7e-4);
 /// Heater resistance factor range: ±10 % (hand-wound wrap, the TCA's 5–8 Ω narrowed by
 /// measuring it once), as the lumped ensemble.
 pub const HEATER_SCALE_RANGE: (f64, f64) = (0.9, 1.1);
@@ -226,6 +241,8 @@ pub struct TcaSpec {
     pub r_ref_ohm: f64,
     /// Temperature coefficient of resistance, 1/K.
     pub tcr_per_k: f64,
+    /// Gauge factor: ΔR/R per unit strain of the coil (shortening is negative strain).
+    pub gauge: f64,
     /// Half-width of the force–temperature play, K.
     pub hysteresis_half_k: f64,
     /// Share of free stroke lost to creep at equilibrium.
@@ -265,8 +282,10 @@ pub struct HifiSpec {
     pub ambient_c: f64,
     /// Heater supply, V.
     pub supply_v: f64,
-    /// Nichrome wrap resistance, Ω (constant).
+    /// Nichrome wrap resistance at [`TCA_R_REF_C`], Ω.
     pub pla_heater_ohm: f64,
+    /// Temperature coefficient of the wrap's resistance, 1/K (it follows the rod's mean).
+    pub pla_heater_tcr_per_k: f64,
     /// TCA.
     pub tca: TcaSpec,
     /// PLA.
@@ -314,11 +333,13 @@ impl HifiSpec {
             ambient_c: params.surroundings.ambient_c,
             supply_v: SUPPLY_NOMINAL_V,
             pla_heater_ohm: HEATER_OHM_NOMINAL[0],
+            pla_heater_tcr_per_k: PLA_HEATER_TCR_PER_K,
             tca: TcaSpec {
                 law: PhysicsLaw::identified(&params, 100.0),
                 stroke_coeffs: [0.0; 3],
                 r_ref_ohm: HEATER_OHM_NOMINAL[1],
                 tcr_per_k: TCA_TCR_PER_K,
+                gauge: TCA_GAUGE,
                 hysteresis_half_k: TCA_HYSTERESIS_HALF_K,
                 creep_fraction: TCA_CREEP_FRACTION,
                 creep_time_s: TCA_CREEP_TIME_S,
@@ -410,6 +431,13 @@ impl HifiSpec {
             uniform(&mut s, CALIBRATION_OFFSET_RANGE),
             uniform(&mut s, CALIBRATION_SLOPE_RANGE),
         );
+        // The resistances' coefficients from a stream of their own, so adding them left every
+        // earlier draw of the ensemble as it was.
+        let mut e = s ^ 0x5eed_e1ec_0000_0001;
+        splitmix(&mut e);
+        spec.pla_heater_tcr_per_k = uniform(&mut e, PLA_HEATER_TCR_RANGE_PER_K);
+        spec.tca.tcr_per_k = uniform(&mut e, TCA_TCR_RANGE_PER_K);
+        spec.tca.gauge = uniform(&mut e, TCA_GAUGE_RANGE);
         spec.identify()?;
         Ok(spec)
     }

@@ -20,9 +20,10 @@ pub fn free_stroke_m(spec: &TcaSpec, temp_c: f64) -> f64 {
     a + b * u + c * u * u
 }
 
-/// Resistance at `temp_c`, Ω.
-pub fn resistance_ohm(spec: &TcaSpec, temp_c: f64) -> f64 {
-    (spec.r_ref_ohm * (1.0 + spec.tcr_per_k * (temp_c - TCA_R_REF_C))).max(1e-3)
+/// Resistance at mean temperature `temp_c` and coil strain `strain` (shortening negative), Ω.
+pub fn resistance_ohm(spec: &TcaSpec, temp_c: f64, strain: f64) -> f64 {
+    (spec.r_ref_ohm * (1.0 + spec.tcr_per_k * (temp_c - TCA_R_REF_C) + spec.gauge * strain))
+        .max(1e-3)
 }
 
 impl Tca {

@@ -331,7 +331,7 @@ fn tca_creeps_slowly_and_its_resistance_follows_its_temperature() {
         "{fresh} {ten} {long}"
     );
     assert!(fresh - long > 0.5 * s.creep_fraction * (fresh - tca::free_stroke_m(&s, 22.0)));
-    assert!(tca::resistance_ohm(&s, 100.0) > 1.1 * tca::resistance_ohm(&s, 22.0));
+    assert!(tca::resistance_ohm(&s, 100.0, 0.0) > 1.1 * tca::resistance_ohm(&s, 22.0, 0.0));
     // Through the plant: the same duty delivers less power as the TCA warms.
     let mut h = link(8);
     let d = Duties {
@@ -351,10 +351,12 @@ fn hifi_tca_rises_more_slowly_than_the_lumped_network() {
     let p = LinkParams::DEFAULT;
     let mut s = HifiSpec::nominal(p, Grid::Reduced).unwrap();
     s.tca.tcr_per_k = 0.0;
+    s.pla_heater_tcr_per_k = 0.0;
     let mut h = Hifi::new(s).unwrap();
     let mut l = Lumped::new(LumpedSpec {
         params: p,
         heater_ohm: spec::HEATER_OHM_NOMINAL,
+        heater_tcr_per_k: [0.0; 2],
         supply_v: spec::SUPPLY_NOMINAL_V,
         sensor_tau_s: [3.0; 3],
     });
@@ -513,4 +515,32 @@ fn cost_per_simulated_second() {
             run * 1e3
         );
     }
+}
+
+#[test]
+fn the_heaters_resistances_follow_their_temperatures_and_the_tca_its_strain() {
+    let mut h = link(8);
+    let [pla0, tca0] = h.sample().heater_ohm.unwrap();
+    assert_eq!([pla0, tca0], h.heater_ohm_now());
+    let d = Duties {
+        pla: 0.6,
+        tca: tca_duty(1.0),
+    };
+    for _ in 0..600 {
+        h.step(0.1, d);
+    }
+    let t = h.truth();
+    let [pla, tca] = h.sample().heater_ohm.unwrap();
+    let s = h.spec();
+    // The wrap: only its small coefficient over the rod's rise.
+    let want_pla = s.pla_heater_ohm * (1.0 + s.pla_heater_tcr_per_k * (t.pla_c - spec::TCA_R_REF_C));
+    assert!((pla - want_pla).abs() < 1e-9 && pla > pla0, "{pla} {want_pla}");
+    // The TCA: its temperature term and its strain term, the bend shortening the coil.
+    let strain = h.tca_strain();
+    assert!(strain < 0.0, "a tighter bend shortens the coil: {strain}");
+    let want_tca = s.tca.r_ref_ohm
+        * (1.0 + s.tca.tcr_per_k * (t.tca_c - spec::TCA_R_REF_C) + s.tca.gauge * strain);
+    assert!((tca - want_tca).abs() < 1e-9, "{tca} {want_tca}");
+    // Power is duty x V^2 / R at the resistance of the step's start.
+    assert!(t.tca_w < tca_duty(1.0) * s.supply_v * s.supply_v / tca0);
 }
