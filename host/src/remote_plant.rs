@@ -95,6 +95,7 @@ impl RemotePlant {
                 t_amb_c: f64::NAN,
                 supply_v: f64::NAN,
                 radius_mm: f64::NAN,
+                heater_ohm: None,
             },
             time_s: 0.0,
             failure: None,
