@@ -1,7 +1,9 @@
 //! The simulated board around a plant: what stands between a simulated link and the
 //! controller on a real board. The heater output stage (duties that hold only while the
-//! controller refreshes them, a stuck MOSFET, an open heater), the
-//! thermistor dividers and ADC (with noise, an open or shorted thermistor) and the `SIM`
+//! controller refreshes them, a stuck MOSFET, an open heater, the supply's cut-off), the
+//! thermistor dividers and ADC (with noise, an open or shorted thermistor), the heaters'
+//! shunt amplifiers (where the plant reports its heaters' resistances: gain error, offset,
+//! noise, the ADC's steps, samples inside the pulse and inside the off-time) and the `SIM`
 //! commands. The plant (`morphlink-plant`) gives bead temperatures, supply and radius; this
 //! module turns them into the ADC frame the controller reads and turns the controller's duties
 //! into what reaches the heaters.
@@ -10,6 +12,7 @@
 //! run the same board model. Built with the `sim` feature; `no_std` and allocation-free.
 
 use crate::controller::{Config, Inputs, Outputs};
+use crate::electrical::{CurrentCounts, PROBE_DUTY, PROBE_TICK_DUTY};
 use crate::heater::CommandWatchdog;
 use crate::protocol::reply::SimSetting;
 use crate::protocol::{format_error, reply, Medium, OutLine, SimCommand, SimFault};
@@ -38,6 +41,15 @@ pub const NOMINAL_LINK: LumpedSpec = LumpedSpec {
     supply_v: 12.0,
     sensor_tau_s: [3.0, 3.0, 3.0],
 };
+
+/// The simulated board's current-sense chain, per heater (PLA, TCA): gain errors (a 1 %
+/// shunt and the amplifier's 1 % gain error, one sign each), offset at the ADC, A, and
+/// noise of one tick's reading, A (the amplifier's and the ADC's, a few counts).
+pub const SENSE_GAIN_ERROR: [f32; 2] = [0.012, -0.015];
+/// Offset of the current-sense chain at the ADC, A (an INA180's 150 µV at gain 20 is 3 mA).
+pub const SENSE_OFFSET_A: f32 = 0.003;
+/// Noise of one tick's current reading, A (standard deviation).
+pub const SENSE_NOISE_A: f32 = 0.003;
 
 /// The rig's side of the thermistors: noise on their readings and its seed.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -70,8 +82,27 @@ pub struct Bench<P> {
     drift: [Option<(f32, Option<u64>)>; 3],
     heater_open: [bool; 2],
     heater_stuck: [bool; 2],
-    output: [CommandWatchdog; 2],
+    /// The cut-off never opens (`SIM FAULT cutoff-stuck`).
+    cutoff_stuck: bool,
+    /// PLA, TCA and the cut-off (1 closed, 0 open): each holds only while refreshed.
+    output: [CommandWatchdog; 3],
     rng: u64,
+    /// The current sense's own noise, apart from the thermistors' (so a board with current
+    /// sense reads its thermistors exactly as one without).
+    current_rng: u64,
+}
+
+/// Approximately standard normal noise from `rng` (xorshift; the sum of four uniforms).
+fn gaussian(rng: &mut u64) -> f64 {
+    let mut s = 0.0;
+    for _ in 0..4 {
+        *rng ^= *rng << 13;
+        *rng ^= *rng >> 7;
+        *rng ^= *rng << 17;
+        s += (*rng >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+    }
+    // Four uniforms on [-0.5, 0.5] have variance 1/3.
+    s * libm::sqrt(3.0)
 }
 
 impl<P: Plant> Bench<P> {
@@ -86,8 +117,10 @@ impl<P: Plant> Bench<P> {
             drift: [None; 3],
             heater_open: [false; 2],
             heater_stuck: [false; 2],
-            output: [CommandWatchdog::default(); 2],
+            cutoff_stuck: false,
+            output: [CommandWatchdog::default(); 3],
             rng: noise.seed | 1,
+            current_rng: (noise.seed ^ 0xc0ff_ee00_1234_5678) | 1,
         }
     }
 
@@ -112,58 +145,95 @@ impl<P: Plant> Bench<P> {
         [t.pla_w, t.tca_w]
     }
 
-    /// The duty that reaches heater `i` (0 PLA, 1 TCA) when `duty` is commanded.
-    fn delivered(&self, i: usize, duty: f32) -> f64 {
-        if self.heater_open[i] {
+    /// Whether the board senses its heaters' current: the plant reports their resistances.
+    pub fn senses_current(&self) -> bool {
+        self.plant.sample().heater_ohm.is_some()
+    }
+
+    /// Whether the heaters have a supply at `now_ms`: the cut-off closed, or stuck closed.
+    fn supplied(&self, now_ms: u64) -> bool {
+        self.cutoff_stuck || self.applied(now_ms).supply_on
+    }
+
+    /// The duty that reaches heater `i` (0 PLA, 1 TCA) when `duty` is commanded and the supply
+    /// is `supplied`; below the probe duty a board that senses current adds its probe pulse.
+    fn delivered(&self, i: usize, duty: f32, supplied: bool, sensing: bool) -> f64 {
+        if !supplied || self.heater_open[i] {
             0.0
         } else if self.heater_stuck[i] {
             1.0
+        } else if sensing && duty < PROBE_DUTY {
+            (duty + PROBE_TICK_DUTY) as f64
         } else {
             duty as f64
         }
     }
 
-    /// The controller's duties at `now_ms`: the output stage holds them only while they are
-    /// refreshed (the core's command watchdog, as a board's PWM stage would apply it).
+    /// The controller's outputs at `now_ms`: the output stage holds them only while they are
+    /// refreshed (the core's command watchdog, as a board's PWM stage would apply it), the
+    /// cut-off's too (a stalled controller leaves the supply cut).
     pub fn drive(&mut self, now_ms: u64, out: Outputs) {
         self.output[0].refresh(now_ms, out.pla_duty);
         self.output[1].refresh(now_ms, out.tca_duty);
+        self.output[2].refresh(now_ms, if out.supply_on { 1.0 } else { 0.0 });
     }
 
-    /// The duties the output stage applies at `now_ms`.
+    /// The outputs the output stage applies at `now_ms`.
     pub fn applied(&self, now_ms: u64) -> Outputs {
         Outputs {
             pla_duty: self.output[0].duty(now_ms),
             tca_duty: self.output[1].duty(now_ms),
+            supply_on: self.output[2].duty(now_ms) > 0.5,
         }
     }
 
-    /// Both outputs off at once, whatever was commanded (the firmware's panic path).
+    /// Both outputs off and the supply cut at once, whatever was commanded (the firmware's
+    /// panic path: the gate and cut-off pins driven low).
     pub fn heaters_off(&mut self) {
-        self.output = [CommandWatchdog::default(); 2];
+        self.output = [CommandWatchdog::default(); 3];
     }
 
     /// Lets the plant run `dt_s` from `now_ms` with the duties the output stage applies then.
     pub fn run(&mut self, now_ms: u64, dt_s: f64) {
         let out = self.applied(now_ms);
+        let (supplied, sensing) = (self.supplied(now_ms), self.senses_current());
         let duty = Duties {
-            pla: self.delivered(0, out.pla_duty),
-            tca: self.delivered(1, out.tca_duty),
+            pla: self.delivered(0, out.pla_duty, supplied, sensing),
+            tca: self.delivered(1, out.tca_duty, supplied, sensing),
         };
         self.plant.step(dt_s, duty);
     }
 
-    /// Approximately normal noise with the bench's standard deviation (sum of four uniforms).
-    fn noise_c(&mut self) -> f64 {
-        let mut s = 0.0;
-        for _ in 0..4 {
-            self.rng ^= self.rng << 13;
-            self.rng ^= self.rng >> 7;
-            self.rng ^= self.rng << 17;
-            s += (self.rng >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+    /// One heater's current reading through its shunt amplifier, summed counts: `amps` with
+    /// the chain's gain error, offset and noise, in the ADC's 12-bit steps.
+    fn sensed_counts(&mut self, i: usize, amps: f64) -> u32 {
+        let noise = gaussian(&mut self.current_rng) as f32 * SENSE_NOISE_A;
+        let a = amps as f32 * (1.0 + SENSE_GAIN_ERROR[i]) + SENSE_OFFSET_A + noise;
+        let one = crate::electrical::ShuntSense {
+            full_scale_counts: 4095,
+            ..self.board.shunt
+        };
+        one.counts(a) * crate::controller::OVERSAMPLE
+    }
+
+    /// The currents the board samples at `sample_ms`, if it senses them: inside the pulse (or
+    /// the probe pulse) and inside the off-time, of the heaters' true resistances now.
+    fn currents(&mut self, sample_ms: u64, s: &morphlink_plant::Sample) -> Option<CurrentCounts> {
+        let ohm = s.heater_ohm?;
+        let v = if self.supplied(sample_ms) { s.supply_v } else { 0.0 };
+        let mut c = CurrentCounts::default();
+        for i in 0..2 {
+            let amps = if self.heater_open[i] { 0.0 } else { v / ohm[i] };
+            c.on[i] = self.sensed_counts(i, amps);
+            let stuck = if self.heater_stuck[i] { amps } else { 0.0 };
+            c.off[i] = self.sensed_counts(i, stuck);
         }
-        // Four uniforms on [-0.5, 0.5] have variance 1/3.
-        s * libm::sqrt(3.0) * self.noise.sensor_noise_c
+        Some(c)
+    }
+
+    /// Approximately normal noise with the bench's standard deviation.
+    fn noise_c(&mut self) -> f64 {
+        gaussian(&mut self.rng) * self.noise.sensor_noise_c
     }
 
     /// The ADC frame the controller would read now (summed counts), stamped `sample_ms`.
@@ -189,6 +259,7 @@ impl<P: Plant> Bench<P> {
             thermistor_counts: counts,
             supply_counts: self.board.supply.counts(s.supply_v as f32),
             sample_ms,
+            current: self.currents(sample_ms, &s),
         }
     }
 
@@ -202,6 +273,7 @@ impl<P: Plant> Bench<P> {
             }
             SimFault::HeaterOpen => self.heater_open[index.min(1)] = true,
             SimFault::HeaterStuck => self.heater_stuck[index.min(1)] = true,
+            SimFault::CutoffStuck => self.cutoff_stuck = true,
             // A drift without a rate is no drift: see [`Bench::inject_drift`].
             SimFault::ThermistorDrift => {}
         }
@@ -220,6 +292,7 @@ impl<P: Plant> Bench<P> {
         self.drift = [None; 3];
         self.heater_open = [false; 2];
         self.heater_stuck = [false; 2];
+        self.cutoff_stuck = false;
     }
 
     /// Sets the true supply voltage, V; the plant may refuse.

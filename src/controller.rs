@@ -8,6 +8,7 @@
 
 use crate::activity::{Activity, Busy, Start};
 use crate::calibration::{Calibration, CalibrationError, ReportRejection};
+use crate::electrical::{CurrentCounts, Currents, Drive, Electrical, ShuntSense, MAX_SENSED_DUTY};
 use crate::heater::HeaterConfig;
 use crate::part_limit::{limit_shares, under_ceiling_w, CEILING_MARGIN_K};
 use crate::protocol::{self, reply, tune_reply, Command, Mode, OutLine, SimCommand};
@@ -91,6 +92,9 @@ pub struct Config {
     pub pla_heater: HeaterConfig,
     /// TCA heater.
     pub tca_heater: HeaterConfig,
+    /// Load-current sense, where the board has it (its frames then carry
+    /// [`Inputs::current`]).
+    pub shunt: ShuntSense,
 }
 
 impl Config {
@@ -101,6 +105,7 @@ impl Config {
         supply: SupplySense::DEFAULT,
         pla_heater: HeaterConfig::PLA,
         tca_heater: HeaterConfig::TCA,
+        shunt: ShuntSense::DEFAULT,
     };
 }
 
@@ -114,15 +119,22 @@ pub struct Inputs {
     pub supply_counts: u32,
     /// When these samples were taken, ms.
     pub sample_ms: u64,
+    /// Both heaters' load currents, on a board that senses them (`None`: the paper's
+    /// wiring, thermistors only).
+    pub current: Option<CurrentCounts>,
 }
 
-/// One tick's outputs: PWM duties in [0, 1].
+/// One tick's outputs: PWM duties in [0, 1] and the supply's cut-off. The default is the safe
+/// state: both heaters off and the supply cut.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Outputs {
     /// PLA heater duty.
     pub pla_duty: f32,
     /// TCA heater duty.
     pub tca_duty: f32,
+    /// The heater supply's cut-off is closed (the heaters have a supply). Open at reset and
+    /// from any trip until RESET; closed once a tick's checks have passed with no fault.
+    pub supply_on: bool,
 }
 
 /// Something to tell the user unprompted.
@@ -166,6 +178,8 @@ pub struct Controller {
     seq: Sequencer,
     sup: Supervisor,
     frame: Option<Frame>,
+    /// The heaters seen electrically (current sense).
+    elec: Electrical,
     powers: Powers,
     outputs: Outputs,
     supply_v: f32,
@@ -240,6 +254,7 @@ impl Controller {
             seq: Sequencer::new(),
             sup: Supervisor::new(),
             frame: None,
+            elec: Electrical::default(),
             powers: Powers::default(),
             outputs: Outputs::default(),
             supply_v: f32::NAN,
@@ -366,14 +381,18 @@ impl Controller {
         let ran = self.activity.stop();
         self.seq.abort();
         self.powers = Powers::default();
-        self.outputs = Outputs::default();
+        // Heaters off; the cut-off as it was (a trip opens it).
+        self.outputs = Outputs {
+            supply_on: self.outputs.supply_on && self.fault.is_none(),
+            ..Outputs::default()
+        };
         ran
     }
 
     /// Latches `fault`: what runs stops, its alarm is raised, then (for a TUNE) the tune's end.
     fn trip(&mut self, fault: Fault) {
-        let ran = self.stop();
         self.fault = Some(fault);
+        let ran = self.stop();
         // The alarm first: `tune failed safety trip (see the alarm)` points back at it.
         self.alarm_once(fault);
         if matches!(ran, Activity::Tune(_)) {
@@ -407,9 +426,22 @@ impl Controller {
             tca_w: capped(Heater::Tca, p.tca_w),
         };
         self.powers = p;
+        // Where current is sensed the watts are the measured resistance's, and every period
+        // keeps its off-window.
+        let elec = &self.elec;
+        let duty = |cfg: HeaterConfig, h: Heater, w: f32| match elec.ohm(h) {
+            Some(resistance_ohm) => HeaterConfig {
+                resistance_ohm,
+                ..cfg
+            }
+            .duty(w, supply_v)
+            .min(MAX_SENSED_DUTY),
+            None => cfg.duty(w, supply_v),
+        };
         self.outputs = Outputs {
-            pla_duty: self.cfg.pla_heater.duty(p.pla_w, supply_v),
-            tca_duty: self.cfg.tca_heater.duty(p.tca_w, supply_v),
+            pla_duty: duty(self.cfg.pla_heater, Heater::Pla, p.pla_w),
+            tca_duty: duty(self.cfg.tca_heater, Heater::Tca, p.tca_w),
+            supply_on: true,
         };
     }
 
@@ -428,11 +460,18 @@ impl Controller {
         let frame = self.frame_of(inputs);
         self.frame = Some(frame);
         self.supply_v = frame.supply_v;
+        let mut faults = Faults::new();
+        // The currents were sampled under the outputs applied since the last tick.
+        let drive = Drive {
+            duty: [self.outputs.pla_duty, self.outputs.tca_duty],
+            supply_on: self.outputs.supply_on,
+        };
+        let currents = inputs.current.map(|c| Currents::of(&c, &self.cfg.shunt));
+        self.elec.check(currents, drive, frame.supply_v, &mut faults);
         if self.fault().is_some() {
             self.powers = Powers::default();
             self.outputs = Outputs::default();
         }
-        let mut faults = Faults::new();
         let doing = self.doing();
         let m = self
             .sup
@@ -447,6 +486,8 @@ impl Controller {
         if self.fault().is_some() {
             return self.outputs;
         }
+        // The checks passed with nothing latched: the heaters may have their supply.
+        self.outputs.supply_on = true;
         match self.tick_activity(now_ms, &m, frame.supply_v) {
             Ok(p) => self.apply(p, frame.supply_v),
             Err(f) => self.trip(f),

@@ -15,6 +15,7 @@ pub mod activity;
 pub mod bench;
 pub mod calibration;
 pub mod controller;
+pub mod electrical;
 pub mod fixed;
 pub mod heater;
 pub mod link;

@@ -230,6 +230,7 @@ mod firmware {
                 ],
                 supply_counts: sums[Input::Supply as usize],
                 sample_ms,
+                current: None,
             };
             let o = with_controller(|c| c.step(now_ms, &inputs));
             heaters.apply(o.pla_duty, o.tca_duty);

@@ -213,6 +213,7 @@ mod tests {
             thermistor_counts: [counts; 3],
             supply_counts: cfg.supply.counts(12.0),
             sample_ms: 0,
+            current: None,
         };
         c.step(0, &inputs);
         c
@@ -266,6 +267,7 @@ mod tests {
                 thermistor_counts: [counts; 3],
                 supply_counts: cfg.supply.counts(12.0),
                 sample_ms: TICK_MS,
+                current: None,
             },
         );
         assert!(c.outputs().pla_duty > 0.0);

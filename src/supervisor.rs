@@ -41,6 +41,15 @@ pub enum FaultCode {
     /// A heated sensor disagreed with the supervisor's thermal expectation for too long
     /// (drifting, swapped, off its heater, or a heater that died).
     SensorImplausible,
+    /// A driven heater carried no current (current sense: [`crate::electrical`]).
+    HeaterOpen,
+    /// A heater carried current while not driven: its MOSFET conducts (current sense).
+    HeaterShort,
+    /// A heater's resistance is out of its range: a partial short, a broken strand, the wrong
+    /// heater on a channel (current sense).
+    HeaterResistance,
+    /// Current persisted after the supply's cut-off opened (current sense).
+    CutoffFailed,
 }
 
 impl FaultCode {
@@ -58,6 +67,10 @@ impl FaultCode {
             FaultCode::PhaseTimeout => "phase-timeout",
             FaultCode::SensorFrozen => "sensor-frozen",
             FaultCode::SensorImplausible => "sensor-implausible",
+            FaultCode::HeaterOpen => "heater-open",
+            FaultCode::HeaterShort => "heater-short",
+            FaultCode::HeaterResistance => "heater-resistance",
+            FaultCode::CutoffFailed => "cutoff-failed",
         }
     }
 }
@@ -145,6 +158,13 @@ impl Fault {
             (FaultCode::SensorImplausible, _) => {
                 "PLAUS_LOW_GAIN, PLAUS_HIGH_GAIN, PLAUS_MARGIN_K, PLAUS_TIME_S"
             }
+            (FaultCode::HeaterOpen, _) => "OPEN_MAX_SHARE, ELECTRICAL_TICKS",
+            (FaultCode::HeaterShort, _) => "SHORT_MIN_A, ELECTRICAL_TICKS",
+            (FaultCode::HeaterResistance, Subject::Heater(Heater::Pla)) => {
+                "PLA_OHM_RANGE, ELECTRICAL_TICKS"
+            }
+            (FaultCode::HeaterResistance, _) => "TCA_OHM_RANGE, ELECTRICAL_TICKS",
+            (FaultCode::CutoffFailed, _) => "SHORT_MIN_A, CUTOFF_SETTLE_TICKS",
         }
     }
 }

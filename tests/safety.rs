@@ -20,9 +20,11 @@ use morphlink_plant::Plant;
 use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
 
+/// The safe state: both heaters off and the supply cut.
 const ZERO: Outputs = Outputs {
     pla_duty: 0.0,
     tca_duty: 0.0,
+    supply_on: false,
 };
 const PHASES: [Phase; 5] = [
     Phase::Idle,

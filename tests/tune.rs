@@ -11,9 +11,11 @@ use morphlink::controller::Outputs;
 use morphlink::protocol::{classify, LineKind};
 use morphlink::tune::{TuneStep, TUNE_TOTAL_S};
 
+/// The safe state: both heaters off and the supply cut.
 const ZERO: Outputs = Outputs {
     pla_duty: 0.0,
     tca_duty: 0.0,
+    supply_on: false,
 };
 
 on_both_links!(

@@ -10,13 +10,14 @@ const SENSORS: [Sensor; 3] = [Sensor::Pla, Sensor::Tca, Sensor::Amb];
 /// Every [`Medium`], for matching wire words.
 const MEDIA: [Medium; 2] = [Medium::Water, Medium::Air];
 /// Every [`SimFault`], for matching wire words.
-const SIM_FAULTS: [SimFault; 6] = [
+const SIM_FAULTS: [SimFault; 7] = [
     SimFault::ThermistorOpen,
     SimFault::ThermistorShort,
     SimFault::ThermistorStuck,
     SimFault::HeaterOpen,
     SimFault::HeaterStuck,
     SimFault::ThermistorDrift,
+    SimFault::CutoffStuck,
 ];
 
 /// Finds the item whose wire word equals `word`, ignoring ASCII case.
@@ -195,10 +196,14 @@ fn parse_sim_fault<'a>(args: &mut impl Iterator<Item = &'a str>) -> Result<SimCo
         .next()
         .and_then(|word| lookup(&SIM_FAULTS, word, SimFault::as_str))
         .ok_or(bad(
-            "SIM FAULT needs thermistor-open, thermistor-short, thermistor-stuck, thermistor-drift, heater-open or heater-stuck.",
+            "SIM FAULT needs thermistor-open, thermistor-short, thermistor-stuck, thermistor-drift, heater-open, heater-stuck or cutoff-stuck.",
         ))?;
     if kind == SimFault::ThermistorDrift {
         return parse_sim_drift(args);
+    }
+    if kind == SimFault::CutoffStuck {
+        no_more(args, "SIM FAULT cutoff-stuck takes no target: the cut-off serves both heaters.")?;
+        return Ok(SimCommand::Fault(kind, Sensor::Pla));
     }
     let target = match args.next() {
         None => Sensor::Pla,

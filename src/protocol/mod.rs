@@ -83,6 +83,10 @@ pub enum SimFault {
     /// moment of injection (a cracked bead, a failing pull-up); `SIM FAULT thermistor-drift
     /// <pla|tca|amb> <K/s>`, negative reads low ([`SimCommand::Drift`]).
     ThermistorDrift,
+    /// The supply's cut-off never opens (welded relay contacts, a failed P-MOSFET); `SIM
+    /// FAULT cutoff-stuck`, no target. Combines with the others: with `heater-stuck` nothing
+    /// the firmware does stops the heater.
+    CutoffStuck,
 }
 
 /// Simulator-only commands (`SIM ...`), answered by `morph-sim` and emulated builds.
@@ -319,6 +323,7 @@ impl SimFault {
             SimFault::HeaterOpen => "heater-open",
             SimFault::HeaterStuck => "heater-stuck",
             SimFault::ThermistorDrift => "thermistor-drift",
+            SimFault::CutoffStuck => "cutoff-stuck",
         }
     }
 }

@@ -85,6 +85,25 @@ impl fmt::Display for FaultText<'_> {
             FaultCode::SensorImplausible => {
                 write!(l, "sensor-implausible {s} off its expected rise by {v} K")
             }
+            FaultCode::HeaterOpen => write!(
+                l,
+                "heater-open {s} heater carries {} A while driven; check its leads, MOSFET",
+                Fixed(f.value, 2)
+            ),
+            FaultCode::HeaterShort => write!(
+                l,
+                "heater-short {s} heater carries {} A while off; its MOSFET conducts, supply cut",
+                Fixed(f.value, 2)
+            ),
+            FaultCode::HeaterResistance => write!(
+                l,
+                "heater-resistance {s} heater reads {v} ohm, out of range; check it and its channel"
+            ),
+            FaultCode::CutoffFailed => write!(
+                l,
+                "cutoff-failed {} A flow with the cut-off open: CUT THE SUPPLY BY HAND",
+                Fixed(f.value, 2)
+            ),
         }
     }
 }
@@ -114,7 +133,7 @@ mod tests {
         ]
         .map(Subject::Phase);
         let heaters = Heater::ALL.map(Subject::Heater);
-        let cases: [(FaultCode, &[Subject]); 13] = [
+        let cases: [(FaultCode, &[Subject]); 17] = [
             (FaultCode::ThermistorOpen, &sensors),
             (FaultCode::ThermistorShort, &sensors),
             (FaultCode::UnderTemperature, &sensors),
@@ -128,6 +147,10 @@ mod tests {
             (FaultCode::SensorFrozen, &sensors),
             (FaultCode::SensorImplausible, &sensors),
             (FaultCode::SensorImplausible, &heaters),
+            (FaultCode::HeaterOpen, &heaters),
+            (FaultCode::HeaterShort, &heaters),
+            (FaultCode::HeaterResistance, &heaters),
+            (FaultCode::CutoffFailed, &[Subject::Supply]),
         ];
         cases
             .iter()

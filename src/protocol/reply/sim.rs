@@ -42,10 +42,11 @@ pub fn sim_state(l: &mut OutLine, time_s: f32, radius_mm: f32, t_pla_c: f32, t_t
 
 /// `SIM FAULT`: `ok fault=<kind> target=<sensor>`.
 pub fn sim_fault(l: &mut OutLine, kind: SimFault, target: Sensor) {
-    ok_with(
-        l,
-        format_args!("fault={} target={}", kind.as_str(), target.as_str()),
-    );
+    let target = match kind {
+        SimFault::CutoffStuck => "supply",
+        _ => target.as_str(),
+    };
+    ok_with(l, format_args!("fault={} target={target}", kind.as_str()));
 }
 
 /// `SIM SUPPLY`: `ok supply_v=<V>`.
