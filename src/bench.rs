@@ -12,7 +12,7 @@
 //! run the same board model. Built with the `sim` feature; `no_std` and allocation-free.
 
 use crate::controller::{Config, Inputs, Outputs};
-use crate::electrical::{CurrentCounts, PROBE_DUTY, PROBE_TICK_DUTY};
+use crate::electrical::{CurrentCounts, MIN_SENSED_ON_US, PROBE_DUTY};
 use crate::heater::CommandWatchdog;
 use crate::protocol::reply::SimSetting;
 use crate::protocol::{format_error, reply, Medium, OutLine, SimCommand, SimFault};
@@ -51,6 +51,10 @@ pub const SENSE_OFFSET_A: f32 = 0.003;
 /// Noise of one tick's current reading, A (standard deviation).
 pub const SENSE_NOISE_A: f32 = 0.003;
 
+/// Share of a control tick the probe pulse is on (one pulse of [`MIN_SENSED_ON_US`] per tick):
+/// the heat it delivers, as a mean duty.
+const PROBE_TICK_DUTY: f32 = MIN_SENSED_ON_US * 1e-6 * crate::controller::CONTROL_HZ as f32;
+
 /// The rig's side of the thermistors: noise on their readings and its seed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Noise {
@@ -84,6 +88,8 @@ pub struct Bench<P> {
     heater_stuck: [bool; 2],
     /// The cut-off never opens (`SIM FAULT cutoff-stuck`).
     cutoff_stuck: bool,
+    /// The board has its current-sense amplifiers ([`Bench::set_current_sense`]).
+    current_sense: bool,
     /// PLA, TCA and the cut-off (1 closed, 0 open): each holds only while refreshed.
     output: [CommandWatchdog; 3],
     rng: u64,
@@ -118,6 +124,7 @@ impl<P: Plant> Bench<P> {
             heater_open: [false; 2],
             heater_stuck: [false; 2],
             cutoff_stuck: false,
+            current_sense: true,
             output: [CommandWatchdog::default(); 3],
             rng: noise.seed | 1,
             current_rng: (noise.seed ^ 0xc0ff_ee00_1234_5678) | 1,
@@ -145,9 +152,16 @@ impl<P: Plant> Bench<P> {
         [t.pla_w, t.tca_w]
     }
 
-    /// Whether the board senses its heaters' current: the plant reports their resistances.
+    /// Whether the board senses its heaters' current: it has the amplifiers and the plant
+    /// reports the heaters' resistances.
     pub fn senses_current(&self) -> bool {
-        self.plant.sample().heater_ohm.is_some()
+        self.current_sense && self.plant.sample().heater_ohm.is_some()
+    }
+
+    /// Fits (`true`, the default) or leaves out the current-sense amplifiers: without them the
+    /// board is the paper's wiring plus the cut-off, thermistors only.
+    pub fn set_current_sense(&mut self, on: bool) {
+        self.current_sense = on;
     }
 
     /// Whether the heaters have a supply at `now_ms`: the cut-off closed, or stuck closed.
@@ -219,7 +233,7 @@ impl<P: Plant> Bench<P> {
     /// The currents the board samples at `sample_ms`, if it senses them: inside the pulse (or
     /// the probe pulse) and inside the off-time, of the heaters' true resistances now.
     fn currents(&mut self, sample_ms: u64, s: &morphlink_plant::Sample) -> Option<CurrentCounts> {
-        let ohm = s.heater_ohm?;
+        let ohm = s.heater_ohm.filter(|_| self.current_sense)?;
         let v = if self.supplied(sample_ms) { s.supply_v } else { 0.0 };
         let mut c = CurrentCounts::default();
         for i in 0..2 {

@@ -43,6 +43,7 @@ const _: () = assert!(crate::heater::CommandWatchdog::DEFAULT_MAX_AGE_MS >= 10 *
 pub const OVERSAMPLE: u32 = 16;
 /// Full scale of one summed reading, counts.
 pub const FULL_SCALE_COUNTS: u32 = OVERSAMPLE * 4095;
+const _: () = assert!(ShuntSense::DEFAULT.full_scale_counts == FULL_SCALE_COUNTS);
 
 /// Heater-supply sense: a resistor divider into an ADC channel.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -135,6 +136,15 @@ pub struct Outputs {
     /// The heater supply's cut-off is closed (the heaters have a supply). Open at reset and
     /// from any trip until RESET; closed once a tick's checks have passed with no fault.
     pub supply_on: bool,
+}
+
+impl Outputs {
+    /// Idle with nothing latched: both heaters off, the supply connected.
+    pub const IDLE: Outputs = Outputs {
+        pla_duty: 0.0,
+        tca_duty: 0.0,
+        supply_on: true,
+    };
 }
 
 /// Something to tell the user unprompted.

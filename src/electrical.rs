@@ -22,9 +22,6 @@ pub const PROBE_DUTY: f32 = MIN_SENSED_ON_US * PWM_HZ / 1e6;
 /// Largest duty on a board that senses current: every period keeps an off-window of
 /// [`MIN_SENSED_ON_US`], so a shorted MOSFET is seen at full drive too.
 pub const MAX_SENSED_DUTY: f32 = 1.0 - PROBE_DUTY;
-/// Share of a control tick the probe pulse is on (one pulse of [`MIN_SENSED_ON_US`] per 100 ms
-/// tick): its mean duty, for the simulated board.
-pub const PROBE_TICK_DUTY: f32 = MIN_SENSED_ON_US * 1e-6 * crate::controller::CONTROL_HZ as f32;
 
 /// Load-current sense: a shunt and an amplifier per heater into an ADC channel.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -46,7 +43,8 @@ impl ShuntSense {
         shunt_ohm: 0.05,
         gain: 20.0,
         vref_v: 3.3,
-        full_scale_counts: crate::controller::FULL_SCALE_COUNTS,
+        // The controller's summed 16 × 12-bit reading (held equal in `controller`).
+        full_scale_counts: 16 * 4095,
     };
 
     /// Amperes per summed count.

@@ -1,6 +1,7 @@
 //! Protocol v1 as a contract, driven through the rig exactly as a serial client would.
 mod common;
 use common::Bench;
+use morphlink::controller::Outputs;
 use morphlink::protocol::{
     classify, format_error, is_final_reply as is_final, Assembled, LineAssembler, ERR_INVALID_LINE,
     ERR_LINE_TOO_LONG,
@@ -120,7 +121,7 @@ fn overlong_and_garbage_lines_get_errors_and_change_nothing() {
     assert!(r[1].starts_with("error: "), "{r:?}");
     assert!(r[2].starts_with("error: bad-argument"), "{r:?}");
     assert!(b.rig.ctrl.idle());
-    assert_eq!(b.rig.ctrl.outputs(), Default::default());
+    assert_eq!(b.rig.ctrl.outputs(), Outputs::IDLE);
 }
 
 #[test]
@@ -158,7 +159,7 @@ proptest! {
         prop_assert_eq!(finals, lines, "{:?}", replies);
         // Whatever was sent, heaters are off unless a MORPH was accepted.
         if !replies.iter().any(|l| l == "ok") {
-            prop_assert_eq!(b.rig.ctrl.outputs(), Default::default());
+            prop_assert_eq!(b.rig.ctrl.outputs(), Outputs::IDLE);
         }
     }
 

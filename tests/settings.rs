@@ -5,6 +5,7 @@
 mod common;
 
 use common::{Bench, Link, LINKS};
+use morphlink::controller::Outputs;
 use morphlink::settings::codec::{self, LoadError};
 use morphlink::settings::store::{block_on_ready, SettingsStore};
 use morphlink::settings::Settings;
@@ -238,7 +239,7 @@ fn saved_settings_survive_a_reboot_and_unsaved_ones_do_not() {
     assert_eq!(s.auto_mode, morphlink::protocol::Mode::Boost);
     // And the boot heated nothing.
     assert_eq!(again.phase(), Phase::Idle);
-    assert_eq!(again.rig.ctrl.outputs(), Default::default());
+    assert_eq!(again.rig.ctrl.outputs(), Outputs::IDLE);
 }
 
 /// A good blob's bytes.
@@ -312,7 +313,7 @@ fn bad_stored_settings_boot_as_the_defaults_with_the_reason_and_never_heat() {
         assert_eq!(*b.rig.ctrl.settings(), Settings::DEFAULT, "{what}");
         b.run_for(5.0);
         assert_eq!(b.phase(), Phase::Idle, "{what}");
-        assert_eq!(b.rig.ctrl.outputs(), Default::default(), "{what}: heated");
+        assert_eq!(b.rig.ctrl.outputs(), Outputs::IDLE, "{what}: heated");
         // And SAVE recovers: the next boot loads.
         assert!(b.send("SAVE")[0].starts_with("ok saved"), "{what}");
         let again = with_flash(Some(b.rig.flash().unwrap().clone()));

@@ -114,6 +114,13 @@ impl Bench {
         ))
     }
 
+    /// The same bench on a board without current sense (the paper's wiring plus the cut-off):
+    /// only the thermistors see the heaters.
+    pub fn thermistors_only(mut self) -> Self {
+        self.rig.bench.set_current_sense(false);
+        self
+    }
+
     fn with_rig(rig: Rig<Box<dyn Plant>>) -> Self {
         Bench {
             rig,
