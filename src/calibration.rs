@@ -108,8 +108,16 @@ pub const POWER_SCALE_RANGE: (f32, f32) = (
 const _: () = assert!(POWER_SCALE_RANGE.1 > 1.0 && POWER_SCALE_RANGE.1 <= 2.0);
 
 /// The calibration's layout version: 2 added [`Calibration::convection_w_m2k`], against
-/// which the rises are read.
-pub const LAYOUT_VERSION: f32 = 2.0;
+/// which the rises are read; 3 [`Calibration::tca_tcr_ppm_per_k`], the TCA's own thermometer.
+pub const LAYOUT_VERSION: f32 = 3.0;
+
+/// The TCA's temperature coefficient of resistance an untuned controller takes, ppm/K: the
+/// silver-coated thread's 1.5e-3/K, an estimate (docs/plant.md); `TUNE` fits the link's own.
+/// In ppm so the settings' three decimals keep it whole.
+pub const TCA_TCR_NOMINAL_PPM_PER_K: f32 = 1500.0;
+/// The coefficients [`Calibration::tca_tcr_ppm_per_k`] may take, ppm/K: a fifth to three times
+/// the nominal (silver's own 3 800 ppm/K is about the top a plated thread can show).
+pub const TCA_TCR_RANGE_PPM_PER_K: (f32, f32) = (300.0, 4500.0);
 
 // The link file's convection is a value the range allows.
 const _: () = assert!(
@@ -174,7 +182,7 @@ const fn field_info(
 }
 
 /// Number of fields.
-pub const FIELD_COUNT: usize = 15;
+pub const FIELD_COUNT: usize = 16;
 
 /// Every field, in index order (the order of [`Calibration::get`] / [`Calibration::set`]).
 pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
@@ -278,6 +286,12 @@ pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
         "rim convection of the thermal model (TUNE: water or still air)",
     ),
     field_info(
+        "tca_tcr_ppm_per_k",
+        "ppm/K",
+        TCA_TCR_RANGE_PPM_PER_K,
+        "temperature coefficient of the TCA's resistance (TUNE, where current is sensed)",
+    ),
+    field_info(
         "version",
         "1",
         (LAYOUT_VERSION, LAYOUT_VERSION),
@@ -319,6 +333,9 @@ pub struct Calibration {
     /// water) unless `TUNE` found still air ([`crate::tune`]). The rises above are this link's
     /// thermistors' at it; the model's own rises at it are [`Calibration::model_resistances`].
     pub convection_w_m2k: f32,
+    /// Temperature coefficient of the TCA's resistance, ppm/K: what its own thermometer reads
+    /// it with (STATUS `t_tca_self_c`); fitted by `TUNE` on a board that senses current.
+    pub tca_tcr_ppm_per_k: f32,
     /// Layout version ([`LAYOUT_VERSION`]): a stored calibration of another layout is not this
     /// one.
     pub version: f32,
@@ -403,6 +420,7 @@ impl Calibration {
         power_count: 0.0,
         power_sum_ratio: 0.0,
         convection_w_m2k: LINK.surroundings.h_w_m2k as f32,
+        tca_tcr_ppm_per_k: TCA_TCR_NOMINAL_PPM_PER_K,
         version: LAYOUT_VERSION,
     };
 
@@ -422,7 +440,8 @@ impl Calibration {
             11 => &mut self.power_count,
             12 => &mut self.power_sum_ratio,
             13 => &mut self.convection_w_m2k,
-            14 => &mut self.version,
+            14 => &mut self.tca_tcr_ppm_per_k,
+            15 => &mut self.version,
             _ => return None,
         })
     }
@@ -450,7 +469,8 @@ impl Calibration {
             11 => self.power_count,
             12 => self.power_sum_ratio,
             13 => self.convection_w_m2k,
-            14 => self.version,
+            14 => self.tca_tcr_ppm_per_k,
+            15 => self.version,
             _ => f32::NAN,
         }
     }

@@ -321,6 +321,18 @@ impl Controller {
         self.outputs
     }
 
+    /// The TCA's mean temperature from its own resistance, °C, on a board that senses current
+    /// once it has a reference at rest ([`Electrical::tca_self_c`], with the calibration's
+    /// coefficient).
+    pub fn tca_self_c(&self) -> Option<f32> {
+        self.elec.tca_self_c(self.settings.cal.tca_tcr_ppm_per_k * 1e-6)
+    }
+
+    /// The heaters seen electrically (currents, resistances, the TCA's rest reference).
+    pub fn electrical(&self) -> &Electrical {
+        &self.elec
+    }
+
     /// The last good temperatures the supervisor read, °C (what the controller acts on).
     pub fn measurements(&self) -> Measurements {
         self.sup.measurements()
@@ -486,6 +498,8 @@ impl Controller {
         let m = self
             .sup
             .check_all(now_ms, &frame, self.powers, doing, &mut faults);
+        let tca_driven = !matches!(doing, Doing::Idle | Doing::Morph(Phase::Rest));
+        self.elec.note_rest(tca_driven, m.t_tca_c, m.t_amb_c);
         for f in faults {
             if self.fault().is_none() {
                 self.trip(f);
@@ -787,6 +801,11 @@ impl Controller {
             pla_target_c: targets.pla_c,
             tca_target_c: targets.tca_c,
             mode: self.seq.mode_ran(),
+            current_a: self.elec.on_a().unwrap_or([f32::NAN; 2]),
+            resistance_ohm: [Heater::Pla, Heater::Tca]
+                .map(|h| self.elec.ohm(h).unwrap_or(f32::NAN)),
+            t_tca_self_c: self.tca_self_c().unwrap_or(f32::NAN),
+            supply_on: self.outputs.supply_on,
         };
         reply::status(l, &status);
     }

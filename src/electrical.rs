@@ -138,8 +138,16 @@ pub const CUTOFF_SETTLE_TICKS: u8 = 3;
 /// few ticks, and averages the PLA's noisier reading (0.4 A) over about three.
 pub const OHM_FILTER_WEIGHT: f32 = 0.3;
 
+/// A TCA whose thermistor reads within this of the ambient one, undriven, is at rest, K: its
+/// resistance then is the reference its own thermometer counts from. 1 K: two beads' tolerance
+/// at rest, a twentieth of a morph's TCA rise.
+pub const SELF_REST_MAX_K: f32 = 1.0;
+/// Weight of each rest tick's resistance in the reference: 0.05 averages the probe pulses'
+/// reading (0.2 % noise) over some 2 s, so the reference is good to about 0.3 K.
+pub const REST_FILTER_WEIGHT: f32 = 0.05;
+
 /// The electrical checks' state: per heater, how long each reading has been wrong, and the
-/// filtered resistance.
+/// filtered resistance; the TCA's resistance at rest.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Electrical {
     open: [u8; 2],
@@ -151,6 +159,11 @@ pub struct Electrical {
     ohm: [Option<f32>; 2],
     /// This tick's currents (`None`: not sensed).
     now: Option<Currents>,
+    /// The TCA's resistance at rest and the ambient it was read at (Ω, °C).
+    rest: Option<(f32, f32)>,
+    /// The supply this tick's currents were drawn from, V, and whether it was connected.
+    supply_v: f32,
+    supplied: bool,
 }
 
 /// What drove the heaters while a frame's currents were sampled: the last tick's outputs.
@@ -180,6 +193,8 @@ impl Electrical {
     /// pushing what is wrong to `out`; `None` (no current sense) judges nothing.
     pub fn check(&mut self, currents: Option<Currents>, drive: Drive, supply_v: f32, out: &mut Faults) {
         self.now = currents;
+        self.supply_v = supply_v;
+        self.supplied = drive.supply_on;
         let Some(c) = currents else {
             return;
         };
@@ -247,6 +262,50 @@ impl Electrical {
     /// This tick's currents while driven on, A (`None`: not sensed).
     pub fn on_a(&self) -> Option<[f32; 2]> {
         self.now.map(|c| c.on_a)
+    }
+
+    /// Takes this tick's TCA resistance as its reference at ambient `t_amb_c` where the TCA is
+    /// at rest: not driven and its thermistor within [`SELF_REST_MAX_K`] of ambient
+    /// (`t_tca_c`). The reference before every MORPH and TUNE is the last one at rest.
+    pub fn note_rest(&mut self, tca_driven: bool, t_tca_c: f32, t_amb_c: f32) {
+        let (Some(c), false) = (self.now, tca_driven) else {
+            return;
+        };
+        if !((t_tca_c - t_amb_c).abs() <= SELF_REST_MAX_K) {
+            return;
+        }
+        if let Some(r) = self.raw_ohm(&c, Heater::Tca) {
+            self.rest = Some(match self.rest {
+                Some((r0, t0)) => (
+                    r0 + REST_FILTER_WEIGHT * (r - r0),
+                    t0 + REST_FILTER_WEIGHT * (t_amb_c - t0),
+                ),
+                None => (r, t_amb_c),
+            });
+        }
+    }
+
+    /// The TCA's own resistance as its mean temperature, °C, with temperature coefficient
+    /// `tcr_per_k`: the rest reference's ambient plus `(R/R₀ − 1)/α`. The sense chain's gain
+    /// error cancels in the ratio; what is left is the coefficient's error, and the coil's
+    /// strain since the reference (docs/safety.md, "The TCA as its own thermometer").
+    pub fn tca_self_c(&self, tcr_per_k: f32) -> Option<f32> {
+        let (r0, t0) = self.rest?;
+        let r = self.ohm(Heater::Tca)?;
+        let t = t0 + (r / r0 - 1.0) / tcr_per_k;
+        t.is_finite().then_some(t)
+    }
+
+    /// The TCA's resistance at rest and the ambient it was read at (Ω, °C).
+    pub fn tca_rest(&self) -> Option<(f32, f32)> {
+        self.rest
+    }
+
+    /// This tick's resistance of heater `h` from its on-current, Ω, where it carries one.
+    fn raw_ohm(&self, c: &Currents, h: Heater) -> Option<f32> {
+        let (lo, hi) = range(h);
+        let r = self.supply_v / c.on_a[h.index()];
+        (self.supplied && (lo..=hi).contains(&r)).then_some(r)
     }
 }
 

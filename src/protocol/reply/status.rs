@@ -55,11 +55,20 @@ pub struct StatusReport {
     pub tca_target_c: f32,
     /// The strategy the running or last morph ran, `auto` resolved (None before the first).
     pub mode: Option<Mode>,
+    /// Each heater's current while driven (PLA, TCA), A (NaN where not sensed: `-`).
+    pub current_a: [f32; 2],
+    /// Each heater's measured resistance (PLA, TCA), Ω (NaN where not sensed: `-`).
+    pub resistance_ohm: [f32; 2],
+    /// The TCA's mean temperature from its own resistance, °C (NaN where not sensed: `-`).
+    pub t_tca_self_c: f32,
+    /// The heater supply's cut-off is closed.
+    pub supply_on: bool,
 }
 
 /// `STATUS`: `ok phase= target_mm= t_pla_c= t_tca_c= t_amb_c= p_pla_w= p_tca_w= supply_v= fault=
-/// pla_target_c= tca_target_c= mode=` (the last three appended in that order, so a parser of the
-/// older line still finds its fields).
+/// pla_target_c= tca_target_c= mode= i_pla_a= i_tca_a= r_pla_ohm= r_tca_ohm= t_tca_self_c=
+/// cutoff=` (each group appended after the older ones, so a parser of an older line still finds
+/// its fields).
 pub fn status(l: &mut OutLine, s: &StatusReport) {
     let _ = write!(
         l,
@@ -85,6 +94,31 @@ pub fn status(l: &mut OutLine, s: &StatusReport) {
         Dash(s.tca_target_c),
         s.mode.map_or("-", Mode::as_str)
     );
+    let [i_pla, i_tca] = s.current_a;
+    let [r_pla, r_tca] = s.resistance_ohm;
+    let _ = write!(
+        l,
+        " i_pla_a={} i_tca_a={} r_pla_ohm={} r_tca_ohm={} t_tca_self_c={} cutoff={}",
+        Dash3(i_pla),
+        Dash3(i_tca),
+        Dash(r_pla),
+        Dash(r_tca),
+        Dash(s.t_tca_self_c),
+        if s.supply_on { "closed" } else { "open" }
+    );
+}
+
+/// A value with 3 decimals, or `-` for NaN (no value).
+struct Dash3(f32);
+
+impl fmt::Display for Dash3 {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0.is_nan() {
+            f.write_str("-")
+        } else {
+            Fixed(self.0, 3).fmt(f)
+        }
+    }
 }
 
 /// A value with 2 decimals, or `-` for NaN (no value).
@@ -317,22 +351,34 @@ mod tests {
             pla_target_c: targets.0,
             tca_target_c: targets.1,
             mode: Some(Mode::Closed),
+            current_a: [0.4, 1.846],
+            resistance_ohm: [30.0, 6.5],
+            t_tca_self_c: 57.25,
+            supply_on: true,
         };
         let l = line(|l| status(l, &report(Phase::Bend, None, (75.0, 62.5))));
         assert_eq!(
             l.as_str(),
             "ok phase=bend target_mm=38.00 t_pla_c=74.17 t_tca_c=56.88 t_amb_c=21.94 \
              p_pla_w=1.250 p_tca_w=0.700 supply_v=12.00 fault=none \
-             pla_target_c=75.00 tca_target_c=62.50 mode=closed"
+             pla_target_c=75.00 tca_target_c=62.50 mode=closed \
+             i_pla_a=0.400 i_tca_a=1.846 r_pla_ohm=30.00 r_tca_ohm=6.50 t_tca_self_c=57.25 cutoff=closed"
         );
         let idle = StatusReport {
             target_mm: f32::NAN,
             mode: None,
+            current_a: [f32::NAN; 2],
+            resistance_ohm: [f32::NAN; 2],
+            t_tca_self_c: f32::NAN,
+            supply_on: false,
             ..report(Phase::Idle, None, (f32::NAN, f32::NAN))
         };
         let l = line(|l| status(l, &idle));
         assert!(
-            l.ends_with("fault=none pla_target_c=- tca_target_c=- mode=-"),
+            l.ends_with(
+                "fault=none pla_target_c=- tca_target_c=- mode=- i_pla_a=- i_tca_a=- \
+                 r_pla_ohm=- r_tca_ohm=- t_tca_self_c=- cutoff=open"
+            ),
             "{l}"
         );
         // The widest values a link gives: every temperature at five digits with a sign, the
@@ -358,10 +404,14 @@ mod tests {
                 p_pla_w: 5.0,
                 p_tca_w: 5.0,
                 supply_v: 99.99,
+                current_a: [-9.999, -9.999],
+                resistance_ohm: [-999.99, -999.99],
+                t_tca_self_c: -999.99,
+                supply_on: false,
                 ..report(phase, fault, targets)
             };
             let l = line(|l| status(l, &wide));
-            assert!(l.ends_with(" mode=closed"), "truncated: {l}");
+            assert!(l.ends_with(" cutoff=open"), "truncated: {l}");
             assert!(l.len() < l.capacity(), "{} bytes: {l}", l.len());
         }
     }

@@ -24,8 +24,9 @@ pub const REPLY_TIMEOUT_S: f64 = 2.0;
 /// Read timeout of the serial port, ms: short, so the reader thread notices a closed tool.
 const SERIAL_READ_TIMEOUT_MS: u64 = 100;
 /// Longest line a device sends, bytes without the ending: the firmware writes every line into a
-/// `protocol::OutLine` (192 bytes). Longer lines are dropped and reported, never buffered.
-pub const MAX_REPLY_LINE: usize = 192;
+/// `protocol::OutLine` ([`morphlink::protocol::OUT_LINE_BYTES`]). Longer lines are dropped and
+/// reported, never buffered.
+pub const MAX_REPLY_LINE: usize = morphlink::protocol::OUT_LINE_BYTES;
 /// Lines the reader thread may queue before it waits for the tool to take them (then the
 /// device's side of the pipe or the serial driver's buffer fills instead of our memory).
 const LINE_QUEUE: usize = 256;
