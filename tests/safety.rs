@@ -440,7 +440,6 @@ fn a_stuck_heater_trips_and_the_cut_off_ends_it_in_every_phase(link: Link) {
                 };
                 cases += 1;
                 assert!(b.send(&format!("SIM FAULT heater-stuck {heater}"))[0].starts_with("ok"));
-                let n = b.lines.len();
                 // Seen as a sensor above any rise its commanded power explains, as heating while
                 // off, or at the limit; the over-temperature still alarms when the limit is
                 // crossed (the supervisor watches a latched link too).
@@ -1189,7 +1188,117 @@ fn a_reading_frozen_in_lock_or_release_trips_within_the_still_time(link: Link) {
     );
 }
 
+/// [`bench_in`] on a board that senses its heaters' current.
+fn sensing_bench_in(link: Link, phase: Phase, mode: &str) -> Bench {
+    let mut b = Bench::on(link);
+    if phase != Phase::Idle {
+        assert_eq!(b.send(&format!("MORPH 38 {mode}")), ["ok"]);
+        assert!(
+            b.run_until(300.0, |b| b.phase() == phase),
+            "never reached {phase:?}: {:?}",
+            b.lines
+        );
+        b.run_for(0.5);
+        assert_eq!(b.phase(), phase, "{:?}", b.lines);
+    } else {
+        b.run_for(2.0);
+    }
+    b
+}
+
+/// Ticks until the first alarm, at most `max_s`; the alarm, the seconds it took and the true
+/// peaks of the rod and the TCA over the run and 120 s after (°C).
+fn first_alarm_and_peaks(b: &mut Bench, max_s: f64) -> (String, f64, [f64; 2]) {
+    let t0 = b.rig.now_ms();
+    let mut peak = [0.0f64; 2];
+    let mut alarm = None;
+    while b.rig.now_ms() < t0 + ((max_s + 120.0) * 1000.0) as u64 {
+        let (out, ev) = b.tick();
+        let t = b.rig.plant().truth();
+        peak = [peak[0].max(t.pla_c), peak[1].max(t.tca_c)];
+        if alarm.is_none() {
+            if let Some(a) = ev.iter().find(|l| classify(l) == LineKind::Alarm) {
+                assert_eq!(out, ZERO, "the tripping tick cuts the supply: {a}");
+                alarm = Some((a.clone(), (b.rig.now_ms() - t0) as f64 / 1000.0));
+            } else if b.rig.now_ms() >= t0 + (max_s * 1000.0) as u64 {
+                panic!("no alarm within {max_s} s: {:?}", b.lines);
+            }
+        }
+    }
+    let (a, s) = alarm.unwrap();
+    (a, s, peak)
+}
+
+/// On a board that senses current, an open heater and a MOSFET failed short are named within
+/// 0.5 s of the fault in every phase and at idle, and after a short the cut-off keeps the rod
+/// and the TCA (their true mean temperatures) under 130 °C.
+fn a_short_or_open_heater_is_named_within_half_a_second_in_every_phase(link: Link) {
+    let mut worst_s: f64 = 0.0;
+    for phase in PHASES {
+        for heater in ["pla", "tca"] {
+            for (fault, code) in [("heater-open", "heater-open"), ("heater-stuck", "heater-short")] {
+                let mut b = sensing_bench_in(link, phase, "auto");
+                assert!(b.send(&format!("SIM FAULT {fault} {heater}"))[0].starts_with("ok"));
+                let (a, s, peak) = first_alarm_and_peaks(&mut b, 0.5);
+                assert!(
+                    a.starts_with(&format!("alarm: {code} {heater} ")),
+                    "{link:?} {phase:?} {fault} {heater}: {a}"
+                );
+                assert!(
+                    peak[0] < PLA_LIMITS.max_c as f64 && peak[1] < TCA_LIMITS.max_c as f64,
+                    "{link:?} {phase:?} {fault} {heater}: peaks {peak:?}"
+                );
+                let st = b.send("STATUS");
+                assert_eq!(Bench::field(&st[0], "cutoff").as_deref(), Some("open"), "{st:?}");
+                assert_eq!(b.rig.powers_w(), [0.0, 0.0]);
+                worst_s = worst_s.max(s);
+            }
+        }
+    }
+    println!("{link:?}: electrical faults named within {worst_s:.1} s");
+}
+
+/// A cut-off that never opens, behind a MOSFET failed short: the short is named, then the
+/// cut-off's failure, and the alarm says the supply must be cut by hand.
+fn a_cut_off_that_does_not_open_is_named_after_the_short(link: Link) {
+    for phase in [Phase::Idle, Phase::Bend] {
+        let mut b = sensing_bench_in(link, phase, "auto");
+        assert!(b.send("SIM FAULT cutoff-stuck")[0].starts_with("ok fault=cutoff-stuck target=supply"));
+        // Harmless alone: the cut-off is closed anyway while nothing is wrong.
+        b.run_for(2.0);
+        assert!(b.alarms().is_empty(), "{:?}", b.lines);
+        assert!(b.send("SIM FAULT heater-stuck tca")[0].starts_with("ok"));
+        let n = b.lines.len();
+        let (a, s, _) = first_alarm_and_peaks(&mut b, 0.5);
+        assert!(a.starts_with("alarm: heater-short tca "), "{a} after {s} s");
+        let later = b.alarms_since(n);
+        let cut = later
+            .iter()
+            .find(|l| l.starts_with("alarm: cutoff-failed "))
+            .unwrap_or_else(|| panic!("{phase:?}: {later:?}"));
+        assert!(cut.contains("CUT THE SUPPLY BY HAND"), "{cut}");
+    }
+}
+
+/// A heater of the wrong resistance (a wrap half shorted, the heaters swapped between their
+/// channels) is named at idle, before anything heats.
+#[test]
+fn a_heater_of_the_wrong_resistance_is_named_at_idle() {
+    for (ohm, heater) in [([15.0, 6.5], "pla"), ([6.5, 30.0], "pla")] {
+        let mut setup = morphlink_sim::LinkSetup::NOMINAL;
+        setup.heater_ohm = ohm;
+        let mut b = Bench::with_plant(setup);
+        let (a, s, _) = first_alarm_and_peaks(&mut b, 0.5);
+        assert!(
+            a.starts_with(&format!("alarm: heater-resistance {heater} ")),
+            "{ohm:?}: {a} after {s} s"
+        );
+    }
+}
+
 on_both_links!(
+    a_short_or_open_heater_is_named_within_half_a_second_in_every_phase,
+    a_cut_off_that_does_not_open_is_named_after_the_short,
     a_reading_frozen_in_lock_or_release_trips_within_the_still_time,
     a_tca_dying_in_bend_or_lock_trips_before_done,
     a_stuck_pla_heater_trips_once_the_controller_turns_it_down,
