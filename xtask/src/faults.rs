@@ -2,8 +2,10 @@
 //! kinds per sensor and heater, `SIM SUPPLY` out of range) in every phase of a morph to
 //! [`TARGET_MM`] on the nominal hifi link (the headline) and the nominal lumped link beside it:
 //! the time from injection to the first alarm, the alarm, and the peak TRUE temperatures of
-//! the PLA rod and the TCA (the plant's truth, not the beads) from injection to the alarm,
-//! against the 130 °C limits. Prints a Markdown table (docs/safety.md holds one run of it).
+//! the PLA rod and the TCA (the plant's truth, not the beads) from injection to
+//! [`AFTER_ALARM_S`] after the alarm (what the trip's cut-off leaves), against the 130 °C
+//! limits; each on the paper's wiring (thermistors only, plus the cut-off) and on a board that
+//! senses its heaters' current. Prints a Markdown table (docs/safety.md holds one run of it).
 //!
 //! A fault injected in idle or release where nothing heats (a dead heater) can only show once
 //! heat is asked for: there the run sends the next `MORPH` [`IDLE_BEFORE_MORPH_S`] after
@@ -34,6 +36,11 @@ pub const DRIFT_K_PER_S: f32 = 0.2;
 pub const AIM_HEATER_S: f64 = 10.0;
 /// Aim for a plausible-but-wrong sensor (stuck or drifting), s.
 pub const AIM_SENSOR_S: f64 = 20.0;
+/// Aim for an open or shorted heater where current is sensed, s (issue 26: half a second).
+pub const AIM_SENSED_S: f64 = 0.5;
+/// How long the peaks are followed after the alarm, s: a trip cuts the supply, and a heater
+/// that still heats (a stuck MOSFET behind a stuck cut-off) shows within it.
+pub const AFTER_ALARM_S: f64 = 60.0;
 
 /// Options of the task.
 #[derive(clap::Args, Debug)]
@@ -44,7 +51,7 @@ pub struct Args {
 }
 
 /// When an injected fault first makes a difference the sensors could show.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 enum Observable {
     /// At once (an open, shorted or frozen thermistor, a drift, the supply). A frozen reading
     /// repeats to the last bit from its first frame on, where a live one carries noise.
@@ -104,6 +111,12 @@ fn cases() -> Vec<FaultCase> {
             });
         }
     }
+    v.push(FaultCase {
+        name: "heater-stuck tca, cutoff-stuck".into(),
+        line: "SIM FAULT cutoff-stuck".into(),
+        aim_s: Some(AIM_HEATER_S),
+        observable: Observable::BelowStuck(Heater::Tca),
+    });
     for volts in ["5", "20"] {
         v.push(FaultCase {
             name: format!("supply {volts} V"),
@@ -176,6 +189,9 @@ fn run_case<P: Plant>(mut rig: Rig<P>, case: &FaultCase, phase: Phase, mode: &st
     }
     let reached = rig.ctrl.phase() == phase;
     send(&mut rig, &case.line, &mut lines);
+    if case.line == "SIM FAULT cutoff-stuck" {
+        send(&mut rig, "SIM FAULT heater-stuck tca", &mut lines);
+    }
     let t0 = rig.now_ms();
     let mut out = Outcome {
         alarm: None,
@@ -214,6 +230,14 @@ fn run_case<P: Plant>(mut rig: Rig<P>, case: &FaultCase, phase: Phase, mode: &st
                 .unwrap_or("?");
             let s = (rig.now_ms() - t0) as f64 / 1000.0;
             out.alarm = Some((s, format!("{code} {subject}")));
+            // What the trip leaves: the cut-off ends the heat, unless it cannot.
+            let after = rig.now_ms() + (AFTER_ALARM_S * 1000.0) as u64;
+            while rig.now_ms() < after {
+                rig.tick();
+                rig.drain_events(&mut |_| {});
+                let t = rig.plant().truth();
+                peak = [peak[0].max(t.pla_c), peak[1].max(t.tca_c)];
+            }
             break;
         }
         if rig.ctrl.idle() && !out.next_morph {
@@ -229,8 +253,10 @@ fn run_case<P: Plant>(mut rig: Rig<P>, case: &FaultCase, phase: Phase, mode: &st
 }
 
 /// One table cell: the time and alarm (from injection, and from when the fault became
-/// observable), and whether the aim (judged from observable) and the limits held.
-fn cell(o: &Outcome, case: &FaultCase) -> String {
+/// observable), and whether the aim (judged from observable; for an open or stuck heater on a
+/// board that senses current, [`AIM_SENSED_S`] from injection) and the limits held.
+fn cell(o: &Outcome, case: &FaultCase, sensing: bool) -> String {
+    let sensed_aim = sensing && case.observable != Observable::AtInjection;
     let limit_c = PLA_LIMITS.max_c.min(TCA_LIMITS.max_c) as f64;
     let mut s = match (&o.alarm, o.observable_s) {
         (None, _) if o.peak_c[0].is_nan() => "phase not reached".to_string(),
@@ -242,11 +268,16 @@ fn cell(o: &Outcome, case: &FaultCase) -> String {
             let from_obs = obs.map(|o| t - o);
             let mut s = format!("{t:.1} s `{code}`");
             match (case.observable, from_obs) {
+                _ if sensed_aim => {}
                 (Observable::AtInjection, _) => {}
                 (_, Some(d)) => s.push_str(&format!(" ({d:.1} s from observable)")),
                 (_, None) => s.push_str(" (before observable)"),
             }
-            if let Some(aim) = case.aim_s {
+            if sensed_aim {
+                if *t > AIM_SENSED_S {
+                    s.push_str(&format!(" **(aim {AIM_SENSED_S} s missed)**"));
+                }
+            } else if let Some(aim) = case.aim_s {
                 if from_obs.unwrap_or(0.0) > aim {
                     s.push_str(&format!(" **(aim {aim:.0} s missed)**"));
                 }
@@ -300,7 +331,7 @@ pub fn run(args: &Args) -> Result<(), String> {
     let jobs: Vec<(usize, Phase)> = (0..cases.len())
         .flat_map(|c| phases.iter().map(move |&p| (c, p)))
         .collect();
-    let rows: Vec<(String, String)> = std::thread::scope(|scope| {
+    let rows: Vec<Vec<String>> = std::thread::scope(|scope| {
         let chunks: Vec<_> = jobs
             .chunks(jobs.len().div_ceil(2))
             .map(|chunk| {
@@ -310,14 +341,22 @@ pub fn run(args: &Args) -> Result<(), String> {
                         .iter()
                         .map(|&(c, p)| {
                             let case = &cases[c];
-                            let h = run_case(
-                                Rig::with_plant(hifi.clone(), Noise::NOMINAL),
-                                case,
-                                p,
-                                mode,
-                            );
-                            let l = run_case(Rig::new(lumped), case, p, mode);
-                            (cell(&h, case), cell(&l, case))
+                            let mut cells = Vec::new();
+                            for hifi_plant in [true, false] {
+                                for sensing in [false, true] {
+                                    let o = if hifi_plant {
+                                        let mut rig = Rig::with_plant(hifi.clone(), Noise::NOMINAL);
+                                        rig.bench.set_current_sense(sensing);
+                                        run_case(rig, case, p, mode)
+                                    } else {
+                                        let mut rig = Rig::new(lumped);
+                                        rig.bench.set_current_sense(sensing);
+                                        run_case(rig, case, p, mode)
+                                    };
+                                    cells.push(cell(&o, case, sensing));
+                                }
+                            }
+                            cells
                         })
                         .collect::<Vec<_>>()
                 })
@@ -328,11 +367,11 @@ pub fn run(args: &Args) -> Result<(), String> {
     let mut t = String::new();
     let _ = writeln!(
         t,
-        "| fault | phase | hifi: time to alarm, alarm; peak true PLA/TCA | lumped: the same |"
+        "| fault | phase | hifi, thermistors only: time to alarm, alarm; peak true PLA/TCA | hifi, current sense | lumped, thermistors only | lumped, current sense |"
     );
-    let _ = writeln!(t, "| --- | --- | --- | --- |");
-    for (&(c, p), (h, l)) in jobs.iter().zip(&rows) {
-        let _ = writeln!(t, "| {} | {} | {h} | {l} |", cases[c].name, p.as_str());
+    let _ = writeln!(t, "| --- | --- | --- | --- | --- | --- |");
+    for (&(c, p), cells) in jobs.iter().zip(&rows) {
+        let _ = writeln!(t, "| {} | {} | {} |", cases[c].name, p.as_str(), cells.join(" | "));
     }
     print!("{t}");
     Ok(())
