@@ -53,6 +53,11 @@ struct Cli {
     /// (exit code 2) before anything runs.
     #[arg(long, value_name = "PATH")]
     flash_file: Option<PathBuf>,
+    /// The board without its current-sense amplifiers: the paper's wiring plus the supply's
+    /// cut-off, the heaters seen through their thermistors only (a `--plant-cmd` plant that
+    /// reports no `r_pla_ohm=`/`r_tca_ohm=` makes the same board).
+    #[arg(long)]
+    thermistors_only: bool,
 }
 
 fn parse_timeout(s: &str) -> Result<f64, String> {
@@ -177,6 +182,7 @@ fn run(cli: &Cli) -> Result<(), Stop> {
         ..LinkSetup::NOMINAL
     };
     let mut rig: SimRig = Rig::with_plant(plant(cli, &setup)?, setup.noise());
+    rig.bench.set_current_sense(!cli.thermistors_only);
     if let Some(path) = &cli.flash_file {
         rig.boot_storage(flash_file::read(path));
     }
