@@ -540,7 +540,8 @@ impl Controller {
                 r.map_err(|t| t.fault())
             }
             Activity::Tune(t) => {
-                let r = t.tick(now_ms, m, &mut |e| {
+                let ratio = self.elec.tca_ratio();
+                let r = t.tick(now_ms, m, ratio, &mut |e| {
                     let _ = events.push(Event::Tune(e));
                 });
                 Ok(match r {

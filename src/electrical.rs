@@ -301,6 +301,11 @@ impl Electrical {
         self.rest
     }
 
+    /// The TCA's filtered resistance over its value at rest, 1.
+    pub fn tca_ratio(&self) -> Option<f32> {
+        Some(self.ohm(Heater::Tca)? / self.rest?.0)
+    }
+
     /// This tick's resistance of heater `h` from its on-current, Ω, where it carries one.
     fn raw_ohm(&self, c: &Currents, h: Heater) -> Option<f32> {
         let (lo, hi) = range(h);

@@ -237,14 +237,15 @@ fn fitted_values(l: &mut OutLine, c: &Calibration) {
     let _ = write!(
         l,
         "pla_rise_k_per_w={} tca_rise_k_per_w={} pla_to_tca_k_per_w={} tca_to_pla_k_per_w={} \
-         pla_tau_s={} tca_tau_s={} convection_w_m2k={}",
+         pla_tau_s={} tca_tau_s={} convection_w_m2k={} tca_tcr_ppm_per_k={}",
         Fixed(c.pla_rise_k_per_w, 2),
         Fixed(c.tca_rise_k_per_w, 2),
         Fixed(c.pla_to_tca_k_per_w, 2),
         Fixed(c.tca_to_pla_k_per_w, 2),
         Fixed(c.pla_tau_s, 1),
         Fixed(c.tca_tau_s, 1),
-        Fixed(c.convection_w_m2k, 1)
+        Fixed(c.convection_w_m2k, 1),
+        Fixed(c.tca_tcr_ppm_per_k, 0)
     );
 }
 

@@ -112,6 +112,9 @@ const _: () = assert!(TUNE_END_SAMPLES >= 1 && TUNE_END_SAMPLES <= fit::MIN_SAMP
 pub const TUNE_SAMPLE_S: f32 = 1.0;
 /// Samples a step can hold (the longer step).
 pub const TUNE_MAX_SAMPLES: usize = 90;
+/// The end of the TCA step over which its resistance's rise is averaged, s: the last 5 s, the
+/// TCA near its steady rise in water (the model's own transient says how near).
+pub const TUNE_TCR_WINDOW_S: f32 = 5.0;
 /// Whole test, s.
 pub const TUNE_TOTAL_S: f32 = TUNE_SETTLE_S + TUNE_TCA_S + TUNE_COOL_S + TUNE_PLA_S + TUNE_VERIFY_S;
 // About 3 minutes under water, and each step's record fits.
@@ -326,6 +329,10 @@ pub struct Tune {
     amb_ms: u64,
     /// Fitted and waiting out [`TuneStep::Verify`].
     fitted: bool,
+    /// Sum and count of the TCA's resistance rise `R/R₀ − 1` over the TCA step's last
+    /// [`TUNE_TCR_WINDOW_S`] (current sense only).
+    ratio_sum: f32,
+    ratio_n: u32,
 }
 
 fn field(name: &str) -> FieldInfo {
@@ -456,6 +463,8 @@ impl Tune {
             amb_n: 0,
             amb_ms: now_ms,
             fitted: false,
+            ratio_sum: 0.0,
+            ratio_n: 0,
         };
         emit(TuneEvent::Step {
             step: TuneStep::Settle,
@@ -515,14 +524,22 @@ impl Tune {
         }
     }
 
-    /// One control tick with the supervisor's measurements `m`.
+    /// One control tick with the supervisor's measurements `m` and, where current is sensed,
+    /// the TCA's resistance over its value at rest before the tune (`tca_ratio`, 1).
     pub fn tick(
         &mut self,
         now_ms: u64,
         m: &Measurements,
+        tca_ratio: Option<f32>,
         emit: &mut impl FnMut(TuneEvent),
     ) -> TuneTick {
         let (pla, tca) = (m.t_pla_c, m.t_tca_c);
+        let late_in_tca = self.step == TuneStep::Tca
+            && since_s(now_ms, self.step_ms) + TUNE_TCR_WINDOW_S >= TUNE_TCA_S;
+        if let (true, Some(r)) = (late_in_tca, tca_ratio.filter(|r| r.is_finite())) {
+            self.ratio_sum += r - 1.0;
+            self.ratio_n += 1;
+        }
         match self.step {
             TuneStep::Settle => {
                 self.base_c[0] += pla;
@@ -680,9 +697,28 @@ impl Tune {
                 why,
             }),
         }
+        self.fit_tcr();
         self.fitted = true;
         self.enter(TuneStep::Verify, now_ms, emit);
         TuneTick::Run(Powers::default())
+    }
+
+    /// The TCA's temperature coefficient from its resistance's rise at the end of its step
+    /// against the thermal model's TCA rise then (its network stepped at the calibration's
+    /// convection): the coefficient in [`Calibration::tca_tcr_ppm_per_k`] where current was
+    /// sensed and the value is in its range; else the old one stays. The PLA is rigid in this
+    /// step, so the link barely bends and the coil's strain term stays small.
+    fn fit_tcr(&mut self) {
+        if self.ratio_n == 0 {
+            return;
+        }
+        let mut net = crate::lumped::Network::new(self.cal.model_convection_w_m2k(), 0.0);
+        net.advance(TUNE_TCA_S - 0.5 * TUNE_TCR_WINDOW_S, TUNE_TCA_W, 0.0, 0.0);
+        let rise_k = net.temp_c[crate::lumped::node::TCA];
+        let ppm = self.ratio_sum / self.ratio_n as f32 / rise_k * 1e6;
+        if let Ok(v) = bounded(field("tca_tcr_ppm_per_k"), ppm) {
+            self.cal.tca_tcr_ppm_per_k = v;
+        }
     }
 
     /// The PLA's step reached its cap early (`rise_k` above its baseline, `t_s` into the
@@ -704,6 +740,7 @@ impl Tune {
         cal.tca_to_pla_k_per_w = r.r_tp;
         self.cal = cal;
         emit(TuneEvent::StillAir { rise_k, t_s });
+        self.fit_tcr();
         self.fitted = true;
         self.enter(TuneStep::Verify, now_ms, emit);
         TuneTick::Run(Powers::default())
