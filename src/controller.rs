@@ -498,7 +498,9 @@ impl Controller {
         let m = self
             .sup
             .check_all(now_ms, &frame, self.powers, doing, &mut faults);
-        let tca_driven = !matches!(doing, Doing::Idle | Doing::Morph(Phase::Rest));
+        // At rest: idle, a morph's rest, a tune's settle step (the reference a tune fits from).
+        let tca_driven = !(matches!(doing, Doing::Idle | Doing::Morph(Phase::Rest))
+            || self.tune_step() == Some(crate::tune::TuneStep::Settle));
         self.elec.note_rest(tca_driven, m.t_tca_c, m.t_amb_c);
         for f in faults {
             if self.fault().is_none() {

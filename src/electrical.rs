@@ -142,9 +142,10 @@ pub const OHM_FILTER_WEIGHT: f32 = 0.3;
 /// resistance then is the reference its own thermometer counts from. 1 K: two beads' tolerance
 /// at rest, a twentieth of a morph's TCA rise.
 pub const SELF_REST_MAX_K: f32 = 1.0;
-/// Weight of each rest tick's resistance in the reference: 0.05 averages the probe pulses'
-/// reading (0.2 % noise) over some 2 s, so the reference is good to about 0.3 K.
-pub const REST_FILTER_WEIGHT: f32 = 0.05;
+/// Least weight of a rest tick's resistance in the reference: the reference is the mean of
+/// the first 100 rest ticks, then follows with this weight (10 s), so the probe pulses' 0.2 %
+/// noise a reading averages to about 0.03 %, a tenth of a kelvin's worth.
+pub const REST_FILTER_WEIGHT: f32 = 0.01;
 
 /// The electrical checks' state: per heater, how long each reading has been wrong, and the
 /// filtered resistance; the TCA's resistance at rest.
@@ -161,6 +162,8 @@ pub struct Electrical {
     now: Option<Currents>,
     /// The TCA's resistance at rest and the ambient it was read at (Ω, °C).
     rest: Option<(f32, f32)>,
+    /// Rest ticks in the reference (up to `1 / REST_FILTER_WEIGHT`).
+    rest_n: u16,
     /// The supply this tick's currents were drawn from, V, and whether it was connected.
     supply_v: f32,
     supplied: bool,
@@ -275,13 +278,10 @@ impl Electrical {
             return;
         }
         if let Some(r) = self.raw_ohm(&c, Heater::Tca) {
-            self.rest = Some(match self.rest {
-                Some((r0, t0)) => (
-                    r0 + REST_FILTER_WEIGHT * (r - r0),
-                    t0 + REST_FILTER_WEIGHT * (t_amb_c - t0),
-                ),
-                None => (r, t_amb_c),
-            });
+            self.rest_n = self.rest_n.saturating_add(1);
+            let w = (1.0 / self.rest_n as f32).max(REST_FILTER_WEIGHT);
+            let (r0, t0) = self.rest.unwrap_or((r, t_amb_c));
+            self.rest = Some((r0 + w * (r - r0), t0 + w * (t_amb_c - t0)));
         }
     }
 

@@ -70,11 +70,11 @@ fn a_healthy_link_tunes_within_bounds_and_raises_no_alarm(link: Link) {
         assert!(v >= f.min && v <= f.max, "{}={v}", f.name);
     }
     assert_eq!(b.rig.ctrl.outputs(), Outputs::IDLE);
-    // The TCA's temperature coefficient, fitted from its resistance (both nominal links have
-    // 1 500 ppm/K): the lumped link's own model within 2 %, the hifi link within 20 % (its TCA
-    // rises more than the model's: docs/safety.md, "The TCA as its own thermometer").
+    // The TCA's temperature coefficient, fitted from its resistance against its thermistor as
+    // both cool (both nominal links have 1 500 ppm/K): within 5 % on the lumped link, 15 % on
+    // the hifi one (docs/safety.md, "The TCA as its own thermometer").
     let tcr = cal.tca_tcr_ppm_per_k;
-    let within = if link == Link::Lumped { 0.02 } else { 0.2 };
+    let within = if link == Link::Lumped { 0.05 } else { 0.15 };
     assert!((tcr / 1500.0 - 1.0).abs() < within, "{link:?}: {tcr} ppm/K");
     // A MORPH reads the TCA's own temperature from it, near the true mean at the end of bend.
     let st = b.send("STATUS");

@@ -36,6 +36,7 @@ use crate::heater::HeaterConfig;
 use crate::link::{CONVECTION_RANGE_W_M2K, LINK};
 use crate::lumped::ResistanceMatrix;
 use crate::supervisor::HEATING_MIN_POWER_FRACTION;
+use crate::strategy::model::observer::SENSOR_TAU_S;
 use crate::vocab::{Heater, Measurements, Powers};
 use fit::{Method, StepFit};
 
@@ -112,9 +113,15 @@ const _: () = assert!(TUNE_END_SAMPLES >= 1 && TUNE_END_SAMPLES <= fit::MIN_SAMP
 pub const TUNE_SAMPLE_S: f32 = 1.0;
 /// Samples a step can hold (the longer step).
 pub const TUNE_MAX_SAMPLES: usize = 90;
-/// The end of the TCA step over which its resistance's rise is averaged, s: the last 5 s, the
-/// TCA near its steady rise in water (the model's own transient says how near).
-pub const TUNE_TCR_WINDOW_S: f32 = 5.0;
+/// Where the cool step's window for the TCA's temperature coefficient starts, s after the TCA
+/// heater went off: by then the TCA, with no heat of its own, and its bead beside it read
+/// nearly one temperature, once the bead's own lag is taken off (it reads a falling TCA
+/// high by its lag times the rate of fall: [`SENSOR_TAU_S`]), so the resistance's rise over
+/// the bead's rise is the coefficient, whatever the thermal model says.
+pub const TUNE_TCR_COOL_FROM_S: f32 = 8.0;
+/// Least mean rise of the TCA's thermistor over that window for the coefficient to be fitted,
+/// K: below it the resistance's noise (about 0.3 K's worth a tick) would dominate.
+pub const TUNE_TCR_MIN_RISE_K: f32 = 2.0;
 /// Whole test, s.
 pub const TUNE_TOTAL_S: f32 = TUNE_SETTLE_S + TUNE_TCA_S + TUNE_COOL_S + TUNE_PLA_S + TUNE_VERIFY_S;
 // About 3 minutes under water, and each step's record fits.
@@ -329,10 +336,14 @@ pub struct Tune {
     amb_ms: u64,
     /// Fitted and waiting out [`TuneStep::Verify`].
     fitted: bool,
-    /// Sum and count of the TCA's resistance rise `R/R₀ − 1` over the TCA step's last
-    /// [`TUNE_TCR_WINDOW_S`] (current sense only).
-    ratio_sum: f32,
-    ratio_n: u32,
+    /// Sums of the TCA's resistance rise `R/R₀ − 1` and its thermistor's rise (K) over the
+    /// cool step from [`TUNE_TCR_COOL_FROM_S`], and their count (current sense only).
+    cool_ratio_sum: f32,
+    cool_rise_sum: f32,
+    cool_n: u32,
+    /// The window's first and last thermistor rise (K) and their times (ms): the lag's share.
+    cool_first: (f32, u64),
+    cool_last: (f32, u64),
 }
 
 fn field(name: &str) -> FieldInfo {
@@ -463,8 +474,11 @@ impl Tune {
             amb_n: 0,
             amb_ms: now_ms,
             fitted: false,
-            ratio_sum: 0.0,
-            ratio_n: 0,
+            cool_ratio_sum: 0.0,
+            cool_rise_sum: 0.0,
+            cool_n: 0,
+            cool_first: (0.0, 0),
+            cool_last: (0.0, 0),
         };
         emit(TuneEvent::Step {
             step: TuneStep::Settle,
@@ -534,11 +548,17 @@ impl Tune {
         emit: &mut impl FnMut(TuneEvent),
     ) -> TuneTick {
         let (pla, tca) = (m.t_pla_c, m.t_tca_c);
-        let late_in_tca = self.step == TuneStep::Tca
-            && since_s(now_ms, self.step_ms) + TUNE_TCR_WINDOW_S >= TUNE_TCA_S;
-        if let (true, Some(r)) = (late_in_tca, tca_ratio.filter(|r| r.is_finite())) {
-            self.ratio_sum += r - 1.0;
-            self.ratio_n += 1;
+        let cooling =
+            self.step == TuneStep::Cool && since_s(now_ms, self.step_ms) >= TUNE_TCR_COOL_FROM_S;
+        if let (true, Some(r)) = (cooling, tca_ratio.filter(|r| r.is_finite())) {
+            let rise = tca - self.base_c[1];
+            if self.cool_n == 0 {
+                self.cool_first = (rise, now_ms);
+            }
+            self.cool_last = (rise, now_ms);
+            self.cool_ratio_sum += r - 1.0;
+            self.cool_rise_sum += rise;
+            self.cool_n += 1;
         }
         match self.step {
             TuneStep::Settle => {
@@ -703,19 +723,21 @@ impl Tune {
         TuneTick::Run(Powers::default())
     }
 
-    /// The TCA's temperature coefficient from its resistance's rise at the end of its step
-    /// against the thermal model's TCA rise then (its network stepped at the calibration's
-    /// convection): the coefficient in [`Calibration::tca_tcr_ppm_per_k`] where current was
-    /// sensed and the value is in its range; else the old one stays. The PLA is rigid in this
-    /// step, so the link barely bends and the coil's strain term stays small.
+    /// The TCA's temperature coefficient: its resistance's rise over its thermistor's rise
+    /// while it cools after its step (heater off, so the two read nearly one temperature), the
+    /// coefficient in [`Calibration::tca_tcr_ppm_per_k`] where current was sensed, the rise
+    /// was large enough and the value is in its range; else the old one stays. The PLA is
+    /// rigid through the TCA's step and its cooling, so the link barely bends and the coil's
+    /// strain term stays small.
     fn fit_tcr(&mut self) {
-        if self.ratio_n == 0 {
+        let n = self.cool_n as f32;
+        if !(self.cool_rise_sum >= TUNE_TCR_MIN_RISE_K * n) || self.cool_n < 2 {
             return;
         }
-        let mut net = crate::lumped::Network::new(self.cal.model_convection_w_m2k(), 0.0);
-        net.advance(TUNE_TCA_S - 0.5 * TUNE_TCR_WINDOW_S, TUNE_TCA_W, 0.0, 0.0);
-        let rise_k = net.temp_c[crate::lumped::node::TCA];
-        let ppm = self.ratio_sum / self.ratio_n as f32 / rise_k * 1e6;
+        // The bead's lag taken off each reading, summed: τ·Σ ḃ = τ·(b_last − b_first)/Δt.
+        let span_s = since_s(self.cool_last.1, self.cool_first.1);
+        let lag_k = SENSOR_TAU_S * (self.cool_last.0 - self.cool_first.0) * (n - 1.0) / span_s;
+        let ppm = self.cool_ratio_sum / (self.cool_rise_sum + lag_k) * 1e6;
         if let Ok(v) = bounded(field("tca_tcr_ppm_per_k"), ppm) {
             self.cal.tca_tcr_ppm_per_k = v;
         }
@@ -750,8 +772,7 @@ impl Tune {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::strategy::model::observer::SENSOR_TAU_S;
-
+    
     /// A first-order record of `rise_k` with time constant `tau_s`, `n` samples.
     fn record(rise_k: f32, tau_s: f32, n: usize) -> [f32; TUNE_MAX_SAMPLES] {
         let mut y = [0.0f32; TUNE_MAX_SAMPLES];

@@ -12,6 +12,7 @@ mod emulate;
 mod faults;
 mod flash;
 mod limits;
+mod self_sense;
 mod stored_heat;
 mod strategies;
 mod warm;
@@ -45,6 +46,8 @@ enum Task {
     Limits(limits::Args),
     /// Morphs back to back on the hifi ensemble: a warm start against the same morph from rest.
     Warm(warm::Args),
+    /// The TCA's self-sensed temperature against its true mean over the hifi ensemble.
+    SelfSense(self_sense::Args),
     /// Build a board's firmware (its feature) and flash it with probe-rs (its chip).
     Flash(flash::Args),
     /// Build a board's firmware, flash and run it, printing the defmt log (probe-rs run).
@@ -66,6 +69,7 @@ fn main() -> ExitCode {
         Task::Calibration(a) => calibration::run(&a, &ws.root),
         Task::Limits(a) => limits::run(&a),
         Task::Warm(a) => warm::run(&a),
+        Task::SelfSense(a) => self_sense::run(&a),
         Task::Flash(a) => flash::run(flash::Action::Flash, &a, &ws),
         Task::Run(a) => flash::run(flash::Action::Run, &a, &ws),
     });
