@@ -66,8 +66,9 @@ pub const TCA_TCR_RANGE_PER_K: (f64, f64) = (0.75e-3, 2.25e-3);
 /// bending the link towards the TCA shortens the coil (it sits `tca_offset_m` off the axis), and
 /// the plated thread's contacts between turns change with it. No source gives the number for
 /// this coil; 0.3 is an estimate, sign included (a coil drawn shorter closing its turns on each
-/// other would lower it: positive). A 12 mm change of radius around 40 mm strains the coil
-/// about 3 %, so 0.3 is 1 % of resistance, some 6 K of the temperature term's worth.
+/// other would lower it: positive). Bending from the cast rest (53 mm) to 33 mm strains the
+/// 2 mm-offset coil by −2.3 %, so 0.3 is 0.7 % of resistance, some 5 K of the temperature
+/// term's worth.
 pub const TCA_GAUGE: f64 = 0.3;
 /// Spread of the gauge factor over the ensemble, both signs (estimate).
 pub const TCA_GAUGE_RANGE: (f64, f64) = (-0.3, 0.9);
