@@ -9,6 +9,7 @@
 use arbitrary::Arbitrary;
 use libfuzzer_sys::fuzz_target;
 use morphlink::controller::{Config, Controller, Inputs, Outputs};
+use morphlink::electrical::CurrentCounts;
 
 use morphlink::protocol::{classify, parse_line, Command, LineKind, OutLine};
 
@@ -28,7 +29,14 @@ enum Op {
     /// `MORPH <radius> <mode>`, the radius in 0.01 mm (so the reachable range is often hit).
     Morph { radius_cmm: u16, mode: u8 },
     /// A tick after `dt_ms` with raw counts.
-    Step { dt_ms: u16, thermistor_counts: [u32; 3], supply_counts: u32, sample_lag_ms: u16 },
+    /// With any current readings (on, off per heater), or none (no current sense).
+    Step {
+        dt_ms: u16,
+        thermistor_counts: [u32; 3],
+        supply_counts: u32,
+        sample_lag_ms: u16,
+        current: Option<([u32; 2], [u32; 2])>,
+    },
     /// A tick after `dt_ms` with counts for these temperatures (°C) and supply (dV).
     Plausible { dt_ms: u16, temps_c: [i8; 3], supply_dv: u8, ticks: u8 },
     /// `CONFIG SET <setting> <value>`, the setting by number, the value in thousandths.
@@ -61,6 +69,7 @@ fn check_outputs(c: &Controller, o: Outputs) {
     }
     if c.fault().is_some() {
         assert_eq!((o.pla_duty, o.tca_duty), (0.0, 0.0), "faulted with {o:?}");
+        assert!(!o.supply_on, "faulted with the supply connected: {o:?}");
     }
     assert_eq!(c.outputs(), o);
 }
@@ -103,12 +112,13 @@ fuzz_target!(|ops: Vec<Op>| {
                 let radius_mm = radius_cmm as f32 / 100.0;
                 line(&mut c, now_ms, &format!("MORPH {radius_mm}{m}"));
             }
-            Op::Step { dt_ms, thermistor_counts, supply_counts, sample_lag_ms } => {
+            Op::Step { dt_ms, thermistor_counts, supply_counts, sample_lag_ms, current } => {
                 now_ms = now_ms.wrapping_add(dt_ms as u64);
                 let inputs = Inputs {
                     thermistor_counts,
                     supply_counts,
                     sample_ms: now_ms.wrapping_sub(sample_lag_ms as u64),
+                    current: current.map(|(on, off)| CurrentCounts { on, off }),
                 };
                 let o = c.step(now_ms, &inputs);
                 check_outputs(&c, o);
@@ -118,6 +128,7 @@ fuzz_target!(|ops: Vec<Op>| {
                     thermistor_counts: temps_c.map(|t| cfg.thermistor.counts_for_temp(t as f32)),
                     supply_counts: cfg.supply.counts(supply_dv as f32 / 10.0),
                     sample_ms: now_ms,
+                    current: None,
                 };
                 for _ in 0..=ticks.min(64) {
                     now_ms = now_ms.wrapping_add(dt_ms as u64);
