@@ -280,3 +280,25 @@ fn a_plant_that_fails_on_a_setting_ends_the_run_without_a_reply() {
     );
     assert!(err.contains("run ended, heaters off"), "{err}");
 }
+
+/// An outside plant that reports its heaters' resistances (`r_pla_ohm=`, `r_tca_ohm=`) runs on a
+/// board that senses current: a MOSFET failed short in bend is named `heater-short` within half a
+/// second and the cut-off opens. The same plant with the resistances stripped from its replies
+/// (an older plant) runs on the paper's wiring, and STATUS says nothing is sensed.
+#[test]
+fn an_outside_plant_that_reports_its_resistances_gets_current_sense() {
+    let script = "MORPH 38\nSIM WAIT 12\nSIM FAULT heater-stuck tca\nSIM WAIT 0.5\nSTATUS\n";
+    let cmd = format!("'{MORPH_PLANT}' --plant hifi");
+    let run = morph_sim(&["--plant-cmd", &cmd], script);
+    let out = text(&run.stdout);
+    assert!(out.contains("alarm: heater-short tca "), "{out}");
+    let status = out.lines().rfind(|l| l.starts_with("ok phase=")).unwrap();
+    assert!(status.contains(" fault=heater-short ") && status.ends_with(" cutoff=open"), "{status}");
+    let old = format!("'{MORPH_PLANT}' --plant hifi | sed -u 's/ r_pla_ohm=[^ ]* r_tca_ohm=[^ ]*//'");
+    let run = morph_sim(&["--plant-cmd", &old], "STATUS\n");
+    let out = text(&run.stdout);
+    assert!(
+        out.contains(" i_pla_a=- i_tca_a=- r_pla_ohm=- r_tca_ohm=- t_tca_self_c=- cutoff=closed"),
+        "{out}"
+    );
+}

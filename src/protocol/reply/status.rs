@@ -99,8 +99,8 @@ pub fn status(l: &mut OutLine, s: &StatusReport) {
     let _ = write!(
         l,
         " i_pla_a={} i_tca_a={} r_pla_ohm={} r_tca_ohm={} t_tca_self_c={} cutoff={}",
-        Dash3(i_pla),
-        Dash3(i_tca),
+        Dashed(i_pla, 3),
+        Dashed(i_tca, 3),
         Dash(r_pla),
         Dash(r_tca),
         Dash(s.t_tca_self_c),
@@ -108,28 +108,25 @@ pub fn status(l: &mut OutLine, s: &StatusReport) {
     );
 }
 
-/// A value with 3 decimals, or `-` for NaN (no value).
-struct Dash3(f32);
-
-impl fmt::Display for Dash3 {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.0.is_nan() {
-            f.write_str("-")
-        } else {
-            Fixed(self.0, 3).fmt(f)
-        }
-    }
-}
 
 /// A value with 2 decimals, or `-` for NaN (no value).
 struct Dash(f32);
 
 impl fmt::Display for Dash {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        Dashed(self.0, 2).fmt(f)
+    }
+}
+
+/// A value with this many decimals, or `-` for NaN (no value).
+struct Dashed(f32, u8);
+
+impl fmt::Display for Dashed {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         if self.0.is_nan() {
             f.write_str("-")
         } else {
-            Fixed(self.0, 2).fmt(f)
+            Fixed(self.0, self.1).fmt(f)
         }
     }
 }
