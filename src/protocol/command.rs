@@ -84,7 +84,13 @@ pub fn parse_line(line: &str) -> Result<Option<Command>, ProtoError> {
     if first.eq_ignore_ascii_case("MORPH") {
         parse_morph(args).map(Some)
     } else if first.eq_ignore_ascii_case("SIM") {
-        parse_sim(args).map(|sim| Some(Command::Sim(sim)))
+        // A build without the simulated link answers every SIM line alike, so a board's image
+        // carries neither the SIM grammar nor its error texts.
+        if cfg!(feature = "sim") {
+            parse_sim(args).map(|sim| Some(Command::Sim(sim)))
+        } else {
+            Err(super::reply::ERR_SIM_UNSUPPORTED)
+        }
     } else if first.eq_ignore_ascii_case("CONFIG") {
         parse_config(args).map(|c| Some(Command::Config(c)))
     } else if first.eq_ignore_ascii_case("HEAT") {
