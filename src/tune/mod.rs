@@ -36,7 +36,6 @@ use crate::heater::HeaterConfig;
 use crate::link::{CONVECTION_RANGE_W_M2K, LINK};
 use crate::lumped::ResistanceMatrix;
 use crate::supervisor::HEATING_MIN_POWER_FRACTION;
-use crate::strategy::model::observer::SENSOR_TAU_S;
 use crate::vocab::{Heater, Measurements, Powers};
 use fit::{Method, StepFit};
 
@@ -119,6 +118,9 @@ pub const TUNE_MAX_SAMPLES: usize = 90;
 /// high by its lag times the rate of fall: [`SENSOR_TAU_S`]), so the resistance's rise over
 /// the bead's rise is the coefficient, whatever the thermal model says.
 pub const TUNE_TCR_COOL_FROM_S: f32 = 8.0;
+/// The thermistor lag the controller assumes, s: the observer's own
+/// (`strategy::model::observer::SENSOR_TAU_S`, held equal there).
+pub const SENSOR_TAU_S: f32 = 3.0;
 /// Least mean rise of the TCA's thermistor over that window for the coefficient to be fitted,
 /// K: below it the resistance's noise (about 0.3 K's worth a tick) would dominate.
 pub const TUNE_TCR_MIN_RISE_K: f32 = 2.0;

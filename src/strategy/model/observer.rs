@@ -19,6 +19,7 @@ use crate::lumped::{lag_remaining, node, Network};
 /// Thermistor time constant the observer assumes, s: the bead is embedded in silicone against
 /// the heater (3 s; the same value the simulated link uses for its nominal sensors).
 pub const SENSOR_TAU_S: f32 = 3.0;
+const _: () = assert!(SENSOR_TAU_S == crate::tune::SENSOR_TAU_S);
 /// Time constant of the disturbance estimate, s. Shorter follows model errors faster but passes
 /// more thermistor noise into the heater power; 2 s is below the 3 s sensor lag, so a steady
 /// model error is removed within a few seconds, and averages the 0.05 °C noise over 20 ticks.
