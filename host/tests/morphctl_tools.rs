@@ -306,7 +306,7 @@ fn a_script_injects_a_fault_then_morphs_on_one_simulator_and_logs_every_line() {
         "# a dead TCA heater is caught, then a healthy morph on the same link\n\
          SIM FAULT heater-open tca\n\
          MORPH 38\n\
-         wait alarm 120   # the supervisor's heating check\n\
+         wait alarm 120   # the supervisor's current check\n\
          SIM CLEAR\n\
          RESET\n\
          MORPH 40\n\
@@ -346,9 +346,9 @@ fn a_script_injects_a_fault_then_morphs_on_one_simulator_and_logs_every_line() {
         "> SIM FAULT heater-open tca",
         "< ok fault=heater-open target=tca",
         "> MORPH 38",
-        "< alarm: heater-not-heating tca",
+        "< alarm: heater-open tca",
         "> RESET",
-        "< ok cleared=heater-not-heating",
+        "< ok cleared=heater-open",
         "> MORPH 40",
         "< event: done ",
         "> SIM STATE",
