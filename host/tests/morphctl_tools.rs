@@ -872,8 +872,8 @@ fn the_running_line_and_the_log_say_when_an_alarm_opens_the_cutoff() {
     assert_eq!(out.status.code(), Some(1), "{stdout}{err}");
     assert!(stdout.contains("alarm: heater-open tca"), "{stdout}");
     // The running line is printed once more after the alarm, from a STATUS that follows it.
-    let running = stdout.lines().filter(|l| l.contains(" s  "));
-    let last = running.last().unwrap();
+    let mut running = stdout.lines().filter(|l| l.contains(" s  "));
+    let last = running.next_back().unwrap();
     assert!(
         last.contains(" fault ") && last.ends_with(" W  cutoff=open"),
         "{stdout}"
