@@ -26,7 +26,7 @@ pub mod prelude {
     pub use super::{
         labelled_point, legend, line, line_key, marks, mesh, palette, sci, whole, write, write_svg,
         Figure, Format, Frame, PlotError, PlotResult, FONT, PALETTE, TAB_BLUE, TAB_GREEN,
-        TAB_ORANGE, TAB_RED,
+        TAB_ORANGE, TAB_PURPLE, TAB_RED,
     };
     pub use plotters::coord::Shift;
     pub use plotters::prelude::*;
@@ -165,6 +165,8 @@ pub const TAB_ORANGE: RGBColor = RGBColor(255, 127, 14);
 pub const TAB_GREEN: RGBColor = RGBColor(44, 160, 44);
 /// "tab10" red.
 pub const TAB_RED: RGBColor = RGBColor(214, 39, 40);
+/// "tab10" purple.
+pub const TAB_PURPLE: RGBColor = RGBColor(148, 103, 189);
 
 /// Series colours in order (the first eight of "tab10").
 pub const PALETTE: [RGBColor; 8] = [
@@ -172,7 +174,7 @@ pub const PALETTE: [RGBColor; 8] = [
     TAB_ORANGE,
     TAB_GREEN,
     TAB_RED,
-    RGBColor(148, 103, 189),
+    TAB_PURPLE,
     RGBColor(140, 86, 75),
     RGBColor(227, 119, 194),
     RGBColor(23, 190, 207),

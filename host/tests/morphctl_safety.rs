@@ -187,12 +187,19 @@ fn an_interrupted_run_keeps_its_csv_rows_and_plots_them() {
             .any(|r| r.contains(",soften,") && r.contains(",5.000,")),
         "{csv}"
     );
-    // Every row has the header's columns (time ... radius, target radius, targets, mode).
-    assert!(rows.iter().all(|r| r.split(',').count() == 13), "{csv}");
+    // Every row has the header's columns (time ... radius, target radius, targets, mode,
+    // then the current sense and the cut-off).
+    assert!(rows.iter().all(|r| r.split(',').count() == 19), "{csv}");
     let auto = morphlink::strategy::AUTO_STRATEGY.as_str();
     assert!(
-        rows.iter().all(|r| r.ends_with(&format!(",{auto}"))),
+        rows.iter().all(|r| r.split(',').nth(12) == Some(auto)),
         "auto ran {auto}: {csv}"
+    );
+    // morph-sim senses current: every value is there, and the supply stays on until the end.
+    assert!(
+        rows.iter()
+            .all(|r| r.ends_with(",closed") && !r.split(',').skip(13).any(|v| v == "NaN")),
+        "{csv}"
     );
     assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
     std::fs::remove_dir_all(&dir).unwrap();

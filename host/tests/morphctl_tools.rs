@@ -306,7 +306,7 @@ fn a_script_injects_a_fault_then_morphs_on_one_simulator_and_logs_every_line() {
         "# a dead TCA heater is caught, then a healthy morph on the same link\n\
          SIM FAULT heater-open tca\n\
          MORPH 38\n\
-         wait alarm 120   # the supervisor's heating check\n\
+         wait alarm 120   # the supervisor's current check\n\
          SIM CLEAR\n\
          RESET\n\
          MORPH 40\n\
@@ -346,9 +346,9 @@ fn a_script_injects_a_fault_then_morphs_on_one_simulator_and_logs_every_line() {
         "> SIM FAULT heater-open tca",
         "< ok fault=heater-open target=tca",
         "> MORPH 38",
-        "< alarm: heater-not-heating tca",
+        "< alarm: heater-open tca",
         "> RESET",
-        "< ok cleared=heater-not-heating",
+        "< ok cleared=heater-open",
         "> MORPH 40",
         "< event: done ",
         "> SIM STATE",
@@ -765,4 +765,124 @@ fn keys_typed_during_a_calibrate_morph_do_not_answer_its_prompt() {
     assert!(status.success(), "{seen}");
     assert!(!seen.contains("calibrate: skipped"), "{seen}");
     assert!(seen.contains("1 measured morph(s) counted"), "{seen}");
+}
+
+#[test]
+fn a_morph_logs_and_plots_the_current_sense_and_older_logs_plot_as_before() {
+    let dir = scratch("current-sense");
+    let (csv, svg) = (dir.join("run.csv"), dir.join("run.svg"));
+    let out = morphctl(&[
+        "--sim",
+        "morph",
+        "38",
+        "--speed",
+        "100",
+        "--log",
+        csv.to_str().unwrap(),
+        "--plot",
+        svg.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let log = read(&csv);
+    let mut rows = log.lines();
+    let header = rows.next().unwrap();
+    assert!(
+        header.ends_with(",mode,i_pla_a,i_tca_a,r_pla_ohm,r_tca_ohm,t_tca_self_c,cutoff"),
+        "{header}"
+    );
+    let rows: Vec<&str> = rows.collect();
+    // morph-sim senses current: the values are there once the heaters have been driven (the
+    // morph's first tick may not have measured them yet), and a healthy morph keeps the supply on.
+    for r in &rows {
+        let cols: Vec<&str> = r.split(',').collect();
+        assert_eq!(cols.len(), 19, "{r}");
+        let finite = |v: &&str| v.parse::<f64>().is_ok_and(f64::is_finite);
+        if ["bend", "lock"].contains(&cols[1]) {
+            assert!(cols[13..18].iter().all(finite), "{r}");
+        }
+        assert_eq!(cols[18], "closed", "{r}");
+    }
+    let plot = read(&svg);
+    for want in ["TCA (own resistance)", "heater current (A)"] {
+        assert!(plot.contains(want), "`{want}` not in the plot");
+    }
+
+    // `morphctl plot` reads the logs of older morphctls (before the current sense: 13 columns;
+    // before the targets: 9) and draws them as it did.
+    for (name, header, columns) in [
+        (
+            "v2",
+            "t_s,phase,t_pla_c,t_tca_c,t_amb_c,p_pla_w,p_tca_w,supply_v,radius_mm,target_mm,pla_target_c,tca_target_c,mode",
+            13,
+        ),
+        (
+            "v1",
+            "t_s,phase,t_pla_c,t_tca_c,t_amb_c,p_pla_w,p_tca_w,supply_v,radius_mm",
+            9,
+        ),
+    ] {
+        let old = dir.join(format!("{name}.csv"));
+        let body: Vec<String> = rows
+            .iter()
+            .map(|r| r.split(',').take(columns).collect::<Vec<_>>().join(","))
+            .collect();
+        std::fs::write(&old, format!("{header}\n{}\n", body.join("\n"))).unwrap();
+        let out_svg = dir.join(format!("{name}.svg"));
+        let out = morphctl(&["plot", old.to_str().unwrap(), out_svg.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{name}: {err}");
+        let plot = read(&out_svg);
+        assert!(plot.contains("power (W)") && plot.contains("radius (mm)"), "{name}");
+        for gone in ["TCA (own resistance)", "heater current (A)"] {
+            assert!(!plot.contains(gone), "{name}: `{gone}` drawn from an older log");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_running_line_and_the_log_say_when_an_alarm_opens_the_cutoff() {
+    let dir = scratch("cutoff-open");
+    // morph-sim whose TCA heater dies as the morph starts (at idle its probe pulses would
+    // name it before MORPH); the fault's own `ok` is dropped, so morphctl sees no extra reply.
+    let device = script(
+        &dir,
+        "device.sh",
+        &format!(
+            "while IFS= read -r l; do printf '%s\\n' \"$l\"; case \"$l\" in \
+             'MORPH '*) echo 'SIM FAULT heater-open tca';; esac; done \
+             | '{MORPH_SIM}' \"$@\" | grep --line-buffered -v '^ok fault=heater-open'"
+        ),
+    );
+    let csv = dir.join("run.csv");
+    let out = morphctl(&[
+        "--sim",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "morph",
+        "38",
+        "--speed",
+        "50",
+        "--log",
+        csv.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stdout}{err}");
+    assert!(stdout.contains("alarm: heater-open tca"), "{stdout}");
+    // The running line is printed once more after the alarm, from a STATUS that follows it.
+    let mut running = stdout.lines().filter(|l| l.contains(" s  "));
+    let last = running.next_back().unwrap();
+    assert!(
+        last.contains(" fault ") && last.ends_with(" W  cutoff=open"),
+        "{stdout}"
+    );
+    let log = read(&csv);
+    let last = log.lines().last().unwrap();
+    assert!(last.ends_with(",open"), "{log}");
+    // The dead heater carries no current.
+    let i_tca_a: f64 = last.split(',').nth(14).unwrap().parse().unwrap();
+    assert!(i_tca_a < 0.05, "{log}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -103,8 +103,9 @@ pub fn field<'a>(line: &'a str, key: &str) -> Option<&'a str> {
 }
 
 /// A STATUS reply, parsed. Numbers are None when the field is missing, `-` or not a number;
-/// the fields STATUS gained later (the target temperatures, the mode) are None on a device
-/// that does not send them.
+/// the fields STATUS gained later (the target temperatures, the mode, then the current sense
+/// and the cut-off) are None on a device that does not send them, and the current sense is
+/// `-`, so None, on a board without it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Status<'a> {
     /// Phase word (`idle`, `soften`, `bend`, `lock`, `release`, `fault`).
@@ -123,6 +124,16 @@ pub struct Status<'a> {
     pub targets_c: [Option<f32>; 2],
     /// The strategy the running or last morph ran (None: none yet, or an older device).
     pub mode: Option<&'a str>,
+    /// Each heater's current while driven (PLA, TCA), A (None: not sensed, or an older device).
+    pub currents_a: [Option<f32>; 2],
+    /// Each heater's measured resistance (PLA, TCA), Ω (None: not sensed, or an older device).
+    pub resistances_ohm: [Option<f32>; 2],
+    /// The TCA's mean temperature from its own resistance, °C: a second reading of the TCA
+    /// beside its thermistor bead (None: not sensed, or an older device).
+    pub t_tca_self_c: Option<f32>,
+    /// The heater supply's cut-off switch: true closed (the heaters have a supply), false open
+    /// (it opens on every alarm); None from an older device or a word neither `closed` nor `open`.
+    pub cutoff_closed: Option<bool>,
 }
 
 impl<'a> Status<'a> {
@@ -141,6 +152,14 @@ impl<'a> Status<'a> {
             fault: field(line, "fault").unwrap_or("none"),
             targets_c: [num("pla_target_c"), num("tca_target_c")],
             mode: field(line, "mode").filter(|m| *m != "-"),
+            currents_a: [num("i_pla_a"), num("i_tca_a")],
+            resistances_ohm: [num("r_pla_ohm"), num("r_tca_ohm")],
+            t_tca_self_c: num("t_tca_self_c"),
+            cutoff_closed: match field(line, "cutoff") {
+                Some("closed") => Some(true),
+                Some("open") => Some(false),
+                _ => None,
+            },
         })
     }
 }
@@ -244,8 +263,96 @@ mod tests {
             (s.phase, s.target_mm, s.targets_c, s.mode),
             ("idle", None, [None, None], None)
         );
+        assert_eq!(
+            (
+                s.currents_a,
+                s.resistances_ohm,
+                s.t_tca_self_c,
+                s.cutoff_closed
+            ),
+            ([None, None], [None, None], None, None)
+        );
         assert_eq!(Status::parse("ok"), None);
         assert_eq!(Status::parse("error: busy phase=bend"), None);
         assert_eq!(field("ok t_pla_c=1 t_pla=2", "t_pla"), Some("2"));
+    }
+
+    #[test]
+    fn status_lines_parse_the_current_sense_and_the_cutoff() {
+        let line = "ok phase=bend target_mm=38.00 t_pla_c=74.17 t_tca_c=56.88 t_amb_c=21.94 \
+                    p_pla_w=1.250 p_tca_w=0.700 supply_v=12.00 fault=none \
+                    pla_target_c=75.00 tca_target_c=- mode=closed \
+                    i_pla_a=0.417 i_tca_a=0.194 r_pla_ohm=28.80 r_tca_ohm=18.61 \
+                    t_tca_self_c=58.12 cutoff=closed";
+        let s = Status::parse(line).unwrap();
+        assert_eq!(s.currents_a, [Some(0.417), Some(0.194)]);
+        assert_eq!(s.resistances_ohm, [Some(28.8), Some(18.61)]);
+        assert_eq!(s.t_tca_self_c, Some(58.12));
+        assert_eq!(s.cutoff_closed, Some(true));
+        // The older fields are read as before.
+        assert_eq!(
+            (s.phase, s.mode, s.targets_c),
+            ("bend", Some("closed"), [Some(75.0), None])
+        );
+        // A board without current sense: `-` for what it does not have; the cut-off is given.
+        let bare = "ok phase=fault target_mm=- t_pla_c=22.00 t_tca_c=22.00 t_amb_c=22.00 \
+                    p_pla_w=0.000 p_tca_w=0.000 supply_v=12.00 fault=heater-open \
+                    pla_target_c=- tca_target_c=- mode=closed \
+                    i_pla_a=- i_tca_a=- r_pla_ohm=- r_tca_ohm=- t_tca_self_c=- cutoff=open";
+        let s = Status::parse(bare).unwrap();
+        assert_eq!(
+            (
+                s.currents_a,
+                s.resistances_ohm,
+                s.t_tca_self_c,
+                s.cutoff_closed
+            ),
+            ([None, None], [None, None], None, Some(false))
+        );
+        assert_eq!((s.phase, s.fault), ("fault", "heater-open"));
+        // A cut-off word this parser does not know is not taken for either state.
+        let odd = bare.replace("cutoff=open", "cutoff=stuck");
+        assert_eq!(Status::parse(&odd).unwrap().cutoff_closed, None);
+    }
+
+    #[test]
+    fn the_firmware_s_own_status_line_parses_back_to_its_values() {
+        use crate::protocol::reply::{status, StatusReport};
+        use crate::protocol::{Mode, OutLine};
+        use crate::vocab::Phase;
+        let report = StatusReport {
+            phase: Phase::Lock,
+            target_mm: 38.0,
+            t_pla_c: 61.5,
+            t_tca_c: 57.0,
+            t_amb_c: 22.0,
+            p_pla_w: 0.0,
+            p_tca_w: 0.7,
+            supply_v: 12.0,
+            fault: None,
+            pla_target_c: f32::NAN,
+            tca_target_c: 57.5,
+            mode: Some(Mode::Closed),
+            current_a: [f32::NAN, 0.194],
+            resistance_ohm: [f32::NAN, 18.61],
+            t_tca_self_c: 58.12,
+            supply_on: true,
+        };
+        let mut l = OutLine::new();
+        status(&mut l, &report);
+        let s = Status::parse(&l).unwrap();
+        assert_eq!(s.currents_a, [None, Some(0.194)]);
+        assert_eq!(s.resistances_ohm, [None, Some(18.61)]);
+        assert_eq!(s.t_tca_self_c, Some(58.12));
+        assert_eq!(s.cutoff_closed, Some(true));
+        let mut l = OutLine::new();
+        status(
+            &mut l,
+            &StatusReport {
+                supply_on: false,
+                ..report
+            },
+        );
+        assert_eq!(Status::parse(&l).unwrap().cutoff_closed, Some(false));
     }
 }

@@ -1,6 +1,8 @@
 //! The live view (`morph --live`, `watch`): a terminal UI (ratatui on crossterm) with the
-//! temperatures against their targets, the heater powers, the radius (target, the controller's
-//! estimate at done, the simulator's truth), the phase and the time left, and the events.
+//! temperatures against their targets (and the TCA's own, from its resistance, where the board
+//! senses current), the heater powers with their currents and resistances, the supply and its
+//! cut-off, the radius (target, the controller's estimate at done, the simulator's truth), the
+//! phase and the time left, and the events.
 //! Key `a` aborts, `q` quits (with ABORT if a morph this morphctl started still runs).
 //!
 //! The state ([`LiveState`]) is updated from the lines and samples alone and drawn by [`draw`]
@@ -75,8 +77,8 @@ pub struct LiveState {
     pub last: Option<Sample>,
     /// Link time the current phase began, s (same clock as the samples).
     pub phase_since_s: f64,
-    /// PLA and TCA temperatures against time, °C.
-    pub history: [VecDeque<(f64, f64)>; 2],
+    /// PLA and TCA thermistors and the TCA's self-sensed temperature against time, °C.
+    pub history: [VecDeque<(f64, f64)>; 3],
     /// The latest events and alarms.
     pub events: VecDeque<String>,
     /// How the morph ended, once it has.
@@ -98,7 +100,7 @@ impl LiveState {
             started,
             last: None,
             phase_since_s: 0.0,
-            history: [VecDeque::new(), VecDeque::new()],
+            history: [VecDeque::new(), VecDeque::new(), VecDeque::new()],
             events: VecDeque::new(),
             outcome: None,
             timeout_s,
@@ -115,12 +117,13 @@ impl LiveState {
         if self.last.as_ref().is_none_or(|l| l.phase != s.phase) {
             self.phase_since_s = s.t_s;
         }
-        for (i, h) in self.history.iter_mut().enumerate() {
-            if s.temps_c[i].is_finite() {
+        let temps_c = [s.temps_c[0], s.temps_c[1], s.t_tca_self_c];
+        for (h, temp_c) in self.history.iter_mut().zip(temps_c) {
+            if temp_c.is_finite() {
                 if h.len() == HISTORY_KEPT {
                     h.pop_front();
                 }
-                h.push_back((s.t_s, s.temps_c[i]));
+                h.push_back((s.t_s, temp_c));
             }
         }
         self.last = Some(s);
@@ -288,9 +291,20 @@ pub fn draw(frame: &mut Frame, st: &LiveState) {
         ];
         if i < 2 {
             spans.push(Span::raw(format!("   target {:>10}", val(target, 1, "°C"))));
-            if temp.is_finite() && target.is_finite() {
-                spans.push(Span::raw(format!("   {:+.1} K", temp - target)));
-            }
+            let off = if temp.is_finite() && target.is_finite() {
+                format!("{:+.1} K", temp - target)
+            } else {
+                String::new()
+            };
+            spans.push(Span::raw(format!("   {off:>8}")));
+        }
+        // The TCA as its own thermometer, on the thermistor's row to compare at a glance.
+        let own = num(&|s| s.t_tca_self_c);
+        if i == 1 && own.is_finite() {
+            spans.push(Span::raw(format!(
+                "   self-sensed {:>8}",
+                val(own, 1, "°C")
+            )));
         }
         Line::from(spans)
     };
@@ -300,23 +314,24 @@ pub fn draw(frame: &mut Frame, st: &LiveState) {
         temps,
     );
 
-    // Powers as gauges of the heater caps.
-    let [pla_area, tca_area] = Layout::vertical([Constraint::Length(1), Constraint::Length(1)])
-        .areas(
-            Block::bordered()
-                .title(format!(
-                    "powers (supply {})",
-                    val(num(&|s| s.supply_v), 2, "V")
-                ))
-                .inner(powers),
-        );
-    frame.render_widget(
-        Block::bordered().title(format!(
-            "powers (supply {})",
-            val(num(&|s| s.supply_v), 2, "V")
+    // Powers as gauges of the heater caps; the supply and its cut-off in the title.
+    let mut title = vec![Span::raw(format!(
+        "powers (supply {}",
+        val(num(&|s| s.supply_v), 2, "V")
+    ))];
+    match s.and_then(|s| s.cutoff_closed) {
+        Some(true) => title.push(Span::raw(" · cut-off closed")),
+        Some(false) => title.push(Span::styled(
+            " · cut-off OPEN: no heater supply",
+            bold.fg(Color::Red),
         )),
-        powers,
-    );
+        None => {}
+    }
+    title.push(Span::raw(")"));
+    let powers_block = Block::bordered().title(Line::from(title));
+    let [pla_area, tca_area] = Layout::vertical([Constraint::Length(1), Constraint::Length(1)])
+        .areas(powers_block.inner(powers));
+    frame.render_widget(powers_block, powers);
     for (i, (area, cap, name, colour)) in [
         (
             pla_area,
@@ -340,11 +355,21 @@ pub fn draw(frame: &mut Frame, st: &LiveState) {
         } else {
             0.0
         };
+        let mut label = format!("{name} {} of {cap:.1} W", val(p, 2, "W"));
+        // What the board measured of the heater, where it senses current.
+        for (v, decimals, unit) in [
+            (num(&|s| s.currents_a[i]), 3, "A"),
+            (num(&|s| s.resistances_ohm[i]), 2, "Ω"),
+        ] {
+            if v.is_finite() {
+                label.push_str(&format!("  ·  {}", val(v, decimals, unit)));
+            }
+        }
         frame.render_widget(
             Gauge::default()
                 .gauge_style(Style::default().fg(colour))
                 .ratio(ratio)
-                .label(format!("{name} {} of {cap:.1} W", val(p, 2, "W"))),
+                .label(label),
             area,
         );
     }
@@ -422,6 +447,16 @@ pub fn draw(frame: &mut Frame, st: &LiveState) {
             .style(Style::default().fg(Color::Blue))
             .data(&series[1]),
     ];
+    if !series[2].is_empty() {
+        sets.push(
+            Dataset::default()
+                .name("TCA self-sensed")
+                .marker(Marker::Braille)
+                .graph_type(GraphType::Line)
+                .style(Style::default().fg(Color::Magenta))
+                .data(&series[2]),
+        );
+    }
     for (i, (name, colour)) in [
         ("PLA target", Color::LightRed),
         ("TCA target", Color::LightBlue),
@@ -586,6 +621,9 @@ mod tests {
         format!("ok phase={phase} target_mm=38.00 t_pla_c={pla} t_tca_c=50.00 t_amb_c=22.00 p_pla_w={p_pla} p_tca_w=1.000 supply_v=12.00 fault=none {targets}")
     }
 
+    /// The current sense of a board that has it, and its cut-off closed.
+    const SENSED: &str = "i_pla_a=0.409 i_tca_a=1.773 r_pla_ohm=29.51 r_tca_ohm=6.75 t_tca_self_c=58.12 cutoff=closed";
+
     fn screen(st: &LiveState) -> String {
         screen_of(st, 110, 40)
     }
@@ -689,7 +727,7 @@ mod tests {
 
     #[test]
     fn the_view_draws_temperatures_targets_powers_radius_phase_and_keys() {
-        let t = "pla_target_c=75.00 tca_target_c=57.50 mode=closed";
+        let t = &format!("pla_target_c=75.00 tca_target_c=57.50 mode=closed {SENSED}");
         let mut st = LiveState::new("MORPH 38 auto on morph-sim".into(), true, 900.0);
         st.sample(Sample::from_status(
             0.0,
@@ -713,23 +751,53 @@ mod tests {
             "target    75.0 °C",
             "-4.9 K",
             "target    57.5 °C",
-            "PLA heater 2.50 W of 5.0 W",
-            "TCA heater 1.00 W of 2.0 W",
-            "supply 12.00 V",
+            "PLA heater 2.50 W of 5.0 W  ·  0.409 A  ·  29.51 Ω",
+            "TCA heater 1.00 W of 2.0 W  ·  1.773 A  ·  6.75 Ω",
+            "supply 12.00 V · cut-off closed",
+            "self-sensed  58.1 °C",
             "target 38.00 mm",
             "controller's estimate at done",
             "true (sim) 44.50 mm",
             "event: phase bend t=3.4",
             "PLA target",
+            "TCA self-sensed",
             "a: abort   q: quit (aborts the morph)",
         ] {
             assert!(s.contains(want), "`{want}` not on screen:\n{s}");
         }
+        assert_eq!(st.history[2].len(), 2, "the self-sensed TCA is charted");
         st.line("event: done t=23.0 radius_mm=38.01");
         st.note = Some("heaters off".into());
         let s = screen(&st);
         assert!(s.contains("done: the controller estimates 38.01 mm"), "{s}");
         assert!(s.contains("a: abort   q: quit   ·   heaters off"), "{s}");
+        // An alarm opened the cut-off.
+        let open = t.replace("cutoff=closed", "cutoff=open");
+        st.line("alarm: heater-open tca heater carries 0.00 A while driven; ...");
+        st.sample(Sample::from_status(
+            9.0,
+            &status("fault", 60.0, 0.0, &open),
+            44.5,
+        ));
+        let s = screen(&st);
+        assert!(s.contains("cut-off OPEN: no heater supply"), "{s}");
+        // A board without current sense: the cut-off, nothing it does not measure.
+        let bare =
+            "mode=closed i_pla_a=- i_tca_a=- r_pla_ohm=- r_tca_ohm=- t_tca_self_c=- cutoff=closed";
+        let mut st = LiveState::new("bare".into(), false, 900.0);
+        st.sample(Sample::from_status(
+            0.0,
+            &status("idle", 22.0, 0.0, bare),
+            f64::NAN,
+        ));
+        let s = screen(&st);
+        assert!(s.contains("supply 12.00 V · cut-off closed)"), "{s}");
+        for gone in ["self-sensed", " A ", "Ω"] {
+            assert!(
+                !s.contains(gone),
+                "`{gone}` on a board without current sense:\n{s}"
+            );
+        }
         // A board: no truth, no targets from an older firmware.
         let mut st = LiveState::new("board".into(), false, 900.0);
         st.sample(Sample::from_status(
@@ -742,13 +810,20 @@ mod tests {
             s.contains("true (sim) -") && s.contains("target          -"),
             "{s}"
         );
+        // ... nor a cut-off: the title of before.
+        assert!(
+            s.contains("powers (supply 12.00 V)") && !s.contains("cut-off"),
+            "{s}"
+        );
         // watch sent no MORPH: no time since one.
         assert!(!s.contains("since MORPH"), "{s}");
     }
 
     #[test]
     fn every_reading_fits_an_80_by_24_terminal() {
-        let t = "pla_target_c=75.00 tca_target_c=57.50 mode=closed";
+        // The widest a TCA row gets: a three-digit miss beside its own reading.
+        let sensed = SENSED.replace("t_tca_self_c=58.12", "t_tca_self_c=128.12");
+        let t = &format!("pla_target_c=75.00 tca_target_c=157.50 mode=closed {sensed}");
         let mut st = LiveState::new(
             "MORPH 37.5 auto on morph-sim (plant hifi)".into(),
             true,
@@ -768,11 +843,14 @@ mod tests {
             "PLA heater 2.50 W of 5.0 W",
             // The TCA's row, its power and the ambient row were cut off at 80×24.
             "50.0 °C",
-            "target    57.5 °C",
-            "TCA heater 1.00 W of 2.0 W",
+            "target   157.5 °C",
+            "-107.5 K",
+            "self-sensed 128.1 °C",
+            "TCA heater 1.00 W of 2.0 W  ·  1.773 A  ·  6.75 Ω",
+            "PLA heater 2.50 W of 5.0 W  ·  0.409 A  ·  29.51 Ω",
             "ambient",
             "22.0 °C",
-            "supply 12.00 V",
+            "supply 12.00 V · cut-off closed",
             "target 38.00 mm",
             // Was cut to `37.` at 80 columns.
             "true (sim) 37.46 mm",
@@ -781,6 +859,18 @@ mod tests {
         ] {
             assert!(s.contains(want), "`{want}` not on an 80×24 screen:\n{s}");
         }
+        st.line("alarm: heater-short tca ...");
+        let open = t.replace("cutoff=closed", "cutoff=open");
+        st.sample(Sample::from_status(
+            5.0,
+            &status("fault", 70.12, 0.0, &open),
+            37.46,
+        ));
+        let s = screen_of(&st, 80, 24);
+        assert!(
+            s.contains("supply 12.00 V · cut-off OPEN: no heater supply)"),
+            "{s}"
+        );
     }
 
     #[test]

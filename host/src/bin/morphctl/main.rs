@@ -882,10 +882,7 @@ fn follow(
         };
         let s = Sample::from_status(t_s, &status, sim.map(|x| x.1).unwrap_or(f64::NAN));
         if last_line.elapsed() >= Duration::from_millis(200) || outcome.is_some() {
-            let running = format!(
-                "{:>6.1} s  {:<8} PLA {:>6.1} °C  TCA {:>6.1} °C  power {:.2} / {:.2} W",
-                s.t_s, s.phase, s.temps_c[0], s.temps_c[1], s.powers_w[0], s.powers_w[1]
-            );
+            let running = running_line(&s);
             if tty {
                 print!("\r{running}   ");
             } else {
@@ -930,9 +927,37 @@ fn follow(
     Ok(outcome.unwrap_or(ExitCode::FAILURE))
 }
 
+/// The running line of a morph: time, phase, the two heated temperatures and powers, and
+/// `cutoff=open` once the heater supply's cut-off has opened (an alarm took the supply away).
+fn running_line(s: &Sample) -> String {
+    let mut line = format!(
+        "{:>6.1} s  {:<8} PLA {:>6.1} °C  TCA {:>6.1} °C  power {:.2} / {:.2} W",
+        s.t_s, s.phase, s.temps_c[0], s.temps_c[1], s.powers_w[0], s.powers_w[1]
+    );
+    if s.cutoff_closed == Some(false) {
+        line.push_str("  cutoff=open");
+    }
+    line
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_running_line_says_when_the_cutoff_opens() {
+        let st = |phase: &str, cutoff: &str| {
+            let line = format!("ok phase={phase} target_mm=38.00 t_pla_c=74.17 t_tca_c=56.88 t_amb_c=21.94 p_pla_w=0.000 p_tca_w=0.000 supply_v=12.00 fault=none pla_target_c=- tca_target_c=- mode=closed {cutoff}");
+            running_line(&Sample::from_status(12.34, &line, f64::NAN))
+        };
+        assert_eq!(
+            st("bend", "cutoff=closed"),
+            "  12.3 s  bend     PLA   74.2 °C  TCA   56.9 °C  power 0.00 / 0.00 W"
+        );
+        assert!(st("fault", "cutoff=open").ends_with(" W  cutoff=open"));
+        // An older device says nothing of a cut-off.
+        assert!(!st("bend", "").contains("cutoff"));
+    }
 
     #[test]
     fn heaters_off_needs_both_powers_zero_in_idle_or_fault() {

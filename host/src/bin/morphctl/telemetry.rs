@@ -1,6 +1,7 @@
 //! Telemetry of a run: samples from STATUS (and, on `morph-sim`, SIM STATE), their CSV file,
-//! and the plot of a run (SVG or PNG, both with text): temperatures against their targets,
-//! the radius, the powers as the steps they are, the phases named.
+//! and the plot of a run (SVG or PNG, both with text): temperatures against their targets
+//! (and the TCA's own reading of itself where the board senses current), the radius, the
+//! powers and the heater currents as the steps they are, the phases named.
 
 use morphlink::protocol::client::Status;
 use morphlink_host::plot::{self, prelude::*};
@@ -27,13 +28,37 @@ pub struct Sample {
     pub targets_c: [f64; 2],
     /// The strategy that ran, as STATUS names it (`-` if unknown).
     pub mode: String,
+    /// Each heater's current while driven (PLA, TCA), A; NaN where not sensed.
+    pub currents_a: [f64; 2],
+    /// Each heater's measured resistance (PLA, TCA), Ω; NaN where not sensed.
+    pub resistances_ohm: [f64; 2],
+    /// The TCA's mean temperature from its own resistance, °C; NaN where not sensed.
+    pub t_tca_self_c: f64,
+    /// The heater supply's cut-off: true closed, false open (after an alarm); None unknown
+    /// (an older device or log).
+    pub cutoff_closed: Option<bool>,
 }
 
-/// The CSV header of [`Sample`] rows.
+/// The CSV header of [`Sample`] rows: the older columns first, so a reader of an older log
+/// finds its columns where they were.
 pub const CSV_HEADER: &str =
+    "t_s,phase,t_pla_c,t_tca_c,t_amb_c,p_pla_w,p_tca_w,supply_v,radius_mm,target_mm,pla_target_c,tca_target_c,mode,i_pla_a,i_tca_a,r_pla_ohm,r_tca_ohm,t_tca_self_c,cutoff";
+/// The header of files written before the current sense and the cut-off were logged; still read.
+const CSV_HEADER_V2: &str =
     "t_s,phase,t_pla_c,t_tca_c,t_amb_c,p_pla_w,p_tca_w,supply_v,radius_mm,target_mm,pla_target_c,tca_target_c,mode";
 /// The header of files written before the targets and the mode were logged; still read.
 const CSV_HEADER_V1: &str = "t_s,phase,t_pla_c,t_tca_c,t_amb_c,p_pla_w,p_tca_w,supply_v,radius_mm";
+/// Columns of a row under [`CSV_HEADER`], [`CSV_HEADER_V2`] and [`CSV_HEADER_V1`].
+const CSV_COLUMNS: [usize; 3] = [19, 13, 9];
+
+/// The cut-off as the log writes it: `closed`, `open`, or `-` when unknown.
+fn cutoff_word(closed: Option<bool>) -> &'static str {
+    match closed {
+        Some(true) => "closed",
+        Some(false) => "open",
+        None => "-",
+    }
+}
 
 /// A parsed field as f64, NaN if absent; through its shortest decimal text, so `0.7` stays
 /// 0.7 and does not become 0.699999988 (the wire carries decimals, not binary f32).
@@ -57,13 +82,17 @@ impl Sample {
             target_mm: f(s.and_then(|s| s.target_mm)),
             targets_c: s.map_or([f64::NAN; 2], |s| s.targets_c.map(f)),
             mode: s.and_then(|s| s.mode).unwrap_or("-").to_string(),
+            currents_a: s.map_or([f64::NAN; 2], |s| s.currents_a.map(f)),
+            resistances_ohm: s.map_or([f64::NAN; 2], |s| s.resistances_ohm.map(f)),
+            t_tca_self_c: f(s.and_then(|s| s.t_tca_self_c)),
+            cutoff_closed: s.and_then(|s| s.cutoff_closed),
         }
     }
 
     /// The sample as a CSV row.
     pub fn csv_row(&self) -> String {
         format!(
-            "{:.2},{},{:.2},{:.2},{:.2},{:.3},{:.3},{:.2},{:.3},{:.2},{:.2},{:.2},{}",
+            "{:.2},{},{:.2},{:.2},{:.2},{:.3},{:.3},{:.2},{:.3},{:.2},{:.2},{:.2},{},{:.3},{:.3},{:.2},{:.2},{:.2},{}",
             self.t_s,
             self.phase,
             self.temps_c[0],
@@ -76,23 +105,44 @@ impl Sample {
             self.target_mm,
             self.targets_c[0],
             self.targets_c[1],
-            self.mode
+            self.mode,
+            self.currents_a[0],
+            self.currents_a[1],
+            self.resistances_ohm[0],
+            self.resistances_ohm[1],
+            self.t_tca_self_c,
+            cutoff_word(self.cutoff_closed)
         )
     }
 
-    /// Parses a CSV row written by [`Sample::csv_row`] (13 columns), or by an older morphctl
-    /// (9 columns: no targets, mode unknown).
+    /// Parses a CSV row written by [`Sample::csv_row`] (19 columns), or by an older morphctl
+    /// (13 columns: no current sense, cut-off unknown; 9: no targets either, mode unknown).
     pub fn parse_csv(row: &str) -> Result<Sample, String> {
         let f: Vec<&str> = row.split(',').collect();
-        if f.len() != 13 && f.len() != 9 {
-            return Err(format!("expected 13 columns, got {}: `{row}`", f.len()));
+        if !CSV_COLUMNS.contains(&f.len()) {
+            return Err(format!(
+                "expected {} columns (or {} or {} from an older morphctl), got {}: `{row}`",
+                CSV_COLUMNS[0],
+                CSV_COLUMNS[1],
+                CSV_COLUMNS[2],
+                f.len()
+            ));
         }
         let n = |i: usize| -> Result<f64, String> {
             f[i].trim()
                 .parse()
                 .map_err(|_| format!("column {} is not a number: `{}`", i + 1, f[i]))
         };
-        let old = f.len() == 9;
+        let old = f.len() == CSV_COLUMNS[2];
+        let sensed = f.len() == CSV_COLUMNS[0];
+        // A current-sense column of a row that has them; NaN in an older row.
+        let sensed_n = |i: usize| if sensed { n(i) } else { Ok(f64::NAN) };
+        let cutoff_closed = match f.get(18).map(|w| w.trim()) {
+            Some("closed") => Some(true),
+            Some("open") => Some(false),
+            Some("-") | None => None,
+            Some(w) => return Err(format!("column 19 is not `closed`, `open` or `-`: `{w}`")),
+        };
         Ok(Sample {
             t_s: n(0)?,
             phase: f[1].to_string(),
@@ -107,6 +157,10 @@ impl Sample {
             } else {
                 f[12].trim().to_string()
             },
+            currents_a: [sensed_n(13)?, sensed_n(14)?],
+            resistances_ohm: [sensed_n(15)?, sensed_n(16)?],
+            t_tca_self_c: sensed_n(17)?,
+            cutoff_closed,
         })
     }
 }
@@ -117,7 +171,10 @@ pub fn read_csv(path: &Path) -> Result<Vec<Sample>, String> {
         .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     let mut lines = text.lines();
     let header = lines.next().map(str::trim);
-    if header != Some(CSV_HEADER) && header != Some(CSV_HEADER_V1) {
+    if ![CSV_HEADER, CSV_HEADER_V2, CSV_HEADER_V1]
+        .iter()
+        .any(|h| header == Some(*h))
+    {
         return Err(format!(
             "{} is not a morphctl telemetry file (header must be `{CSV_HEADER}`)",
             path.display()
@@ -148,8 +205,11 @@ pub fn title(radius_mm: f32, asked_mode: &str, samples: &[Sample], device: &str)
     }
 }
 
-/// Plot size, px: three panels one above the other, readable when shared at full size.
+/// Plot size, px: up to three panels one above the other, readable when shared at full size.
 const PLOT_SIZE_PX: (u32, u32) = (1100, 900);
+/// Extra height for a fourth panel (the heater currents), px: it keeps the panels as tall as
+/// three are.
+const FOURTH_PANEL_PX: u32 = 290;
 /// Height of a phase name above the panel's foot, a fraction of the panel's span (the
 /// text hangs down from it); each further row of names is as much higher.
 const MARK_TEXT_RISE: f64 = 0.08;
@@ -184,13 +244,30 @@ pub fn label_rows(marks: &[(f64, String)], t0: f64, t_end: f64) -> Vec<usize> {
 const LEGEND_ROOM: f64 = 0.35;
 
 /// Plots a run into `out` (`.svg` or `.png`, checked first): temperatures with their targets
-/// (top), the radius (middle, when known), the powers as steps (bottom), the phases named.
+/// and the TCA's own reading where sensed (top), the radius (when known), the powers as steps,
+/// the heater currents as steps (bottom, where sensed), the phases named.
 pub fn plot(samples: &[Sample], title: &str, out: &Path) -> Result<(), String> {
     plot::Format::of(out)?;
     if samples.is_empty() {
         return Err("nothing to plot: no samples".into());
     }
-    Ok(plot::write(out, PLOT_SIZE_PX, &RunPlot { samples, title })?)
+    let (w, mut h) = PLOT_SIZE_PX;
+    if has_radius(samples) && has_currents(samples) {
+        h += FOURTH_PANEL_PX;
+    }
+    Ok(plot::write(out, (w, h), &RunPlot { samples, title })?)
+}
+
+/// True if the run knows the true radius (a simulator).
+fn has_radius(samples: &[Sample]) -> bool {
+    samples.iter().any(|x| x.radius_mm.is_finite())
+}
+
+/// True if the run's device senses the heater currents.
+fn has_currents(samples: &[Sample]) -> bool {
+    samples
+        .iter()
+        .any(|x| x.currents_a.iter().any(|i| i.is_finite()))
 }
 
 /// The panels of a run.
@@ -268,15 +345,13 @@ impl Figure for RunPlot<'_> {
         let t0 = s.first().map_or(0.0, |x| x.t_s).min(0.0);
         // A little room after the last sample for the name of the phase it ended in.
         let t_end = s.last().map_or(1.0, |x| x.t_s).max(t0 + 1.0) * 1.04;
-        let has_radius = s.iter().any(|x| x.radius_mm.is_finite());
+        let has_radius = has_radius(s);
+        let has_currents = has_currents(s);
         let title_px = 30;
         let (head, body) = root.split_vertically(title_px);
         head.titled(self.title, (FONT, 22))?;
-        let areas = if has_radius {
-            body.split_evenly((3, 1))
-        } else {
-            body.split_evenly((2, 1))
-        };
+        let panels = 2 + usize::from(has_radius) + usize::from(has_currents);
+        let areas = body.split_evenly((panels, 1));
         let frame = Frame::new(16, 10, 40, 60);
         let marks = phase_marks(s);
         let rows = label_rows(&marks, t0, t_end);
@@ -287,8 +362,12 @@ impl Figure for RunPlot<'_> {
 
         // Temperatures and their targets.
         let (lo, hi) = span(
-            s.iter()
-                .flat_map(|x| x.temps_c.into_iter().chain(x.targets_c)),
+            s.iter().flat_map(|x| {
+                x.temps_c
+                    .into_iter()
+                    .chain(x.targets_c)
+                    .chain([x.t_tca_self_c])
+            }),
             5.0,
             (10.0, 100.0),
         );
@@ -301,6 +380,15 @@ impl Figure for RunPlot<'_> {
         for (i, name) in ["PLA", "TCA", "ambient"].iter().enumerate() {
             let pts = runs(s, |x| x.temps_c[i]).concat();
             line(&mut chart, pts, colours[i].stroke_width(2), Some(name))?;
+            if i == 1 {
+                // Beside the TCA's bead, the TCA's mean from its resistance: where the two
+                // part, the bead reads only a share of the actuator's rise.
+                let own = runs(s, |x| x.t_tca_self_c);
+                for (k, run) in own.into_iter().enumerate() {
+                    let label = (k == 0).then_some("TCA (own resistance)");
+                    line(&mut chart, run, TAB_PURPLE.stroke_width(2), label)?;
+                }
+            }
         }
         for (i, name) in ["PLA target", "TCA target"].iter().enumerate() {
             let style = colours[i].mix(0.45).stroke_width(2);
@@ -345,21 +433,73 @@ impl Figure for RunPlot<'_> {
         }
 
         // Powers, held between polls.
-        let (_, p_hi) = span(s.iter().flat_map(|x| x.powers_w), 0.0, (0.0, 1.0));
-        let p_hi = p_hi.max(0.5) * (1.0 + LEGEND_ROOM);
+        let power_area = &areas[1 + usize::from(has_radius)];
+        let held = HeldPanel {
+            axis: "power (W)",
+            floor: 0.5,
+            value: |x: &Sample, i: usize| x.powers_w[i],
+        };
+        held.draw(power_area, &frame, s, (t0, t_end), &marks, &rows)?;
+        // The currents the board measured, held between polls as the powers are.
+        if has_currents {
+            let held = HeldPanel {
+                axis: "heater current (A)",
+                floor: 0.1,
+                value: |x: &Sample, i: usize| x.currents_a[i],
+            };
+            held.draw(
+                areas.last().expect("four panels"),
+                &frame,
+                s,
+                (t0, t_end),
+                &marks,
+                &rows,
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// A panel of the two heaters' values held between polls (drawn as steps) against time.
+struct HeldPanel<F> {
+    /// The y axis's description, with its unit.
+    axis: &'static str,
+    /// The least top of the y axis, in its unit: a run at zero still has an axis.
+    floor: f64,
+    /// The PLA's (0) or the TCA's (1) value of a sample, in the axis's unit.
+    value: F,
+}
+
+impl<F: Fn(&Sample, usize) -> f64> HeldPanel<F> {
+    /// Draws the panel into `area` over `t_s` (from, to), the phases named.
+    fn draw<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+        frame: &Frame,
+        s: &[Sample],
+        t_s: (f64, f64),
+        marks: &[(f64, String)],
+        rows: &[usize],
+    ) -> PlotResult {
+        let colours = [TAB_RED, TAB_BLUE];
+        let values = s
+            .iter()
+            .flat_map(|x| [(self.value)(x, 0), (self.value)(x, 1)]);
+        let (_, hi) = span(values, 0.0, (0.0, 1.0));
+        let hi = hi.max(self.floor) * (1.0 + LEGEND_ROOM);
         let mut chart = frame
-            .builder(areas.last().expect("two or three panels"), None)
-            .build_cartesian_2d(t0..t_end, 0.0..p_hi)?;
-        mesh(&mut chart, time, "power (W)", true).draw()?;
+            .builder(area, None)
+            .build_cartesian_2d(t_s.0..t_s.1, 0.0..hi)?;
+        mesh(&mut chart, "time since MORPH (s)", self.axis, true).draw()?;
         for (i, name) in ["PLA heater", "TCA heater"].iter().enumerate() {
             line(
                 &mut chart,
-                steps(s, |x| x.powers_w[i]),
+                steps(s, |x| (self.value)(x, i)),
                 colours[i].stroke_width(2),
                 Some(name),
             )?;
         }
-        named_marks(&mut chart, &marks, &rows, 0.0, p_hi)?;
+        named_marks(&mut chart, marks, rows, 0.0, hi)?;
         legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         Ok(())
     }
@@ -410,7 +550,11 @@ mod tests {
         format!("ok phase={phase} target_mm=38.00 t_pla_c={pla} t_tca_c=40.00 t_amb_c=22.00 p_pla_w={p_pla} p_tca_w=0.700 supply_v=12.00 fault=none {targets}")
     }
 
-    fn samples() -> Vec<Sample> {
+    /// The current sense of a board that has it, and its cut-off closed.
+    const SENSED: &str = "i_pla_a=0.409 i_tca_a=1.773 r_pla_ohm=29.51 r_tca_ohm=6.75 t_tca_self_c=41.32 cutoff=closed";
+
+    /// A morph on a board without current sense (the fields of a device before it).
+    fn unsensed() -> Vec<Sample> {
         let t = "pla_target_c=75.00 tca_target_c=57.50 mode=closed";
         vec![
             Sample::from_status(0.0, &st("soften", 22.0, 5.0, t), 46.0),
@@ -429,6 +573,24 @@ mod tests {
         ]
     }
 
+    /// The same morph on a board that senses current.
+    fn samples() -> Vec<Sample> {
+        unsensed()
+            .iter()
+            .map(|x| {
+                let pla_target = if x.targets_c[0].is_finite() {
+                    "75.00"
+                } else {
+                    "-"
+                };
+                let fields =
+                    format!("pla_target_c={pla_target} tca_target_c=57.50 mode=closed {SENSED}");
+                let line = st(&x.phase, x.temps_c[0], x.powers_w[0], &fields);
+                Sample::from_status(x.t_s, &line, x.radius_mm)
+            })
+            .collect()
+    }
+
     #[test]
     fn status_replies_become_samples_and_round_trip_through_csv() {
         let s = samples();
@@ -444,14 +606,79 @@ mod tests {
         }
         let back = Sample::parse_csv(&s[3].csv_row()).unwrap();
         assert!(back.targets_c[0].is_nan() && back.targets_c[1] == 57.5);
+        // The current sense and the cut-off, as STATUS gave them, in the last six columns.
+        assert_eq!(s[2].currents_a, [0.409, 1.773]);
+        assert_eq!(s[2].resistances_ohm, [29.51, 6.75]);
+        assert_eq!(s[2].t_tca_self_c, 41.32);
+        assert_eq!(s[2].cutoff_closed, Some(true));
+        assert!(s[2]
+            .csv_row()
+            .ends_with(",closed,0.409,1.773,29.51,6.75,41.32,closed"));
+        assert!(back.cutoff_closed == Some(true) && back.currents_a == [0.409, 1.773]);
+        assert_eq!(
+            s[3].csv_row().split(',').count(),
+            CSV_HEADER.split(',').count()
+        );
+        // A board without current sense: NaN where it has no value, the cut-off still read.
+        let bare = "i_pla_a=- i_tca_a=- r_pla_ohm=- r_tca_ohm=- t_tca_self_c=- cutoff=open";
+        let b = Sample::from_status(0.0, &st("fault", 22.0, 0.0, bare), f64::NAN);
+        assert!(b
+            .currents_a
+            .iter()
+            .chain(&b.resistances_ohm)
+            .all(|v| v.is_nan()));
+        assert!(b.t_tca_self_c.is_nan() && b.cutoff_closed == Some(false));
+        let back = Sample::parse_csv(&b.csv_row()).unwrap();
+        assert!(back.currents_a[0].is_nan() && back.cutoff_closed == Some(false));
+        // A row from before the current sense: read, the new values unknown.
+        let v2 = Sample::parse_csv(
+            "1.00,bend,72.00,40.00,22.00,4.000,0.700,12.00,40.000,38.00,75.00,57.50,closed",
+        )
+        .unwrap();
+        assert_eq!((v2.targets_c, v2.mode.as_str()), ([75.0, 57.5], "closed"));
+        assert!(v2
+            .currents_a
+            .iter()
+            .chain(&v2.resistances_ohm)
+            .all(|v| v.is_nan()));
+        assert!(v2.t_tca_self_c.is_nan() && v2.cutoff_closed.is_none());
         // A row from before the targets: read, targets unknown.
         let old =
             Sample::parse_csv("1.00,bend,72.00,40.00,22.00,4.000,0.700,12.00,40.000").unwrap();
         assert!(old.targets_c.iter().all(|t| t.is_nan()) && old.mode == "-");
+        assert!(old.currents_a[0].is_nan() && old.cutoff_closed.is_none());
         assert!(Sample::parse_csv("1,2,3").is_err());
-        // A STATUS of a device without the new fields: NaN targets, mode unknown.
+        let bad = s[2].csv_row().replace(",closed,0.409", ",closed,x");
+        assert!(Sample::parse_csv(&bad).unwrap_err().contains("column 14"));
+        let bad = s[2].csv_row().replace("41.32,closed", "41.32,ajar");
+        assert!(Sample::parse_csv(&bad).unwrap_err().contains("column 19"));
+        // A STATUS of a device without the new fields: NaN targets, mode and sense unknown.
         let s = Sample::from_status(0.0, &st("bend", 70.0, 1.0, ""), f64::NAN);
         assert!(s.targets_c.iter().all(|t| t.is_nan()) && s.mode == "-");
+        assert!(s.currents_a[1].is_nan() && s.t_tca_self_c.is_nan() && s.cutoff_closed.is_none());
+    }
+
+    #[test]
+    fn logs_of_every_older_morphctl_are_read() {
+        let dir = std::env::temp_dir().join(format!("morphctl-csv-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let row = samples()[2].csv_row();
+        let cols: Vec<&str> = row.split(',').collect();
+        for (header, n) in [(CSV_HEADER, 19), (CSV_HEADER_V2, 13), (CSV_HEADER_V1, 9)] {
+            let path = dir.join(format!("v{n}.csv"));
+            let text = format!("{header}\n{}\n", cols[..n].join(","));
+            std::fs::write(&path, text).unwrap();
+            let read = read_csv(&path).unwrap();
+            assert_eq!(read.len(), 1, "{header}");
+            assert_eq!(read[0].temps_c, [72.0, 40.0, 22.0], "{header}");
+            assert_eq!(read[0].currents_a[0].is_finite(), n == 19, "{header}");
+        }
+        let path = dir.join("other.csv");
+        std::fs::write(&path, "a,b\n1,2\n").unwrap();
+        assert!(read_csv(&path)
+            .unwrap_err()
+            .contains("not a morphctl telemetry file"));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -540,6 +767,8 @@ mod tests {
             "soften",
             "bend",
             "lock",
+            "TCA (own resistance)",
+            "heater current (A)",
         ] {
             assert!(text.contains(want), "{want} missing from the SVG");
         }
@@ -552,9 +781,16 @@ mod tests {
         let mut board = samples();
         board.iter_mut().for_each(|s| s.radius_mm = f64::NAN);
         plot(&board, "board", &svg).unwrap();
-        assert!(!std::fs::read_to_string(&svg)
-            .unwrap()
-            .contains("radius (mm)"));
+        let text = std::fs::read_to_string(&svg).unwrap();
+        assert!(!text.contains("radius (mm)"));
+        assert!(text.contains("heater current (A)") && text.contains("TCA (own resistance)"));
+        // Without current sense (a board without it, an older log): the plot of before.
+        plot(&unsensed(), "older", &svg).unwrap();
+        let text = std::fs::read_to_string(&svg).unwrap();
+        for gone in ["TCA (own resistance)", "heater current (A)"] {
+            assert!(!text.contains(gone), "{gone} drawn without current sense");
+        }
+        assert!(text.contains("radius (mm)") && text.contains("power (W)"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
