@@ -657,9 +657,10 @@ fn bringup_names_swapped_thermistor_wires() {
 
 #[test]
 fn bringup_names_a_dead_heater_and_refuses_a_faulted_device() {
+    // On the paper's wiring the pulses find it: no thermistor warms.
     let (code, out) = bringup(
         "bringup-dead",
-        &format!("{{ echo 'SIM FAULT heater-open tca'; cat; }} | '{MORPH_SIM}' \"$@\" | sed -u '/^ok fault=heater-open/d'"),
+        &format!("{{ echo 'SIM FAULT heater-open tca'; cat; }} | '{MORPH_SIM}' --thermistors-only \"$@\" | sed -u '/^ok fault=heater-open/d'"),
     );
     assert_eq!(code, Some(1), "{out}");
     assert!(out.contains("FAIL TCA heater warms no thermistor"), "{out}");
@@ -667,6 +668,15 @@ fn bringup_names_a_dead_heater_and_refuses_a_faulted_device() {
         out.contains("ok   PLA heater warms its own thermistor"),
         "{out}"
     );
+    ends_heaters_off(&out);
+    // A board that senses current names it at rest, before any pulse, by its alarm.
+    let (code, out) = bringup(
+        "bringup-dead-sensed",
+        &format!("{{ echo 'SIM FAULT heater-open tca'; cat; }} | '{MORPH_SIM}' \"$@\" | sed -u '/^ok fault=heater-open/d'"),
+    );
+    assert_eq!(code, Some(1), "{out}");
+    assert!(out.contains("heater-open"), "{out}");
+    assert!(!out.contains("HEAT"), "a heater was pulsed:\n{out}");
     ends_heaters_off(&out);
     // A supply out of range trips the supervisor at rest: bring-up refuses the faulted device
     // and pulses no heater.
