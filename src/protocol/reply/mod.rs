@@ -31,7 +31,7 @@ pub use status::*;
 /// HELP text, one `data:` line each.
 pub const HELP: [&str; 15] = [
     "MORPH <radius_mm> [auto|paper|gated|boost|closed]  morph to a radius (see RANGE)",
-    "STATUS                          phase, temperatures, powers, supply, fault, targets, mode",
+    "STATUS                          phase, temperatures, powers, supply, fault, targets, mode, currents, cut-off",
     "ABORT                           both heaters off at once, phase idle",
     "RESET                           clear a latched fault once its cause is gone",
     "RANGE                           reachable radii in mm",
