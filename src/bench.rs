@@ -234,7 +234,11 @@ impl<P: Plant> Bench<P> {
     /// the probe pulse) and inside the off-time, of the heaters' true resistances now.
     fn currents(&mut self, sample_ms: u64, s: &morphlink_plant::Sample) -> Option<CurrentCounts> {
         let ohm = s.heater_ohm.filter(|_| self.current_sense)?;
-        let v = if self.supplied(sample_ms) { s.supply_v } else { 0.0 };
+        let v = if self.supplied(sample_ms) {
+            s.supply_v
+        } else {
+            0.0
+        };
         let mut c = CurrentCounts::default();
         for i in 0..2 {
             let amps = if self.heater_open[i] { 0.0 } else { v / ohm[i] };

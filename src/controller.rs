@@ -325,7 +325,8 @@ impl Controller {
     /// once it has a reference at rest ([`Electrical::tca_self_c`], with the calibration's
     /// coefficient).
     pub fn tca_self_c(&self) -> Option<f32> {
-        self.elec.tca_self_c(self.settings.cal.tca_tcr_ppm_per_k * 1e-6)
+        self.elec
+            .tca_self_c(self.settings.cal.tca_tcr_ppm_per_k * 1e-6)
     }
 
     /// The heaters seen electrically (currents, resistances, the TCA's rest reference).
@@ -489,7 +490,8 @@ impl Controller {
             supply_on: self.outputs.supply_on,
         };
         let currents = inputs.current.map(|c| Currents::of(&c, &self.cfg.shunt));
-        self.elec.check(currents, drive, frame.supply_v, &mut faults);
+        self.elec
+            .check(currents, drive, frame.supply_v, &mut faults);
         if self.fault().is_some() {
             self.powers = Powers::default();
             self.outputs = Outputs::default();

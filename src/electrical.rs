@@ -124,8 +124,7 @@ pub const OPEN_MAX_SHARE: f32 = 0.3;
 /// a quarter of the PLA wrap's least current (its highest resistance at the lowest allowed
 /// supply), so even a MOSFET that only partly conducts is seen.
 pub const SHORT_MIN_A: f32 = 0.05;
-const _: () =
-    assert!(SHORT_MIN_A < 0.25 * crate::supervisor::SUPPLY_MIN_V / PLA_OHM_RANGE.1);
+const _: () = assert!(SHORT_MIN_A < 0.25 * crate::supervisor::SUPPLY_MIN_V / PLA_OHM_RANGE.1);
 /// Consecutive ticks a reading must stay wrong before it trips: 2 (0.2 s), so one sample
 /// taken while the duty changed (an ABORT during the ADC burst) never does, and every
 /// electrical fault is named within 0.3 s of the tick it began in.
@@ -194,7 +193,13 @@ fn persists(count: &mut u8, wrong: bool, n: u8) -> bool {
 impl Electrical {
     /// Judges one frame's currents, sampled under `drive` from a supply of `supply_v` volts,
     /// pushing what is wrong to `out`; `None` (no current sense) judges nothing.
-    pub fn check(&mut self, currents: Option<Currents>, drive: Drive, supply_v: f32, out: &mut Faults) {
+    pub fn check(
+        &mut self,
+        currents: Option<Currents>,
+        drive: Drive,
+        supply_v: f32,
+        out: &mut Faults,
+    ) {
         self.now = currents;
         self.supply_v = supply_v;
         self.supplied = drive.supply_on;
@@ -419,7 +424,10 @@ mod tests {
         let mut e = Electrical::default();
         let f = run(&mut e, stuck, cut, CUTOFF_SETTLE_TICKS as usize + 2);
         assert_eq!(f.len(), 1);
-        assert_eq!((f[0].code, f[0].subject), (FaultCode::CutoffFailed, Subject::Supply));
+        assert_eq!(
+            (f[0].code, f[0].subject),
+            (FaultCode::CutoffFailed, Subject::Supply)
+        );
         // No current sense: nothing judged, nothing read.
         let mut e = Electrical::default();
         let mut f = Faults::new();

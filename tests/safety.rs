@@ -472,7 +472,11 @@ fn a_stuck_heater_trips_and_the_cut_off_ends_it_in_every_phase(link: Link) {
                 assert_latched(&mut b, code);
                 // Cooled with the supply cut: the MOSFET replaced (SIM CLEAR), RESET is taken.
                 assert!(b.send("SIM CLEAR")[0].starts_with("ok"));
-                assert!(b.send("RESET")[0].starts_with("ok cleared="), "{:?}", b.lines);
+                assert!(
+                    b.send("RESET")[0].starts_with("ok cleared="),
+                    "{:?}",
+                    b.lines
+                );
             }
         }
     }
@@ -1236,7 +1240,10 @@ fn a_short_or_open_heater_is_named_within_half_a_second_in_every_phase(link: Lin
     let mut worst_s: f64 = 0.0;
     for phase in PHASES {
         for heater in ["pla", "tca"] {
-            for (fault, code) in [("heater-open", "heater-open"), ("heater-stuck", "heater-short")] {
+            for (fault, code) in [
+                ("heater-open", "heater-open"),
+                ("heater-stuck", "heater-short"),
+            ] {
                 let mut b = sensing_bench_in(link, phase, "auto");
                 assert!(b.send(&format!("SIM FAULT {fault} {heater}"))[0].starts_with("ok"));
                 let (a, s, peak) = first_alarm_and_peaks(&mut b, 0.5);
@@ -1249,7 +1256,11 @@ fn a_short_or_open_heater_is_named_within_half_a_second_in_every_phase(link: Lin
                     "{link:?} {phase:?} {fault} {heater}: peaks {peak:?}"
                 );
                 let st = b.send("STATUS");
-                assert_eq!(Bench::field(&st[0], "cutoff").as_deref(), Some("open"), "{st:?}");
+                assert_eq!(
+                    Bench::field(&st[0], "cutoff").as_deref(),
+                    Some("open"),
+                    "{st:?}"
+                );
                 assert_eq!(b.rig.powers_w(), [0.0, 0.0]);
                 worst_s = worst_s.max(s);
             }
@@ -1263,7 +1274,9 @@ fn a_short_or_open_heater_is_named_within_half_a_second_in_every_phase(link: Lin
 fn a_cut_off_that_does_not_open_is_named_after_the_short(link: Link) {
     for phase in [Phase::Idle, Phase::Bend] {
         let mut b = sensing_bench_in(link, phase, "auto");
-        assert!(b.send("SIM FAULT cutoff-stuck")[0].starts_with("ok fault=cutoff-stuck target=supply"));
+        assert!(
+            b.send("SIM FAULT cutoff-stuck")[0].starts_with("ok fault=cutoff-stuck target=supply")
+        );
         // Harmless alone: the cut-off is closed anyway while nothing is wrong.
         b.run_for(2.0);
         assert!(b.alarms().is_empty(), "{:?}", b.lines);

@@ -78,7 +78,10 @@ fn a_healthy_link_tunes_within_bounds_and_raises_no_alarm(link: Link) {
     assert!((tcr / 1500.0 - 1.0).abs() < within, "{link:?}: {tcr} ppm/K");
     // A MORPH reads the TCA's own temperature from it, near the true mean at the end of bend.
     let st = b.send("STATUS");
-    assert!(Bench::field(&st[0], "t_tca_self_c").is_some_and(|v| v != "-"), "{st:?}");
+    assert!(
+        Bench::field(&st[0], "t_tca_self_c").is_some_and(|v| v != "-"),
+        "{st:?}"
+    );
     // A morph after the tune runs with the fitted values and finishes.
     b.run_for(60.0);
     b.morph(38.0, "auto");

@@ -141,7 +141,12 @@ fn heredoc(lines: &[&str], name: &str) -> Option<String> {
     let open = format!("cat > {name} <<'END'");
     let start = lines.iter().rposition(|l| l.trim() == open)? + 1;
     let len = lines[start..].iter().position(|l| l.trim() == "END")?;
-    Some(lines[start..start + len].iter().map(|l| format!("{l}\n")).collect())
+    Some(
+        lines[start..start + len]
+            .iter()
+            .map(|l| format!("{l}\n"))
+            .collect(),
+    )
 }
 
 fn binary(name: &str) -> Option<&'static str> {
@@ -183,7 +188,8 @@ fn run(b: &Block) -> Result<Option<Vec<String>>, String> {
     let dir = if b.files.is_empty() {
         root()
     } else {
-        let d = std::env::temp_dir().join(format!("morphlink-docs-{}-{}", std::process::id(), b.line));
+        let d =
+            std::env::temp_dir().join(format!("morphlink-docs-{}-{}", std::process::id(), b.line));
         std::fs::create_dir_all(&d).map_err(|e| e.to_string())?;
         for (name, text) in &b.files {
             std::fs::write(d.join(name), text).map_err(|e| e.to_string())?;
@@ -275,12 +281,17 @@ fn lines_match(want: &str, got: &str, tol: f64) -> bool {
         // Every piece of the prefix as it is, the last text piece only as a beginning.
         let (w, g) = (pieces(prefix), pieces(got));
         return g.len() >= w.len()
-            && w.iter().zip(&g).enumerate().all(|(k, (a, b))| match (a, b) {
-                (Piece::Text(x), Piece::Text(y)) if k + 1 == w.len() => y.starts_with(x.as_str()),
-                (Piece::Text(x), Piece::Text(y)) => x == y,
-                (Piece::Num(x), Piece::Num(y)) => num(*x, *y),
-                _ => false,
-            });
+            && w.iter()
+                .zip(&g)
+                .enumerate()
+                .all(|(k, (a, b))| match (a, b) {
+                    (Piece::Text(x), Piece::Text(y)) if k + 1 == w.len() => {
+                        y.starts_with(x.as_str())
+                    }
+                    (Piece::Text(x), Piece::Text(y)) => x == y,
+                    (Piece::Num(x), Piece::Num(y)) => num(*x, *y),
+                    _ => false,
+                });
     }
     let (w, g) = (pieces(want), pieces(got));
     w.len() == g.len()
@@ -352,16 +363,46 @@ fn numbers_and_words_are_compared_apart() {
         vec![Piece::Text("fv96+cosserat ".into()), Piece::Num(-1.5)]
     );
     // A line ending in ` ...` is a beginning; `...` alone any lines, none included.
-    assert!(lines_match("alarm: heater-not-heating tca ...", "alarm: heater-not-heating tca rose 1.2 K", 0.0));
-    assert!(!lines_match("alarm: heater-not-heating pla ...", "alarm: heater-not-heating tca rose 1.2 K", 0.0));
+    assert!(lines_match(
+        "alarm: heater-not-heating tca ...",
+        "alarm: heater-not-heating tca rose 1.2 K",
+        0.0
+    ));
+    assert!(!lines_match(
+        "alarm: heater-not-heating pla ...",
+        "alarm: heater-not-heating tca rose 1.2 K",
+        0.0
+    ));
     let v = |s: &[&str]| s.iter().map(|l| l.to_string()).collect::<Vec<_>>();
-    assert!(block_matches(&v(&["a", "...", "d"]), &v(&["a", "b", "c", "d"]), 0.0));
+    assert!(block_matches(
+        &v(&["a", "...", "d"]),
+        &v(&["a", "b", "c", "d"]),
+        0.0
+    ));
     assert!(block_matches(&v(&["a", "...", "d"]), &v(&["a", "d"]), 0.0));
-    assert!(!block_matches(&v(&["a", "...", "d"]), &v(&["a", "b", "c"]), 0.0));
+    assert!(!block_matches(
+        &v(&["a", "...", "d"]),
+        &v(&["a", "b", "c"]),
+        0.0
+    ));
     assert!(!block_matches(&v(&["a", "b"]), &v(&["a", "b", "c"]), 0.0));
-    assert_eq!(without_wall("[wall     0.930 s] > SIM CLEAR"), "[wall s] > SIM CLEAR");
     assert_eq!(
-        heredoc(&["x", "cat > s.txt <<'END'", "MORPH 38", "wait done", "END", "y"], "s.txt").as_deref(),
+        without_wall("[wall     0.930 s] > SIM CLEAR"),
+        "[wall s] > SIM CLEAR"
+    );
+    assert_eq!(
+        heredoc(
+            &[
+                "x",
+                "cat > s.txt <<'END'",
+                "MORPH 38",
+                "wait done",
+                "END",
+                "y"
+            ],
+            "s.txt"
+        )
+        .as_deref(),
         Some("MORPH 38\nwait done\n")
     );
     assert_eq!(

@@ -154,7 +154,13 @@ done"#,
     // As a simulator's child, and over TCP as the emulated image serves its USART1.
     let (addr, server) = tcp_serve(device.clone(), Vec::new());
     for args in [
-        vec!["--sim", "--sim-program", device.to_str().unwrap(), "morph", "38"],
+        vec![
+            "--sim",
+            "--sim-program",
+            device.to_str().unwrap(),
+            "morph",
+            "38",
+        ],
         vec!["--tcp", &addr, "morph", "38"],
     ] {
         let out = morphctl(&args);

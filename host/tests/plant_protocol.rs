@@ -293,8 +293,12 @@ fn an_outside_plant_that_reports_its_resistances_gets_current_sense() {
     let out = text(&run.stdout);
     assert!(out.contains("alarm: heater-short tca "), "{out}");
     let status = out.lines().rfind(|l| l.starts_with("ok phase=")).unwrap();
-    assert!(status.contains(" fault=heater-short ") && status.ends_with(" cutoff=open"), "{status}");
-    let old = format!("'{MORPH_PLANT}' --plant hifi | sed -u 's/ r_pla_ohm=[^ ]* r_tca_ohm=[^ ]*//'");
+    assert!(
+        status.contains(" fault=heater-short ") && status.ends_with(" cutoff=open"),
+        "{status}"
+    );
+    let old =
+        format!("'{MORPH_PLANT}' --plant hifi | sed -u 's/ r_pla_ohm=[^ ]* r_tca_ohm=[^ ]*//'");
     let run = morph_sim(&["--plant-cmd", &old], "STATUS\n");
     let out = text(&run.stdout);
     assert!(

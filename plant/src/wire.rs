@@ -446,7 +446,9 @@ mod tests {
             Ok(Some([30.0, 6.5]))
         );
         assert_eq!(
-            parse_reply("ok t_pla_c=22 t_tca_c=23.5 t_amb_c=22 supply_v=12 radius_mm=46.25 r_tca_ohm=6.5"),
+            parse_reply(
+                "ok t_pla_c=22 t_tca_c=23.5 t_amb_c=22 supply_v=12 radius_mm=46.25 r_tca_ohm=6.5"
+            ),
             Err(ParseError::Missing("r_pla_ohm"))
         );
         assert_eq!(

@@ -208,7 +208,10 @@ fn parse_sim_fault<'a>(args: &mut impl Iterator<Item = &'a str>) -> Result<SimCo
         return parse_sim_drift(args);
     }
     if kind == SimFault::CutoffStuck {
-        no_more(args, "SIM FAULT cutoff-stuck takes no target: the cut-off serves both heaters.")?;
+        no_more(
+            args,
+            "SIM FAULT cutoff-stuck takes no target: the cut-off serves both heaters.",
+        )?;
         return Ok(SimCommand::Fault(kind, Sensor::Pla));
     }
     let target = match args.next() {

@@ -774,7 +774,7 @@ impl Tune {
 #[cfg(test)]
 mod tests {
     use super::*;
-    
+
     /// A first-order record of `rise_k` with time constant `tau_s`, `n` samples.
     fn record(rise_k: f32, tau_s: f32, n: usize) -> [f32; TUNE_MAX_SAMPLES] {
         let mut y = [0.0f32; TUNE_MAX_SAMPLES];

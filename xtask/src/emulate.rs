@@ -75,7 +75,10 @@ fn demo(qemu: &Path, image: &Path, radius_mm: f32) -> Result<(), String> {
     let mut done_t = String::from("?");
     let times = demo_morph(qemu, image, radius_mm, &mut |l| {
         println!("{l}");
-        if let Some(t) = l.strip_prefix("event: done t=").and_then(|r| r.split(' ').next()) {
+        if let Some(t) = l
+            .strip_prefix("event: done t=")
+            .and_then(|r| r.split(' ').next())
+        {
             done_t = t.to_string();
         }
     })?;

@@ -371,7 +371,13 @@ pub fn run(args: &Args) -> Result<(), String> {
     );
     let _ = writeln!(t, "| --- | --- | --- | --- | --- | --- |");
     for (&(c, p), cells) in jobs.iter().zip(&rows) {
-        let _ = writeln!(t, "| {} | {} | {} |", cases[c].name, p.as_str(), cells.join(" | "));
+        let _ = writeln!(
+            t,
+            "| {} | {} | {} |",
+            cases[c].name,
+            p.as_str(),
+            cells.join(" | ")
+        );
     }
     print!("{t}");
     Ok(())

@@ -42,9 +42,17 @@ struct Errors {
 }
 
 /// Morphs `target_mm` on a fresh copy of `spec` with `cal`; the self-sensed TCA's errors.
-fn morph(spec: &HifiSpec, noise: morphlink::bench::Noise, cal: &Calibration, target_mm: f32, e: &mut Errors) {
+fn morph(
+    spec: &HifiSpec,
+    noise: morphlink::bench::Noise,
+    cal: &Calibration,
+    target_mm: f32,
+    e: &mut Errors,
+) {
     let mut rig = Rig::with_plant(Hifi::new(*spec).expect("a drawn link builds"), noise);
-    rig.ctrl.set_calibration(*cal).expect("a calibration in bounds");
+    rig.ctrl
+        .set_calibration(*cal)
+        .expect("a calibration in bounds");
     for _ in 0..50 {
         rig.tick();
     }
@@ -132,7 +140,8 @@ pub fn run(args: &Args) -> Result<(), String> {
                                 s.tca.gauge = gauge;
                                 let cal = tune(&s, noise);
                                 if v == 0 {
-                                    tcr_miss = cal.tca_tcr_ppm_per_k as f64 * 1e-6 / s.tca.tcr_per_k - 1.0;
+                                    tcr_miss =
+                                        cal.tca_tcr_ppm_per_k as f64 * 1e-6 / s.tca.tcr_per_k - 1.0;
                                 }
                                 for &t in &TARGETS_MM {
                                     morph(&s, noise, &Calibration::DEFAULT, t, &mut out[2 * v]);
@@ -146,7 +155,10 @@ pub fn run(args: &Args) -> Result<(), String> {
                 })
             })
             .collect();
-        handles.into_iter().flat_map(|h| h.join().unwrap()).collect()
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap())
+            .collect()
     });
     eprintln!();
     let mut all: [Errors; 4] = Default::default();
@@ -159,7 +171,9 @@ pub fn run(args: &Args) -> Result<(), String> {
         }
         misses.push(miss.abs() * 100.0);
         let (spec, _) = morphlink_sim::ensemble::hifi_draw(args.seed, *d).expect("valid");
-        nominal_misses.push((TCA_TCR_NOMINAL_PPM_PER_K as f64 * 1e-6 / spec.tca.tcr_per_k - 1.0).abs() * 100.0);
+        nominal_misses.push(
+            (TCA_TCR_NOMINAL_PPM_PER_K as f64 * 1e-6 / spec.tca.tcr_per_k - 1.0).abs() * 100.0,
+        );
     }
     let mut t = String::new();
     let _ = writeln!(
@@ -181,7 +195,10 @@ pub fn run(args: &Args) -> Result<(), String> {
         t,
         "| temperature coefficient | p50 \\|miss\\| | p95 | largest |\n| --- | --- | --- | --- |"
     );
-    for (name, v) in [("nominal 1500 ppm/K", &mut nominal_misses), ("fitted by TUNE", &mut misses)] {
+    for (name, v) in [
+        ("nominal 1500 ppm/K", &mut nominal_misses),
+        ("fitted by TUNE", &mut misses),
+    ] {
         let largest = v.iter().cloned().fold(0.0f64, f64::max);
         let _ = writeln!(
             t,

@@ -533,8 +533,12 @@ fn the_heaters_resistances_follow_their_temperatures_and_the_tca_its_strain() {
     let [pla, tca] = h.sample().heater_ohm.unwrap();
     let s = h.spec();
     // The wrap: only its small coefficient over the rod's rise.
-    let want_pla = s.pla_heater_ohm * (1.0 + s.pla_heater_tcr_per_k * (t.pla_c - spec::TCA_R_REF_C));
-    assert!((pla - want_pla).abs() < 1e-9 && pla > pla0, "{pla} {want_pla}");
+    let want_pla =
+        s.pla_heater_ohm * (1.0 + s.pla_heater_tcr_per_k * (t.pla_c - spec::TCA_R_REF_C));
+    assert!(
+        (pla - want_pla).abs() < 1e-9 && pla > pla0,
+        "{pla} {want_pla}"
+    );
     // The TCA: its temperature term and its strain term, the bend shortening the coil.
     let strain = h.tca_strain();
     assert!(strain < 0.0, "a tighter bend shortens the coil: {strain}");

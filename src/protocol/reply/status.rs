@@ -108,7 +108,6 @@ pub fn status(l: &mut OutLine, s: &StatusReport) {
     );
 }
 
-
 /// A value with 2 decimals, or `-` for NaN (no value).
 struct Dash(f32);
 
