@@ -1,7 +1,8 @@
 //! The emulated board's simulated link (firmware only, declared by `main.rs` for the
 //! `board-b-l475e-iot01a-emulated` feature): the nominal lumped plant on the core's simulated
-//! board ([`morphlink::bench`]), kept here and lent to the board's ADC and PWM stand-ins
-//! through `morphlink_boards::emulated::SimulatedLink`. The plant runs at firmware time.
+//! board ([`morphlink::bench`]: the host rig's board, with its supply cut-off and its heaters'
+//! current sense), kept here and lent to the board's ADC, PWM and cut-off stand-ins through
+//! `morphlink_boards::emulated::SimulatedLink`. The plant runs at firmware time.
 
 use core::cell::RefCell;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
@@ -10,13 +11,14 @@ use morphlink::bench::{Bench, Noise, NOMINAL_LINK};
 use morphlink::controller::{Config, Controller, Outputs};
 use morphlink::protocol::SimCommand;
 use morphlink_boards::emulated::SimulatedLink;
-use morphlink_boards::INPUTS;
+use morphlink_boards::{CurrentSums, INPUTS};
 use morphlink_plant::Lumped;
 
-/// The bench and the time it was last advanced to.
+/// The bench, the time it was last advanced to, and the currents of the last frame read.
 struct State {
     bench: Bench<Lumped>,
     last_ms: u64,
+    currents: Option<CurrentSums>,
 }
 
 impl State {
@@ -49,15 +51,28 @@ impl SimulatedLink for Link {
         with_state(|s| {
             s.advance_to(now_ms);
             let i = s.bench.inputs(now_ms);
+            s.currents = i.current.map(|c| CurrentSums {
+                on: c.on,
+                off: c.off,
+            });
             let c = i.thermistor_counts;
             [c[0], c[1], c[2], i.supply_counts].map(|v| v.min(u16::MAX as u32) as u16)
         })
     }
 
-    fn apply(&self, now_ms: u64, pla_duty: f32, tca_duty: f32) {
+    fn currents(&self) -> Option<CurrentSums> {
+        with_state(|s| s.currents)
+    }
+
+    fn apply(&self, now_ms: u64, pla_duty: f32, tca_duty: f32, supply_on: bool) {
         with_state(|s| {
             s.advance_to(now_ms);
-            s.bench.drive(now_ms, Outputs { pla_duty, tca_duty });
+            let out = Outputs {
+                pla_duty,
+                tca_duty,
+                supply_on,
+            };
+            s.bench.drive(now_ms, out);
         });
     }
 
@@ -79,6 +94,7 @@ pub fn init() -> &'static Link {
         *s.borrow_mut() = Some(State {
             bench: Bench::new(Lumped::new(NOMINAL_LINK), Config::DEFAULT, Noise::NOMINAL),
             last_ms: 0,
+            currents: None,
         })
     });
     &LINK

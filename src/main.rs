@@ -3,8 +3,10 @@
 //! prints how to build it.
 //!
 //! Two embassy tasks share one [`morphlink::controller::Controller`]:
-//! - `control`, every [`TICK_MS`] (10 Hz): ADC burst (16 samples per input) → `Controller::step`
-//!   → PWM duties; feeds the watchdog; records its timing for `STATS`.
+//! - `control`, every [`TICK_MS`] (10 Hz): ADC burst (16 samples per input), then the heaters'
+//!   currents where the board senses them (16 readings inside the pulses and between them) →
+//!   `Controller::step` → PWM duties and the supply's cut-off; feeds the watchdog; records its
+//!   timing for `STATS`.
 //! - `serial`: bytes from the board's serial port → `morphlink::session::Session` (line
 //!   assembly, ABORT first, replies built or dropped and counted, events and alarms) → the
 //!   port; it signals the control task to apply the duties at once after an ABORT and carries
@@ -42,7 +44,8 @@ mod firmware {
     use embassy_sync::signal::Signal;
     use embassy_time::{Duration, Instant, Ticker, Timer};
     use embedded_io_async::Write;
-    use morphlink::controller::{Config, Controller, Inputs, OVERSAMPLE, TICK_MS};
+    use morphlink::controller::{Config, Controller, Inputs, Outputs, OVERSAMPLE, TICK_MS};
+    use morphlink::electrical::{CurrentCounts, ShuntSense};
     use morphlink::protocol::{reply, OutLine, SimCommand};
     use morphlink::session::{Session, OUT_BYTES};
     use morphlink::settings::codec::LoadError;
@@ -51,8 +54,8 @@ mod firmware {
     use morphlink::vocab::ResetCause;
     use morphlink_boards::selected as board;
     use morphlink_boards::{
-        AnalogInputs, HeaterOutputs, Input, LastFatal, Received, SerialReceive, Watchdog, INPUTS,
-        SERIAL_RX_BYTES,
+        AnalogInputs, CurrentSense, HeaterOutputs, Input, LastFatal, Received, SerialReceive,
+        Watchdog, INPUTS, SERIAL_RX_BYTES,
     };
 
     /// Spacing of the ADC samples in a tick's burst: 16 samples 1 ms apart span 16 ms, about
@@ -62,6 +65,22 @@ mod firmware {
     /// Reads per input per tick: the core's oversampling over what the ADC sums in hardware.
     const READS_PER_TICK: u32 = OVERSAMPLE / board::HW_OVERSAMPLE;
     const _: () = assert!(READS_PER_TICK * board::HW_OVERSAMPLE == OVERSAMPLE);
+
+    // The board's PWM and probe pulse are the ones the core's electrical checks assume.
+    const _: () = assert!(
+        morphlink_boards::PWM_HZ as f32 == morphlink::electrical::PWM_HZ
+            && morphlink_boards::PROBE_PULSE_US as f32 == morphlink::electrical::MIN_SENSED_ON_US
+    );
+
+    /// The controller's board settings: the defaults, with this board's current-sense chain.
+    const CONFIG: Config = Config {
+        shunt: ShuntSense {
+            shunt_ohm: board::SHUNT.shunt_ohm,
+            gain: board::SHUNT.gain,
+            ..ShuntSense::DEFAULT
+        },
+        ..Config::DEFAULT
+    };
 
     /// The controller, shared by the two tasks. Both run in the same thread-mode executor, so
     /// the lock never contends and never masks interrupts (the UART interrupt keeps running
@@ -146,7 +165,7 @@ mod firmware {
 
         // Built in its static, not in `main`'s future: held across the settings load below it
         // would take its 3.5 KiB again in the task's RAM.
-        CONTROLLER.lock(|c| *c.borrow_mut() = Slot::Ready(Controller::new(Config::DEFAULT)));
+        CONTROLLER.lock(|c| *c.borrow_mut() = Slot::Ready(Controller::new(CONFIG)));
         with_controller(|c| {
             c.enable_timing(LoopTiming::new(board::CPU_HZ, TICK_MS as u32 * 1000, cause))
         });
@@ -200,9 +219,14 @@ mod firmware {
         sums
     }
 
+    /// Drives the heaters and the supply's cut-off as `o` says.
+    fn drive(heaters: &mut impl HeaterOutputs, o: Outputs) {
+        heaters.apply(o.pla_duty, o.tca_duty, o.supply_on);
+    }
+
     /// The control loop at [`TICK_MS`]; the only feeder of the watchdog.
     async fn control_loop(
-        mut sensors: impl AnalogInputs,
+        mut sensors: impl AnalogInputs + CurrentSense,
         mut heaters: impl HeaterOutputs,
         mut wdg: impl Watchdog,
     ) {
@@ -210,8 +234,7 @@ mod firmware {
         let mut ticker = Ticker::every(Duration::from_millis(TICK_MS));
         loop {
             if let Either::Second(()) = select(ticker.next(), APPLY_NOW.wait()).await {
-                let o = with_controller(|c| c.outputs());
-                heaters.apply(o.pla_duty, o.tca_duty);
+                drive(&mut heaters, with_controller(|c| c.outputs()));
                 continue;
             }
             let start = board::cycles();
@@ -220,6 +243,7 @@ mod firmware {
             // stale-sensor check (`STALE_AFTER_MS`) refuses it.
             let sample_ms = Instant::now().as_millis();
             let sums = read_burst(&mut sensors).await;
+            let current = sensors.read_currents(OVERSAMPLE).await;
             let adc_done = board::cycles();
             let now_ms = Instant::now().as_millis();
             let inputs = Inputs {
@@ -230,10 +254,12 @@ mod firmware {
                 ],
                 supply_counts: sums[Input::Supply as usize],
                 sample_ms,
-                current: None,
+                current: current.map(|c| CurrentCounts {
+                    on: c.on,
+                    off: c.off,
+                }),
             };
-            let o = with_controller(|c| c.step(now_ms, &inputs));
-            heaters.apply(o.pla_duty, o.tca_duty);
+            drive(&mut heaters, with_controller(|c| c.step(now_ms, &inputs)));
             let applied = board::cycles();
             wdg.feed();
             with_controller(|c| c.record_timing(start, adc_done, applied));
@@ -326,9 +352,9 @@ mod firmware {
     /// end instead of recursing.
     static FAULTED: AtomicBool = AtomicBool::new(false);
 
-    /// Heaters off first (raw writes), then one log line over RTT, then the board's fatal end:
-    /// the reason recorded in RAM that survives the reset, then a system reset, reported at the
-    /// next boot as `reset=software panic="<reason>"`.
+    /// Supply cut and heaters off first (raw writes), then one log line over RTT, then the
+    /// board's fatal end: the reason recorded in RAM that survives the reset, then a system
+    /// reset, reported at the next boot as `reset=software panic="<reason>"`.
     #[panic_handler]
     fn panic(info: &core::panic::PanicInfo) -> ! {
         board::heater_pins_low();

@@ -12,7 +12,16 @@
 //! | TCA thermistor | PC4 (A1) | ADC1_IN13 |
 //! | ambient thermistor | PC2 (A3) | ADC1_IN3 |
 //! | supply divider | PC1 (A4) | ADC1_IN2 |
+//! | supply cut-off (its driver's gate) | PB2 (D8) | GPIO, push-pull; low = cut |
+//! | PLA current: INA180A1 output | PC3 (A2) | ADC1_IN4 |
+//! | TCA current: INA180A1 output | PC0 (A5) | ADC1_IN1 |
 //! | ST-LINK virtual COM port | PB6 TX / PB7 RX | USART1, 115 200 8N1 |
+//!
+//! Current sense: a 50 mΩ low-side shunt per heater into an INA180A1 (gain 20, 1 V/A at the
+//! ADC), on the thermistors' ADC1; the conversions are timed against TIM3's counter
+//! (`stm32`, "Sampling the currents inside the pulse"), 24.5 ADC cycles of sampling (0.3 µs)
+//! each, after one discarded conversion (the L4's erratum on a first conversion after a
+//! pause). Written and built, never run on a board.
 //!
 //! The heater gates are on PA6/PA7 because those pins have no pull-up from reset until `init`
 //! (input on the F4, analog on the G4 and L4), so the external gate pull-downs hold both heaters
@@ -23,13 +32,14 @@
 //! clock SYSCLK. TIM2 is the embassy time driver.
 
 use crate::stm32 as common;
+use crate::stm32::Shunts;
 pub use crate::stm32::{
-    cycles, fatal, heater_pins_low, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx,
-    SerialTx, SettingsFlash,
+    cycles, fatal, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx, SerialTx,
+    SettingsFlash,
 };
-use crate::ResetFlags;
-use embassy_stm32::adc::{Adc, AdcChannel, SampleTime};
-use embassy_stm32::peripherals::USART1;
+use crate::{ResetFlags, ShuntChain};
+use embassy_stm32::adc::{AdcChannel, AnyAdcChannel, SampleTime};
+use embassy_stm32::peripherals::{ADC1, USART1};
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::{bind_interrupts, pac};
 
@@ -45,10 +55,42 @@ pub const HW_OVERSAMPLE: u32 = 1;
 /// ADC sample time: the longest, because the thermistor dividers are 5–10 kΩ sources and the
 /// supply divider 8.2 kΩ; 640.5 cycles at 80 MHz is 8 µs per conversion.
 const SAMPLE_TIME: SampleTime = SampleTime::CYCLES640_5;
+/// Sample time of the current inputs: 24.5 cycles at 80 MHz, 0.3 µs (the INA180's output is a
+/// low-impedance source), so two conversions take under 1 µs.
+const SHUNT_SAMPLE_TIME: SampleTime = SampleTime::CYCLES24_5;
+
+/// The current-sense chain: 50 mΩ into an INA180A1.
+pub const SHUNT: ShuntChain = ShuntChain::INA180A1;
+
+/// The supply cut-off's pin, PB2 (Arduino D8): analog from reset, so the driver's 100 kΩ
+/// pull-down holds the cut-off open.
+const CUTOFF: common::RawPin = (pac::GPIOB, 2);
+
+/// Drives the cut-off and both heater gates low by raw register writes, whatever state the
+/// firmware is in (the panic and HardFault handlers).
+pub fn heater_pins_low() {
+    common::heater_pins_low(CUTOFF);
+}
 
 bind_interrupts!(struct Irqs {
     USART1 => usart::BufferedInterruptHandler<USART1>;
 });
+
+/// Powers and calibrates ADC1 by registers, the steps of embassy-stm32's `Adc::new` on the L4
+/// (its clock: SYSCLK, 80 MHz, the kernel clock `init` selects); `Sensors::new` enables it.
+fn adc1_on() {
+    embassy_stm32::rcc::enable_and_reset_without_stop::<ADC1>();
+    let a = pac::ADC1;
+    a.cr().modify(|w| {
+        w.set_deeppwd(false);
+        w.set_advregen(true);
+    });
+    // The regulator's start-up time, 20 µs; then the calibration, and 1 µs before enabling.
+    cortex_m::asm::delay(20 * (CPU_HZ / 1_000_000));
+    a.cr().modify(|w| w.set_adcal(true));
+    while a.cr().read().adcal() {}
+    cortex_m::asm::delay(CPU_HZ / 1_000_000);
+}
 
 /// Reads and clears the reset flags in RCC_CSR.
 fn take_reset_flags() -> ResetFlags {
@@ -86,10 +128,12 @@ pub fn init() -> Parts {
     }
     let p = embassy_stm32::init(config);
 
-    let pwm = common::heater_pwm(p.TIM3, p.PA6, p.PA7);
+    let heaters = Heaters::new(common::heater_pwm(p.TIM3, p.PA6, p.PA7), CUTOFF, p.PB2);
 
+    let shunts: [AnyAdcChannel<'static, ADC1>; 2] = [p.PC3.degrade_adc(), p.PC0.degrade_adc()];
+    let _ = p.ADC1;
+    adc1_on();
     let sensors = Sensors::new(
-        Adc::new(p.ADC1),
         [
             p.PC5.degrade_adc(),
             p.PC4.degrade_adc(),
@@ -97,6 +141,11 @@ pub fn init() -> Parts {
             p.PC1.degrade_adc(),
         ],
         SAMPLE_TIME,
+        Some(Shunts::new(
+            pac::ADC1,
+            shunts.map(|c| c.get_hw_channel()),
+            SHUNT_SAMPLE_TIME,
+        )),
     );
 
     let (tx_buf, rx_buf) = common::uart_buffers();
@@ -111,5 +160,5 @@ pub fn init() -> Parts {
     )
     .expect("USART1 accepts 115200 8N1");
 
-    common::parts(sensors, pwm, serial, p.IWDG, p.FLASH, reset_flags)
+    common::parts(sensors, heaters, serial, p.IWDG, p.FLASH, reset_flags)
 }

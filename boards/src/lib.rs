@@ -11,10 +11,11 @@
 //! | `b-l475e-iot01a-emulated` | `emulated` | the same board under QEMU |
 //!
 //! The selected module is re-exported as `selected`. Every board module provides the same
-//! items: `NAME`, `CPU_HZ`, `HW_OVERSAMPLE`, `init() -> Parts`, `heater_pins_low()`,
-//! `cycles()` and `fatal()`. Nothing here knows the controller: the board moves ADC counts
-//! and PWM duties, and bytes through its serial port (`embedded_io_async::{Read, Write}`).
-//! On the host only the traits and [`ResetFlags`] compile.
+//! items: `NAME`, `CPU_HZ`, `HW_OVERSAMPLE`, `SHUNT`, `init() -> Parts`, `heater_pins_low()`,
+//! `cycles()` and `fatal()`. Nothing here knows the controller: the board moves ADC counts,
+//! PWM duties and the supply's cut-off, and bytes through its serial port
+//! (`embedded_io_async::{Read, Write}`). On the host only the traits and [`ResetFlags`]
+//! compile.
 #![no_std]
 #![deny(missing_docs)]
 
@@ -46,10 +47,65 @@ pub trait AnalogInputs {
     fn read(&mut self) -> [u16; INPUTS];
 }
 
-/// Both heaters' PWM outputs.
+/// Both heaters' PWM outputs and the cut-off of their supply.
+///
+/// The cut-off is a switch in the heater supply ahead of both heaters (a high-side P-MOSFET,
+/// or a relay), driven by one GPIO whose pull-down holds it open: from reset until `init`,
+/// after a crash and in the panic path (each board's `heater_pins_low()`)
+/// the heaters have no supply, whatever their MOSFETs do.
 pub trait HeaterOutputs {
-    /// Sets both duties, fractions in [0, 1]; anything else, NaN included, is off.
-    fn apply(&mut self, pla_duty: f32, tca_duty: f32);
+    /// Sets both duties, fractions in [0, 1] (anything else, NaN included, is off), then the
+    /// cut-off: closed (the heaters supplied) if `supply_on`, open otherwise.
+    fn apply(&mut self, pla_duty: f32, tca_duty: f32, supply_on: bool);
+}
+
+/// Heater PWM frequency on every board, Hz: the core's `electrical::PWM_HZ` (the firmware
+/// asserts they agree). Why 1 kHz: `stm32::PWM_FREQUENCY`.
+pub const PWM_HZ: u32 = 1000;
+
+/// Length of the probe pulse, µs: the core's `electrical::MIN_SENSED_ON_US` (the firmware
+/// asserts they agree). A heater driven below the duty of this pulse (off included) gets one
+/// such pulse per tick, and its on-current is sampled inside it ([`CurrentSense`]).
+pub const PROBE_PULSE_US: u32 = 10;
+
+/// One tick's load-current readings of both heaters (PLA first, then TCA), each the sum of
+/// the number of 12-bit conversions [`CurrentSense::read_currents`] was asked for, ADC counts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CurrentSums {
+    /// Sampled inside each heater's PWM on-time, or inside its probe pulse.
+    pub on: [u32; 2],
+    /// Sampled inside its off-time.
+    pub off: [u32; 2],
+}
+
+/// The heaters' load currents, through a low-side shunt and an amplifier per heater into the
+/// ADC, sampled inside the PWM on-time and inside the off-time (each board module says how it
+/// times the conversions against the PWM). A board without current sense returns `None`: the
+/// controller then runs on its thermistors alone, the paper's wiring plus the cut-off.
+#[allow(async_fn_in_trait)]
+pub trait CurrentSense {
+    /// Takes `reads` readings of each heater inside its on-time and `reads` inside its
+    /// off-time and returns their sums; a heater driven below the probe pulse's duty gets one
+    /// probe pulse ([`PROBE_PULSE_US`]), and its one reading inside it counts `reads` times.
+    /// `None` where the board senses no current.
+    async fn read_currents(&mut self, reads: u32) -> Option<CurrentSums>;
+}
+
+/// A board's current-sense chain, for the controller's conversion of counts to amperes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShuntChain {
+    /// Shunt resistance, Ω.
+    pub shunt_ohm: f32,
+    /// Amplifier gain, V/V.
+    pub gain: f32,
+}
+
+impl ShuntChain {
+    /// 50 mΩ into an INA180A1 (gain 20): 1 V/A at the ADC, the core's `ShuntSense::DEFAULT`.
+    pub const INA180A1: ShuntChain = ShuntChain {
+        shunt_ohm: 0.05,
+        gain: 20.0,
+    };
 }
 
 /// A watchdog that resets (or, emulated, ends) the firmware when it is not fed in time.
@@ -144,11 +200,12 @@ impl LastFatal {
     }
 }
 
-/// A board's peripherals, configured and ready for the tasks: heaters at 0 % duty.
+/// A board's peripherals, configured and ready for the tasks: heaters at 0 % duty, the
+/// supply's cut-off open.
 pub struct Parts<S, H, W, Tx, Rx, F = ()> {
-    /// Thermistor and supply inputs.
+    /// Thermistor and supply inputs, and the heaters' currents ([`CurrentSense`]).
     pub sensors: S,
-    /// Both heaters, off.
+    /// Both heaters, off, and the cut-off, open.
     pub heaters: H,
     /// The watchdog, not started yet.
     pub watchdog: W,

@@ -9,7 +9,15 @@
 //! | TCA thermistor | PA1 (A1) | ADC1_IN1 |
 //! | ambient thermistor | PB0 (A3) | ADC1_IN8 |
 //! | supply divider | PC1 (A4) | ADC1_IN11 |
+//! | supply cut-off (its driver's gate) | PA9 (D8) | GPIO, push-pull; low = cut |
+//! | PLA current: INA180A1 output | PA4 (A2) | ADC1_IN4 |
+//! | TCA current: INA180A1 output | PC0 (A5) | ADC1_IN10 |
 //! | ST-LINK virtual COM port | PA2 TX / PA3 RX | USART2, 115 200 8N1 |
+//!
+//! Current sense: a 50 mΩ low-side shunt per heater into an INA180A1 (gain 20, 1 V/A at the
+//! ADC), on the thermistors' ADC1; the conversions are timed against TIM3's counter
+//! (`stm32`, "Sampling the currents inside the pulse"), 15 ADC cycles of sampling (0.7 µs)
+//! each. Written and built, never run on a board.
 //!
 //! The heater gates are on PA6/PA7 because those pins have no pull-up from reset until `init`
 //! (input on the F4, analog on the G4 and L4), so the external gate pull-downs hold both heaters
@@ -20,13 +28,14 @@
 //! PCLK2/4 = 21 MHz. TIM2 is the embassy time driver.
 
 use crate::stm32 as common;
+use crate::stm32::Shunts;
 pub use crate::stm32::{
-    cycles, fatal, heater_pins_low, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx,
-    SerialTx, SettingsFlash,
+    cycles, fatal, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx, SerialTx,
+    SettingsFlash,
 };
-use crate::ResetFlags;
-use embassy_stm32::adc::{Adc, AdcChannel, SampleTime};
-use embassy_stm32::peripherals::USART2;
+use crate::{ResetFlags, ShuntChain};
+use embassy_stm32::adc::{Adc, AdcChannel, AnyAdcChannel, SampleTime};
+use embassy_stm32::peripherals::{ADC1, USART2};
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::{bind_interrupts, pac};
 
@@ -41,6 +50,22 @@ pub const HW_OVERSAMPLE: u32 = 1;
 /// ADC sample time: the longest, because the thermistor dividers are 5–10 kΩ sources and the
 /// supply divider 8.2 kΩ; 480 cycles at 21 MHz is 23 µs per conversion.
 const SAMPLE_TIME: SampleTime = SampleTime::CYCLES480;
+/// Sample time of the current inputs: 15 cycles at 21 MHz, 0.7 µs (the INA180's output is a
+/// low-impedance source), so two conversions take 2.6 µs.
+const SHUNT_SAMPLE_TIME: SampleTime = SampleTime::CYCLES15;
+
+/// The current-sense chain: 50 mΩ into an INA180A1.
+pub const SHUNT: ShuntChain = ShuntChain::INA180A1;
+
+/// The supply cut-off's pin, PA9 (Arduino D8): an input without pull from reset, so the
+/// driver's 100 kΩ pull-down holds the cut-off open.
+const CUTOFF: common::RawPin = (pac::GPIOA, 9);
+
+/// Drives the cut-off and both heater gates low by raw register writes, whatever state the
+/// firmware is in (the panic and HardFault handlers).
+pub fn heater_pins_low() {
+    common::heater_pins_low(CUTOFF);
+}
 
 bind_interrupts!(struct Irqs {
     USART2 => usart::BufferedInterruptHandler<USART2>;
@@ -84,10 +109,13 @@ pub fn init() -> Parts {
     }
     let p = embassy_stm32::init(config);
 
-    let pwm = common::heater_pwm(p.TIM3, p.PA6, p.PA7);
+    let heaters = Heaters::new(common::heater_pwm(p.TIM3, p.PA6, p.PA7), CUTOFF, p.PA9);
 
+    let shunts: [AnyAdcChannel<'static, ADC1>; 2] = [p.PA4.degrade_adc(), p.PC0.degrade_adc()];
+    // ADC1's driver sets it up and is kept for the program's life: dropped, it would switch the
+    // ADC off (the conversions are register writes, `stm32::convert`).
+    core::mem::forget(Adc::new(p.ADC1));
     let sensors = Sensors::new(
-        Adc::new(p.ADC1),
         [
             p.PA0.degrade_adc(),
             p.PA1.degrade_adc(),
@@ -95,6 +123,11 @@ pub fn init() -> Parts {
             p.PC1.degrade_adc(),
         ],
         SAMPLE_TIME,
+        Some(Shunts::new(
+            pac::ADC1,
+            shunts.map(|c| c.get_hw_channel()),
+            SHUNT_SAMPLE_TIME,
+        )),
     );
 
     let (tx_buf, rx_buf) = common::uart_buffers();
@@ -109,5 +142,5 @@ pub fn init() -> Parts {
     )
     .expect("USART2 accepts 115200 8N1");
 
-    common::parts(sensors, pwm, serial, p.IWDG, p.FLASH, reset_flags)
+    common::parts(sensors, heaters, serial, p.IWDG, p.FLASH, reset_flags)
 }

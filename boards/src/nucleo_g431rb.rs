@@ -10,7 +10,19 @@
 //! | TCA thermistor | PA1 (A1) | ADC1_IN2 |
 //! | ambient thermistor | PB0 (A3) | ADC1_IN15 |
 //! | supply divider | PC1 (A4) | ADC1_IN7 |
+//! | supply cut-off (its driver's gate) | PA9 (D8) | GPIO, push-pull; low = cut |
+//! | PLA current: shunt into OPAMP2 | PB14 (morpho CN10) | OPAMP2_VINP1, PGA ×16 → ADC2_IN16 (internal) |
+//! | TCA current: shunt into OPAMP3 | PB13 (morpho CN10) | OPAMP3_VINP1, PGA ×16 → ADC2_IN18 (internal) |
 //! | ST-LINK virtual COM port | PA2 TX / PA3 RX | LPUART1, 115 200 8N1 |
+//!
+//! Current sense: a 50 mΩ low-side shunt per heater straight into an op-amp of the G431 as a
+//! programmable-gain amplifier (×16: 0.8 V/A at the ADC, 4.1 A full scale), each op-amp's
+//! offset trimmed by its calibration at boot; their outputs reach ADC2 internally, so ADC2
+//! converts only currents (no hardware oversampling: one conversion per sample) while ADC1
+//! oversamples the thermistors. The op-amps' other inputs are taken (PA1, PA3, PA7, PB0), so
+//! their inputs are the morpho pins PB14 and PB13, not Arduino pins. The conversions are
+//! timed against TIM3's counter (`stm32`, "Sampling the currents inside the pulse"), 24.5 ADC
+//! cycles of sampling (0.6 µs) each. Written and built, never run on a board.
 //!
 //! The heater gates are on PA6/PA7 because those pins have no pull-up from reset until `init`
 //! (input on the F4, analog on the G4 and L4), so the external gate pull-downs hold both heaters
@@ -22,13 +34,13 @@
 //! only ADC2 reads, so the ambient thermistor sits on A3 on every board.)
 
 use crate::stm32 as common;
+use crate::stm32::Shunts;
 pub use crate::stm32::{
-    cycles, fatal, heater_pins_low, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx,
-    SerialTx, SettingsFlash,
+    cycles, fatal, HardwareParts as Parts, Heaters, Iwdg, Sensors, SerialRx, SerialTx,
+    SettingsFlash,
 };
-use crate::ResetFlags;
-use embassy_stm32::adc::vals::{Rovsm, Trovs};
-use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, SampleTime};
+use crate::{ResetFlags, ShuntChain};
+use embassy_stm32::adc::{AdcChannel, SampleTime};
 use embassy_stm32::peripherals::LPUART1;
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::{bind_interrupts, pac};
@@ -46,10 +58,117 @@ const OVERSAMPLING_RATIO_X16: u8 = 3;
 /// ADC sample time: the longest, because the thermistor dividers are 5–10 kΩ sources and the
 /// supply divider 8.2 kΩ; 640.5 cycles at 42.5 MHz is 15 µs, 0.25 ms per 16-fold read.
 const SAMPLE_TIME: SampleTime = SampleTime::CYCLES640_5;
+/// Sample time of the op-amps' outputs: 24.5 cycles at 42.5 MHz, 0.6 µs (above the op-amp
+/// output's minimum for the ADC), so two conversions take 1.7 µs.
+const SHUNT_SAMPLE_TIME: SampleTime = SampleTime::CYCLES24_5;
+/// ADC2's channels of OPAMP2's and OPAMP3's internal outputs (RM0440, "ADC connectivity").
+const OPAMP_CHANNELS: [u8; 2] = [16, 18];
+
+/// The current-sense chain: 50 mΩ into the op-amp as PGA at gain 16.
+pub const SHUNT: ShuntChain = ShuntChain {
+    shunt_ohm: 0.05,
+    gain: 16.0,
+};
+
+/// The supply cut-off's pin, PA9 (Arduino D8): analog from reset, so the driver's 100 kΩ
+/// pull-down holds the cut-off open.
+const CUTOFF: common::RawPin = (pac::GPIOA, 9);
+
+/// Drives the cut-off and both heater gates low by raw register writes, whatever state the
+/// firmware is in (the panic and HardFault handlers).
+pub fn heater_pins_low() {
+    common::heater_pins_low(CUTOFF);
+}
 
 bind_interrupts!(struct Irqs {
     LPUART1 => usart::BufferedInterruptHandler<LPUART1>;
 });
+
+/// Cycles of `us` µs at the core clock, for busy waits before the scheduler runs.
+const fn cycles_of_us(us: u32) -> u32 {
+    us * (CPU_HZ / 1_000_000)
+}
+
+/// Makes `amp` a programmable-gain amplifier of gain 16 on its non-inverting input 1 (PB`pin`,
+/// analog) with its output to the ADC inside the chip, after trimming its offset: both input
+/// pairs' trims found by the reference manual's binary search against its comparator
+/// (RM0440, "Calibration"; 2 ms per step, 20 ms in all). The same steps as embassy-stm32's
+/// `OpAmp::calibrate` and `pga_int`, by registers, so one copy serves both op-amps.
+fn pga_x16(amp: pac::opamp::Opamp, pin: usize) {
+    use embassy_stm32::pac::opamp::vals::{Calsel, PgaGain, VmSel, VpSel};
+    // MODER's two bits of the pin to 0b11, analog (as at reset; made sure of here).
+    pac::GPIOB.moder().modify(|w| w.0 |= 0b11 << (2 * pin));
+    amp.csr().modify(|w| {
+        w.set_opampen(true);
+        w.set_calon(true);
+        w.set_usertrim(true);
+    });
+    for (calsel, n_pair) in [(Calsel::PERCENT10, false), (Calsel::PERCENT90, true)] {
+        amp.csr().modify(|w| w.set_calsel(calsel));
+        let (mut low, mut high) = (0u8, 31u8);
+        while low <= high {
+            let mid = (low + high) / 2;
+            amp.csr().modify(|w| {
+                if n_pair {
+                    w.set_trimoffsetn(mid)
+                } else {
+                    w.set_trimoffsetp(mid)
+                }
+            });
+            // The comparator settles within 2 ms of a trim step (RM0440).
+            cortex_m::asm::delay(cycles_of_us(2_000));
+            if !amp.csr().read().calout() {
+                if mid == 0 {
+                    break;
+                }
+                high = mid - 1;
+            } else {
+                if mid == 31 {
+                    break;
+                }
+                low = mid + 1;
+            }
+        }
+    }
+    amp.csr().modify(|w| {
+        w.set_calon(false);
+        w.set_vp_sel(VpSel::VINP1);
+        w.set_vm_sel(VmSel::PGA);
+        w.set_pga_gain(PgaGain::GAIN16);
+        w.set_opaintoen(true);
+    });
+}
+
+/// ADC1 (the thermistors', its hardware oversampler summing 16 conversions: ratio ×16, no
+/// shift, all 16 after one start) and ADC2 (the currents', one conversion each), by registers:
+/// the steps of embassy-stm32's `Adc::new` for single-ended channels. Their shared clock is
+/// SYSCLK / 4, 42.5 MHz (at most 60 MHz).
+fn adcs_on() {
+    use embassy_stm32::pac::adc::vals::{Adcaldif, Rovsm, Trovs};
+    use embassy_stm32::pac::adccommon::vals::Presc;
+    embassy_stm32::rcc::enable_and_reset::<embassy_stm32::peripherals::ADC1>();
+    pac::ADC12_COMMON.ccr().modify(|w| w.set_presc(Presc::DIV4));
+    for a in [pac::ADC1, pac::ADC2] {
+        a.cr().modify(|w| {
+            w.set_deeppwd(false);
+            w.set_advregen(true);
+        });
+        // The regulator's start-up time, 20 µs.
+        cortex_m::asm::delay(cycles_of_us(20));
+        a.cr().modify(|w| w.set_adcaldif(Adcaldif::SINGLE_ENDED));
+        a.cr().modify(|w| w.set_adcal(true));
+        while a.cr().read().adcal() {}
+        cortex_m::asm::delay(cycles_of_us(20));
+        common::enable(a);
+    }
+    pac::ADC1.cfgr2().modify(|w| {
+        w.set_ovsr(OVERSAMPLING_RATIO_X16);
+        w.set_ovss(0);
+        w.set_rovsm(Rovsm::CONTINUED);
+        w.set_trovs(Trovs::AUTOMATIC);
+        w.set_rovse(true);
+    });
+}
 
 /// Reads and clears the reset flags in RCC_CSR.
 fn take_reset_flags() -> ResetFlags {
@@ -88,18 +207,15 @@ pub fn init() -> Parts {
     }
     let p = embassy_stm32::init(config);
 
-    let pwm = common::heater_pwm(p.TIM3, p.PA6, p.PA7);
+    let heaters = Heaters::new(common::heater_pwm(p.TIM3, p.PA6, p.PA7), CUTOFF, p.PA9);
 
+    // The ADCs, and the op-amps as PGAs with their outputs inside the chip, into ADC2.
+    let _ = (p.ADC1, p.ADC2, p.OPAMP2, p.OPAMP3, p.PB14, p.PB13);
+    adcs_on();
+    pga_x16(pac::OPAMP2, 14);
+    pga_x16(pac::OPAMP3, 13);
+    let shunts = Shunts::new(pac::ADC2, OPAMP_CHANNELS, SHUNT_SAMPLE_TIME);
     let sensors = Sensors::new(
-        Adc::new(
-            p.ADC1,
-            AdcConfig {
-                oversampling_ratio: Some(OVERSAMPLING_RATIO_X16),
-                oversampling_shift: Some(0),
-                oversampling_mode: Some((Rovsm::CONTINUED, Trovs::AUTOMATIC, true)),
-                ..AdcConfig::default()
-            },
-        ),
         [
             p.PA0.degrade_adc(),
             p.PA1.degrade_adc(),
@@ -107,6 +223,7 @@ pub fn init() -> Parts {
             p.PC1.degrade_adc(),
         ],
         SAMPLE_TIME,
+        Some(shunts),
     );
 
     let (tx_buf, rx_buf) = common::uart_buffers();
@@ -121,5 +238,5 @@ pub fn init() -> Parts {
     )
     .expect("LPUART1 accepts 115200 8N1");
 
-    common::parts(sensors, pwm, serial, p.IWDG, p.FLASH, reset_flags)
+    common::parts(sensors, heaters, serial, p.IWDG, p.FLASH, reset_flags)
 }

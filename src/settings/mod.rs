@@ -432,8 +432,8 @@ impl Settings {
         let model = [r.r_pp, r.r_tt, r.r_tp, r.r_tp][k];
         let (lo, hi) = SHARE_RULE[k].1;
         let scale = decimal_scale(spec.decimals);
-        let min = ((lo * model * scale) as i64 + 1) as f32 / scale;
-        let max = ((hi * model * scale) as i64) as f32 / scale;
+        let min = (whole(lo * model * scale) + 1.0) / scale;
+        let max = whole(hi * model * scale) / scale;
         Spec {
             min: spec.min.max(if lo == 0.0 { 0.0 } else { min }),
             max: spec.max.min(max),
@@ -553,14 +553,32 @@ fn round_to(v: f32, decimals: u8) -> f32 {
     let scale = decimal_scale(decimals);
     let x = v * scale;
     let r = if x >= 0.0 {
-        (x + 0.5) as i64
+        whole(x + 0.5)
     } else {
-        (x - 0.5) as i64
+        whole(x - 0.5)
     };
     if x.abs() < 1e15 {
-        r as f32 / scale
+        r / scale
     } else {
         v
+    }
+}
+
+/// `x as i64 as f32` in 32-bit arithmetic, so the firmware carries no 64-bit float
+/// conversions: the same value for every `x` (an `f32` beyond `i32`'s range is already whole;
+/// NaN is 0 and the rest saturates as `as i64` does).
+fn whole(x: f32) -> f32 {
+    const I64_MAX: f32 = i64::MAX as f32;
+    if x.abs() < 2_147_483_520.0 {
+        x as i32 as f32
+    } else if x.is_nan() {
+        0.0
+    } else if x > I64_MAX {
+        I64_MAX
+    } else if x < -I64_MAX {
+        -I64_MAX
+    } else {
+        x
     }
 }
 
@@ -569,6 +587,44 @@ mod tests {
     use super::*;
     extern crate std;
     use std::collections::BTreeSet;
+
+    #[test]
+    fn whole_is_the_i64_round_trip() {
+        let mut xs = std::vec![
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -2.5,
+            8_388_607.5,
+            16_777_217.0
+        ];
+        xs.extend([
+            2_147_483_520.0f32,
+            2_147_483_648.0,
+            -2_147_483_648.0,
+            1e15,
+            -1e15,
+            1e19,
+        ]);
+        xs.extend([
+            -1e19,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ]);
+        let mut v = 1.0e-3f32;
+        while v < 1e20 {
+            xs.extend([v, -v, v + 0.5, -(v + 0.5)]);
+            v *= 1.37;
+        }
+        for x in xs {
+            assert_eq!(whole(x).to_bits(), (x as i64 as f32).to_bits(), "{x}");
+        }
+    }
     use std::vec::Vec;
 
     /// Every setting's spec as compiled in (the widest ranges; [`Settings::live`] narrows the

@@ -6,7 +6,8 @@
 //! | TIM2 embassy time driver | [`time_driver`]: SysTick, running [`SPEEDUP`]× real time | QEMU models no STM32 timers |
 //! | `embassy_stm32::init` (HSI → PLL 80 MHz) | reset clock (MSI 4 MHz), no init | init waits forever for PWR/RCC ready bits QEMU never sets |
 //! | ADC1 thermistors and supply | [`Sensors`]: the firmware's [`SimulatedLink`] | QEMU's ADC never becomes ready |
-//! | TIM3 PWM heaters | [`Heaters`]: duties into the [`SimulatedLink`] | no timers |
+//! | shunt amplifiers sampled against TIM3 | [`Sensors`]: the link's currents, with the frame they came in | no ADC, no timers |
+//! | TIM3 PWM heaters, the cut-off on PB2 | [`Heaters`]: duties and cut-off into the [`SimulatedLink`] | no timers |
 //! | buffered USART1 (embassy) | [`usart`]: register-level USART1 with an RX interrupt | QEMU's USART needs 32-bit accesses and never sets IDLE |
 //! | IWDG | [`Iwdg`]: the same 500 ms rule checked in the SysTick interrupt, then a system reset | no IWDG model |
 //! | panic/HardFault → reset | heaters off, message on the semihosting console, then the same reset | a test must see it |
@@ -17,7 +18,10 @@
 //! only calls it through [`SimulatedLink`], at firmware time, so a whole morph runs
 //! [`SPEEDUP`] times faster than real time.
 
-use crate::{AnalogInputs, FatalKind, HeaterOutputs, ResetFlags, Watchdog, INPUTS};
+use crate::{
+    AnalogInputs, CurrentSense, CurrentSums, FatalKind, HeaterOutputs, ResetFlags, ShuntChain,
+    Watchdog, INPUTS,
+};
 use core::cell::Cell;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use critical_section::Mutex;
@@ -39,15 +43,23 @@ pub const HW_OVERSAMPLE: u32 = 16;
 pub const SPEEDUP: u32 = 20;
 /// Watchdog timeout, firmware ms: as the hardware IWDG's 500 ms.
 pub const WATCHDOG_MS: u64 = 500;
+/// The simulated board's current-sense chain: the one its ADC model uses
+/// (`morphlink::bench`, the core's `ShuntSense::DEFAULT`).
+pub const SHUNT: ShuntChain = ShuntChain::INA180A1;
 
-/// What stands in for the ADC and the heater PWM: a simulated link the firmware keeps. Its
-/// methods take `&self` (it keeps its own lock) and firmware time in ms.
+/// What stands in for the ADC, the heater PWM and the cut-off: a simulated link the firmware
+/// keeps. Its methods take `&self` (it keeps its own lock) and firmware time in ms.
 pub trait SimulatedLink: Sync {
-    /// One read of every input at `now_ms`, ADC counts as [`AnalogInputs::read`] gives them.
+    /// One read of every input at `now_ms`, ADC counts as [`AnalogInputs::read`] gives them;
+    /// the frame's currents are kept for [`SimulatedLink::currents`].
     fn read(&self, now_ms: u64) -> [u16; INPUTS];
-    /// Applies both duties from `now_ms` on.
-    fn apply(&self, now_ms: u64, pla_duty: f32, tca_duty: f32);
-    /// Both heaters off, from a panic or the watchdog: must not block or panic.
+    /// The currents of the frame the last [`SimulatedLink::read`] took, sums of the core's
+    /// oversampling count (`None`: the simulated board senses no current).
+    fn currents(&self) -> Option<CurrentSums>;
+    /// Applies both duties and the cut-off (`supply_on`: closed) from `now_ms` on.
+    fn apply(&self, now_ms: u64, pla_duty: f32, tca_duty: f32, supply_on: bool);
+    /// Both heaters off and the supply cut, from a panic or the watchdog: must not block or
+    /// panic.
     fn heaters_off(&self);
 }
 
@@ -61,13 +73,13 @@ fn now_ms() -> u64 {
     embassy_time::Instant::now().as_millis()
 }
 
-/// Drives both heater gates low by raw register writes (PA6 and PA7, as on the hardware board)
-/// and switches the simulated heaters off, whatever state the rest of the firmware is in.
+/// Drives the cut-off's pin and both heater gates low by raw register writes (PB2, PA6 and
+/// PA7, as on the hardware board) and switches the simulated heaters and supply off, whatever
+/// state the rest of the firmware is in.
 pub fn heater_pins_low() {
-    for pin in [6, 7] {
-        pac::GPIOA.bsrr().write(|w| w.set_br(pin, true));
-        pac::GPIOA
-            .moder()
+    for (port, pin) in [(pac::GPIOB, 2), (pac::GPIOA, 6), (pac::GPIOA, 7)] {
+        port.bsrr().write(|w| w.set_br(pin, true));
+        port.moder()
             .modify(|w| w.set_moder(pin, pac::gpio::vals::Moder::OUTPUT));
     }
     if let Some(l) = link() {
@@ -75,7 +87,7 @@ pub fn heater_pins_low() {
     }
 }
 
-/// The simulated thermistor and supply inputs.
+/// The simulated thermistor and supply inputs and heater currents.
 pub struct Sensors(&'static dyn SimulatedLink);
 
 impl AnalogInputs for Sensors {
@@ -84,12 +96,21 @@ impl AnalogInputs for Sensors {
     }
 }
 
-/// The simulated heaters: duties go into the link.
+impl CurrentSense for Sensors {
+    /// The currents of the tick's frame, already summed by the simulated board over the core's
+    /// oversampling count (which is what the firmware asks for: `reads` is not used), probe
+    /// pulses included. The firmware reads them after the frame's [`AnalogInputs::read`].
+    async fn read_currents(&mut self, _reads: u32) -> Option<CurrentSums> {
+        self.0.currents()
+    }
+}
+
+/// The simulated heaters and cut-off: duties and cut-off go into the link.
 pub struct Heaters(&'static dyn SimulatedLink);
 
 impl HeaterOutputs for Heaters {
-    fn apply(&mut self, pla_duty: f32, tca_duty: f32) {
-        self.0.apply(now_ms(), pla_duty, tca_duty);
+    fn apply(&mut self, pla_duty: f32, tca_duty: f32, supply_on: bool) {
+        self.0.apply(now_ms(), pla_duty, tca_duty, supply_on);
     }
 }
 
