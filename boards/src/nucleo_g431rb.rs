@@ -58,8 +58,9 @@ const OVERSAMPLING_RATIO_X16: u8 = 3;
 /// ADC sample time: the longest, because the thermistor dividers are 5–10 kΩ sources and the
 /// supply divider 8.2 kΩ; 640.5 cycles at 42.5 MHz is 15 µs, 0.25 ms per 16-fold read.
 const SAMPLE_TIME: SampleTime = SampleTime::CYCLES640_5;
-/// Sample time of the op-amps' outputs: 24.5 cycles at 42.5 MHz, 0.6 µs (above the op-amp
-/// output's minimum for the ADC), so two conversions take 1.7 µs.
+/// Sample time of the op-amps' outputs: 24.5 cycles at 42.5 MHz, 0.6 µs (the op-amp drives the
+/// ADC's sampling capacitor directly; the datasheet's minimum for it is not checked here, so
+/// this leaves margin), so two conversions take 1.7 µs.
 const SHUNT_SAMPLE_TIME: SampleTime = SampleTime::CYCLES24_5;
 /// ADC2's channels of OPAMP2's and OPAMP3's internal outputs (RM0440, "ADC connectivity").
 const OPAMP_CHANNELS: [u8; 2] = [16, 18];

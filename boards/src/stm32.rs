@@ -293,7 +293,7 @@ impl Heaters {
         cutoff: RawPin,
         pin: Peri<'static, impl embassy_stm32::gpio::Pin>,
     ) -> Self {
-        drop(pin);
+        let _reserved = pin;
         force_low(cutoff.0, cutoff.1);
         compare(0).write(|w| w.set_ccr(0));
         compare(1).write(|w| w.set_ccr(0));
