@@ -256,6 +256,14 @@ impl<P: Plant> Bench<P> {
 
     /// The ADC frame the controller would read now (summed counts), stamped `sample_ms`.
     pub fn inputs(&mut self, sample_ms: u64) -> Inputs {
+        let mut i = self.thermistor_inputs(sample_ms);
+        i.current = self.current_counts(sample_ms);
+        i
+    }
+
+    /// [`Bench::inputs`] without the currents: a reading of the thermistors and the supply only
+    /// (the emulated board reads these sixteen times a tick and its currents once).
+    pub fn thermistor_inputs(&mut self, sample_ms: u64) -> Inputs {
         let s = self.plant.sample();
         let beads = [s.t_pla_c, s.t_tca_c, s.t_amb_c];
         let mut counts = [0u32; 3];
@@ -277,8 +285,14 @@ impl<P: Plant> Bench<P> {
             thermistor_counts: counts,
             supply_counts: self.board.supply.counts(s.supply_v as f32),
             sample_ms,
-            current: self.currents(sample_ms, &s),
+            current: None,
         }
+    }
+
+    /// The currents the board samples at `sample_ms`, if it senses them ([`Bench::inputs`]).
+    pub fn current_counts(&mut self, sample_ms: u64) -> Option<CurrentCounts> {
+        let s = self.plant.sample();
+        self.currents(sample_ms, &s)
     }
 
     /// Injects a fault on the sensor with [`crate::vocab::Sensor::index`] `index`, or on the heater of that

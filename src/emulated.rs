@@ -18,7 +18,8 @@ use morphlink_plant::Lumped;
 struct State {
     bench: Bench<Lumped>,
     last_ms: u64,
-    currents: Option<CurrentSums>,
+    /// When the tick's last thermistor read was taken, ms: its currents are sampled then.
+    last_read_ms: u64,
 }
 
 impl State {
@@ -50,18 +51,22 @@ impl SimulatedLink for Link {
     fn read(&self, now_ms: u64) -> [u16; INPUTS] {
         with_state(|s| {
             s.advance_to(now_ms);
-            let i = s.bench.inputs(now_ms);
-            s.currents = i.current.map(|c| CurrentSums {
-                on: c.on,
-                off: c.off,
-            });
+            // The currents once a tick (`currents`), not with each of the sixteen reads: the
+            // bench's noise is software double precision on this CPU.
+            let i = s.bench.thermistor_inputs(now_ms);
+            s.last_read_ms = now_ms;
             let c = i.thermistor_counts;
             [c[0], c[1], c[2], i.supply_counts].map(|v| v.min(u16::MAX as u32) as u16)
         })
     }
 
     fn currents(&self) -> Option<CurrentSums> {
-        with_state(|s| s.currents)
+        with_state(|s| {
+            let at_ms = s.last_read_ms;
+            s.bench
+                .current_counts(at_ms)
+                .map(|c| CurrentSums { on: c.on, off: c.off })
+        })
     }
 
     fn apply(&self, now_ms: u64, pla_duty: f32, tca_duty: f32, supply_on: bool) {
@@ -94,7 +99,7 @@ pub fn init() -> &'static Link {
         *s.borrow_mut() = Some(State {
             bench: Bench::new(Lumped::new(NOMINAL_LINK), Config::DEFAULT, Noise::NOMINAL),
             last_ms: 0,
-            currents: None,
+            last_read_ms: 0,
         })
     });
     &LINK

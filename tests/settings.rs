@@ -42,7 +42,7 @@ fn flash_holding(bytes: &[u8]) -> SimFlash {
 fn config_lists_every_setting_with_unit_value_and_range() {
     let mut b = Bench::new();
     let rows = listing(&mut b);
-    assert_eq!(rows.len(), 21);
+    assert_eq!(rows.len(), 22);
     for r in &rows {
         assert!(r.starts_with("data: "), "{r}");
         assert!(r.contains("default="), "{r}");
@@ -166,7 +166,7 @@ fn settings_cannot_change_or_be_saved_while_a_morph_runs() {
     assert_eq!(b.rig.saves(), 0);
     assert_eq!(*b.rig.ctrl.settings(), Settings::DEFAULT);
     // CONFIG (read-only) still answers.
-    assert_eq!(listing(&mut b).len(), 21);
+    assert_eq!(listing(&mut b).len(), 22);
     assert_eq!(b.send("ABORT"), ["ok"]);
     assert_eq!(
         b.send("CONFIG SET lock_timeout_s 300"),
@@ -222,7 +222,7 @@ fn saved_settings_survive_a_reboot_and_unsaved_ones_do_not() {
     b.send("CONFIG SET soften_timeout_s 45");
     b.send("CONFIG SET auto_mode boost");
     let r = b.send("SAVE");
-    assert_eq!(r, ["ok saved bytes=90 erases=0"]);
+    assert_eq!(r, ["ok saved bytes=94 erases=0"]);
     b.send("CONFIG SET bend_timeout_s 200");
     let flash = b.rig.flash().unwrap().clone();
 
