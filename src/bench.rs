@@ -256,8 +256,9 @@ impl<P: Plant> Bench<P> {
 
     /// The ADC frame the controller would read now (summed counts), stamped `sample_ms`.
     pub fn inputs(&mut self, sample_ms: u64) -> Inputs {
-        let mut i = self.thermistor_inputs(sample_ms);
-        i.current = self.current_counts(sample_ms);
+        let s = self.plant.sample();
+        let mut i = self.thermistor_inputs_of(sample_ms, &s);
+        i.current = self.currents(sample_ms, &s);
         i
     }
 
@@ -265,6 +266,11 @@ impl<P: Plant> Bench<P> {
     /// (the emulated board reads these sixteen times a tick and its currents once).
     pub fn thermistor_inputs(&mut self, sample_ms: u64) -> Inputs {
         let s = self.plant.sample();
+        self.thermistor_inputs_of(sample_ms, &s)
+    }
+
+    /// The thermistors and the supply of the plant's sample `s`.
+    fn thermistor_inputs_of(&mut self, sample_ms: u64, s: &morphlink_plant::Sample) -> Inputs {
         let beads = [s.t_pla_c, s.t_tca_c, s.t_amb_c];
         let mut counts = [0u32; 3];
         for (i, c) in counts.iter_mut().enumerate() {

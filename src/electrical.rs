@@ -163,9 +163,8 @@ pub struct Electrical {
     rest: Option<(f32, f32)>,
     /// Rest ticks in the reference (up to `1 / REST_FILTER_WEIGHT`).
     rest_n: u16,
-    /// The supply this tick's currents were drawn from, V, and whether it was connected.
-    supply_v: f32,
-    supplied: bool,
+    /// This tick's resistance of each heater, Ω, where it was read within its range.
+    raw: [Option<f32>; 2],
 }
 
 /// What drove the heaters while a frame's currents were sampled: the last tick's outputs.
@@ -201,8 +200,7 @@ impl Electrical {
         out: &mut Faults,
     ) {
         self.now = currents;
-        self.supply_v = supply_v;
-        self.supplied = drive.supply_on;
+        self.raw = [None; 2];
         let Some(c) = currents else {
             return;
         };
@@ -254,6 +252,7 @@ impl Electrical {
                 let _ = out.push(heater_fault(FaultCode::HeaterResistance, h, r));
             }
             if !out_of_range {
+                self.raw[i] = Some(r);
                 self.ohm[i] = Some(match self.ohm[i] {
                     Some(f) => f + OHM_FILTER_WEIGHT * (r - f),
                     None => r,
@@ -276,18 +275,16 @@ impl Electrical {
     /// at rest: not driven and its thermistor within [`SELF_REST_MAX_K`] of ambient
     /// (`t_tca_c`). The reference before every MORPH and TUNE is the last one at rest.
     pub fn note_rest(&mut self, tca_driven: bool, t_tca_c: f32, t_amb_c: f32) {
-        let (Some(c), false) = (self.now, tca_driven) else {
+        let (Some(r), false) = (self.raw[Heater::Tca.index()], tca_driven) else {
             return;
         };
         if !((t_tca_c - t_amb_c).abs() <= SELF_REST_MAX_K) {
             return;
         }
-        if let Some(r) = self.raw_ohm(&c, Heater::Tca) {
-            self.rest_n = self.rest_n.saturating_add(1);
-            let w = (1.0 / self.rest_n as f32).max(REST_FILTER_WEIGHT);
-            let (r0, t0) = self.rest.unwrap_or((r, t_amb_c));
-            self.rest = Some((r0 + w * (r - r0), t0 + w * (t_amb_c - t0)));
-        }
+        self.rest_n = self.rest_n.saturating_add(1);
+        let w = (1.0 / self.rest_n as f32).max(REST_FILTER_WEIGHT);
+        let (r0, t0) = self.rest.unwrap_or((r, t_amb_c));
+        self.rest = Some((r0 + w * (r - r0), t0 + w * (t_amb_c - t0)));
     }
 
     /// The TCA's own resistance as its mean temperature, °C, with temperature coefficient
@@ -309,13 +306,6 @@ impl Electrical {
     /// The TCA's filtered resistance over its value at rest, 1.
     pub fn tca_ratio(&self) -> Option<f32> {
         Some(self.ohm(Heater::Tca)? / self.rest?.0)
-    }
-
-    /// This tick's resistance of heater `h` from its on-current, Ω, where it carries one.
-    fn raw_ohm(&self, c: &Currents, h: Heater) -> Option<f32> {
-        let (lo, hi) = range(h);
-        let r = self.supply_v / c.on_a[h.index()];
-        (self.supplied && (lo..=hi).contains(&r)).then_some(r)
     }
 }
 

@@ -63,9 +63,10 @@ impl SimulatedLink for Link {
     fn currents(&self) -> Option<CurrentSums> {
         with_state(|s| {
             let at_ms = s.last_read_ms;
-            s.bench
-                .current_counts(at_ms)
-                .map(|c| CurrentSums { on: c.on, off: c.off })
+            s.bench.current_counts(at_ms).map(|c| CurrentSums {
+                on: c.on,
+                off: c.off,
+            })
         })
     }
 

@@ -74,7 +74,7 @@ pub fn status(l: &mut OutLine, s: &StatusReport) {
         l,
         "{OK} phase={} target_mm={}",
         s.phase.as_str(),
-        Dash(s.target_mm)
+        Dashed(s.target_mm, 2)
     );
     let _ = write!(
         l,
@@ -90,8 +90,8 @@ pub fn status(l: &mut OutLine, s: &StatusReport) {
     let _ = write!(
         l,
         " pla_target_c={} tca_target_c={} mode={}",
-        Dash(s.pla_target_c),
-        Dash(s.tca_target_c),
+        Dashed(s.pla_target_c, 2),
+        Dashed(s.tca_target_c, 2),
         s.mode.map_or("-", Mode::as_str)
     );
     let [i_pla, i_tca] = s.current_a;
@@ -101,20 +101,11 @@ pub fn status(l: &mut OutLine, s: &StatusReport) {
         " i_pla_a={} i_tca_a={} r_pla_ohm={} r_tca_ohm={} t_tca_self_c={} cutoff={}",
         Dashed(i_pla, 3),
         Dashed(i_tca, 3),
-        Dash(r_pla),
-        Dash(r_tca),
-        Dash(s.t_tca_self_c),
+        Dashed(r_pla, 2),
+        Dashed(r_tca, 2),
+        Dashed(s.t_tca_self_c, 2),
         if s.supply_on { "closed" } else { "open" }
     );
-}
-
-/// A value with 2 decimals, or `-` for NaN (no value).
-struct Dash(f32);
-
-impl fmt::Display for Dash {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        Dashed(self.0, 2).fmt(f)
-    }
 }
 
 /// A value with this many decimals, or `-` for NaN (no value).
