@@ -110,7 +110,8 @@ impl Pulse {
             heater,
             power_w,
             // At most 60 000 ms: a u32 holds it (and needs no 64-bit float conversion).
-            until_ms: now_ms + (duration_s * 1000.0) as u32 as u64,
+            // Saturating: a clock at its end makes a pulse that ends there, not a panic.
+            until_ms: now_ms.saturating_add((duration_s * 1000.0) as u32 as u64),
         })
     }
 
@@ -163,6 +164,10 @@ mod tests {
             );
         }
         assert!(Pulse::new(0, Heater::Pla, 1.0, HEAT_MAX_S).is_ok());
+        // A clock at its very end (the fuzzer's jump) ends the pulse there instead of panicking.
+        let late = Pulse::new(u64::MAX - 10, Heater::Pla, 1.0, 5.0).unwrap();
+        assert_eq!(late.until_ms, u64::MAX);
+        assert_eq!(late.powers(u64::MAX), None);
     }
 
     #[test]
