@@ -108,8 +108,35 @@ pub const POWER_SCALE_RANGE: (f32, f32) = (
 const _: () = assert!(POWER_SCALE_RANGE.1 > 1.0 && POWER_SCALE_RANGE.1 <= 2.0);
 
 /// The calibration's layout version: 2 added [`Calibration::convection_w_m2k`], against
-/// which the rises are read; 3 [`Calibration::tca_tcr_ppm_per_k`], the TCA's own thermometer.
-pub const LAYOUT_VERSION: f32 = 3.0;
+/// which the rises are read; 3 [`Calibration::tca_tcr_ppm_per_k`], the TCA's own thermometer;
+/// 4 [`Calibration::tca_self_bend`] and the strain term's sums.
+pub const LAYOUT_VERSION: f32 = 4.0;
+
+/// Largest strain factor the own thermometer takes, K·m (see [`Calibration::strain_k_m`]): its
+/// correction over the table's whole bend (some 12 /m of curvature from the cast shape) stays
+/// under [`MAP_MAX_CORRECTION_K`]'s 25 K; the high-fidelity links' estimates reach 2.4 K·m.
+pub const STRAIN_MAX_K_M: f32 = 3.0;
+/// Least change of shape, 1/m of curvature, a strain report is taken from: under it the
+/// change of the rest resistance is mostly noise (some 0.1 K of the own temperature).
+pub const STRAIN_MIN_DKAPPA_PER_M: f32 = 1.0;
+/// Largest change of shape a strain report may describe, 1/m (the table's range spans 9 /m).
+pub const STRAIN_MAX_DKAPPA_PER_M: f32 = 50.0;
+/// Reports the strain factor remembers: each new one first scales the older ones' sums by
+/// `1 − 1 / STRAIN_MEMORY`, so a link that changes is followed.
+pub const STRAIN_MEMORY: f32 = 4.0;
+/// Weight of the strain factor's prior (0: the strain term unknown, sign included), 1/m²: a
+/// report over a 10 /m change weighs 100, so one report sets the factor to 99 % of what it
+/// shows, while reports over tiny changes stay near 0.
+pub const STRAIN_PRIOR_PER_M2: f32 = 1.0;
+const _: () = assert!(
+    STRAIN_MAX_K_M > 0.0
+        && STRAIN_MIN_DKAPPA_PER_M > 0.0
+        && STRAIN_MAX_DKAPPA_PER_M > STRAIN_MIN_DKAPPA_PER_M
+        && STRAIN_MEMORY >= 1.0
+        && STRAIN_PRIOR_PER_M2 > 0.0
+);
+/// The strain sums' bounds: [`STRAIN_MEMORY`] reports at the largest change.
+const STRAIN_SUM_XX_MAX: f32 = STRAIN_MEMORY * STRAIN_MAX_DKAPPA_PER_M * STRAIN_MAX_DKAPPA_PER_M;
 
 /// The TCA's temperature coefficient of resistance an untuned controller takes, ppm/K: the
 /// silver-coated thread's 1.5e-3/K, an estimate (docs/plant.md); `TUNE` fits the link's own.
@@ -182,7 +209,7 @@ const fn field_info(
 }
 
 /// Number of fields.
-pub const FIELD_COUNT: usize = 16;
+pub const FIELD_COUNT: usize = 19;
 
 /// Every field, in index order (the order of [`Calibration::get`] / [`Calibration::set`]).
 pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
@@ -292,6 +319,27 @@ pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
         "temperature coefficient of the TCA's resistance (TUNE, where current is sensed)",
     ),
     field_info(
+        "tca_self_bend",
+        "1",
+        (0.0, 1.0),
+        "1: closed bends on the TCA's own temperature (current sense; 0: its thermistor)",
+    ),
+    field_info(
+        "strain_sum_xx_per_m2",
+        "1/m2",
+        (0.0, STRAIN_SUM_XX_MAX),
+        "sum of squared shape changes at rest (the strain term)",
+    ),
+    field_info(
+        "strain_sum_xy_k_per_m",
+        "K/m",
+        (
+            -STRAIN_MAX_K_M * STRAIN_SUM_XX_MAX,
+            STRAIN_MAX_K_M * STRAIN_SUM_XX_MAX,
+        ),
+        "sum of shape change times own-temperature miss at rest",
+    ),
+    field_info(
         "version",
         "1",
         (LAYOUT_VERSION, LAYOUT_VERSION),
@@ -336,6 +384,15 @@ pub struct Calibration {
     /// Temperature coefficient of the TCA's resistance, ppm/K: what its own thermometer reads
     /// it with (STATUS `t_tca_self_c`); fitted by `TUNE` on a board that senses current.
     pub tca_tcr_ppm_per_k: f32,
+    /// 1: `closed` bends on the TCA's own temperature where the board senses current; 0 (the
+    /// default): on its thermistor ([`Calibration::self_sensed`]). A choice, not a fit: the
+    /// map's reports are of one view, so switching starts the map afresh.
+    pub tca_self_bend: f32,
+    /// The strain term's sums ([`Calibration::fold_strain`]): of the squared changes of shape
+    /// between two rests, 1/m², ...
+    pub strain_sum_xx_per_m2: f32,
+    /// ... and of each change times what the own thermometer missed ambient by after it, K/m.
+    pub strain_sum_xy_k_per_m: f32,
     /// Layout version ([`LAYOUT_VERSION`]): a stored calibration of another layout is not this
     /// one.
     pub version: f32,
@@ -421,6 +478,9 @@ impl Calibration {
         power_sum_ratio: 0.0,
         convection_w_m2k: LINK.surroundings.h_w_m2k as f32,
         tca_tcr_ppm_per_k: TCA_TCR_NOMINAL_PPM_PER_K,
+        tca_self_bend: 0.0,
+        strain_sum_xx_per_m2: 0.0,
+        strain_sum_xy_k_per_m: 0.0,
         version: LAYOUT_VERSION,
     };
 
@@ -441,7 +501,10 @@ impl Calibration {
             12 => &mut self.power_sum_ratio,
             13 => &mut self.convection_w_m2k,
             14 => &mut self.tca_tcr_ppm_per_k,
-            15 => &mut self.version,
+            15 => &mut self.tca_self_bend,
+            16 => &mut self.strain_sum_xx_per_m2,
+            17 => &mut self.strain_sum_xy_k_per_m,
+            18 => &mut self.version,
             _ => return None,
         })
     }
@@ -470,7 +533,10 @@ impl Calibration {
             12 => self.power_sum_ratio,
             13 => self.convection_w_m2k,
             14 => self.tca_tcr_ppm_per_k,
-            15 => self.version,
+            15 => self.tca_self_bend,
+            16 => self.strain_sum_xx_per_m2,
+            17 => self.strain_sum_xy_k_per_m,
+            18 => self.version,
             _ => f32::NAN,
         }
     }
@@ -642,6 +708,85 @@ impl Calibration {
         Ok((a, b))
     }
 
+    /// Forgets the map's reports (`MEASURED`): what they paired no longer describes what `closed`
+    /// bends on.
+    pub fn clear_map(&mut self) {
+        self.map_count = 0.0;
+        self.map_sum_x_k = 0.0;
+        self.map_sum_y_k = 0.0;
+        self.map_sum_xx_k2 = 0.0;
+        self.map_sum_xy_k2 = 0.0;
+    }
+
+    /// Whether `closed` bends on the TCA's own temperature where the board senses current
+    /// ([`Calibration::tca_self_bend`]; docs/strategies.md, "Bending on the TCA's own
+    /// temperature").
+    pub fn self_sensed(&self) -> bool {
+        self.tca_self_bend >= 0.5
+    }
+
+    /// The TCA's temperature coefficient changed from `old_ppm_per_k` to the present one (a
+    /// `TUNE`): what was learnt in the own temperature's scale is rescaled to the new one (a
+    /// rise reads `old / new` times as large), so no report is lost.
+    pub fn rescale_own(&mut self, old_ppm_per_k: f32) {
+        let r = old_ppm_per_k / self.tca_tcr_ppm_per_k;
+        if !r.is_finite() {
+            return;
+        }
+        self.strain_sum_xy_k_per_m *= r;
+        if self.self_sensed() {
+            self.map_sum_x_k *= r;
+            self.map_sum_xx_k2 *= r * r;
+            self.map_sum_xy_k2 *= r;
+        }
+    }
+
+    /// The own thermometer's strain factor, K·m: what it reads low per 1/m the link has bent
+    /// tighter since its rest reference (the coil sits off the rod's axis, so the bend strains
+    /// it and shifts its resistance; the sign is the link's own). The true temperature is the
+    /// own reading plus this times the change of curvature. Fitted by the least-squares line
+    /// through the origin of the reports at rest ([`Calibration::fold_strain`]), pulled to 0 by
+    /// [`STRAIN_PRIOR_PER_M2`]; 0 outside ±[`STRAIN_MAX_K_M`].
+    pub fn strain_k_m(&self) -> f32 {
+        let s = self.strain_sum_xy_k_per_m / (self.strain_sum_xx_per_m2 + STRAIN_PRIOR_PER_M2);
+        if s.abs() <= STRAIN_MAX_K_M {
+            s
+        } else {
+            0.0
+        }
+    }
+
+    /// Adds one strain report: the link's shape changed by `dkappa_per_m` (1/m of curvature)
+    /// between two rests, and at the second the own thermometer, still on the first's
+    /// reference, read `miss_k` below the ambient (K). Returns the new factor; refused, changing
+    /// nothing, for a change under [`STRAIN_MIN_DKAPPA_PER_M`] or over
+    /// [`STRAIN_MAX_DKAPPA_PER_M`] or a factor past [`STRAIN_MAX_K_M`].
+    pub fn fold_strain(&mut self, dkappa_per_m: f32, miss_k: f32) -> Result<f32, ReportRejection> {
+        if !(dkappa_per_m.is_finite() && miss_k.is_finite()) {
+            return Err(ReportRejection::NotFinite);
+        }
+        if !(dkappa_per_m.abs() >= STRAIN_MIN_DKAPPA_PER_M
+            && dkappa_per_m.abs() <= STRAIN_MAX_DKAPPA_PER_M)
+        {
+            return Err(ReportRejection::Correction(0.0));
+        }
+        let keep = 1.0 - 1.0 / STRAIN_MEMORY;
+        let mut next = *self;
+        next.strain_sum_xx_per_m2 = keep * next.strain_sum_xx_per_m2 + dkappa_per_m * dkappa_per_m;
+        next.strain_sum_xy_k_per_m = keep * next.strain_sum_xy_k_per_m + dkappa_per_m * miss_k;
+        let s = next.strain_sum_xy_k_per_m / (next.strain_sum_xx_per_m2 + STRAIN_PRIOR_PER_M2);
+        if !(s.abs() <= STRAIN_MAX_K_M) {
+            return Err(ReportRejection::Correction(
+                s.abs() * STRAIN_MAX_DKAPPA_PER_M,
+            ));
+        }
+        if let Some(f) = next.first_invalid() {
+            return Err(ReportRejection::Field(f));
+        }
+        *self = next;
+        Ok(s)
+    }
+
     /// The table power's scale for the power strategies: the mean of the reported ratios,
     /// with a prior of 1 worth [`MAP_PRIOR_WEIGHT`] reports.
     pub fn power_scale(&self) -> f32 {
@@ -722,6 +867,44 @@ fn map_of(n: f32, sx: f32, sy: f32, sxx: f32, sxy: f32) -> (f32, f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_strain_factor_is_fitted_through_the_origin_bounded_and_rescaled_with_the_coefficient() {
+        let mut c = Calibration::DEFAULT;
+        assert_eq!(c.strain_k_m(), 0.0);
+        // One report over a 10 /m bend that read 5 K low: 0.5 K·m, pulled a little to 0.
+        let s = c.fold_strain(10.0, 5.0).unwrap();
+        assert!((s - 0.5 * 100.0 / 101.0).abs() < 1e-4, "{s}");
+        assert_eq!(c.strain_k_m(), s);
+        // Tiny, huge or non-finite changes and factors past the bound change nothing.
+        for (dk, miss) in [
+            (0.5, 1.0),
+            (60.0, 1.0),
+            (f32::NAN, 1.0),
+            (10.0, f32::INFINITY),
+            (10.0, 80.0),
+        ] {
+            let before = c;
+            assert!(c.fold_strain(dk, miss).is_err(), "{dk} {miss}");
+            assert_eq!(c, before);
+        }
+        // Older reports fade: after many at 0.2 K·m the factor is near it.
+        for _ in 0..20 {
+            c.fold_strain(-8.0, -1.6).unwrap();
+        }
+        assert!((c.strain_k_m() - 0.2).abs() < 0.01, "{}", c.strain_k_m());
+        // A coefficient twice as large reads every rise half as large: so does the factor.
+        let before = c.strain_k_m();
+        c.tca_tcr_ppm_per_k = 3000.0;
+        c.rescale_own(1500.0);
+        assert!((c.strain_k_m() - before / 2.0).abs() < 1e-4);
+        // Sums set by hand to a factor past the bound steer nothing.
+        c.strain_sum_xy_k_per_m = 100.0 * STRAIN_MAX_K_M * c.strain_sum_xx_per_m2;
+        assert_eq!(c.strain_k_m(), 0.0);
+        assert!(!c.self_sensed());
+        c.tca_self_bend = 1.0;
+        assert!(c.self_sensed());
+    }
 
     #[test]
     fn defaults_are_the_compiled_in_link_and_within_range() {

@@ -220,6 +220,11 @@ pub struct Controller {
     cal_epoch: u32,
     /// Each heater's HEAT time over the last window ([`crate::pulse::HEAT_WINDOW_S`]).
     heat_budget: crate::pulse::HeatBudget,
+    /// The link's shape as the controller knows it, 1/m of curvature: as built until the first
+    /// frame says the ambient (`None`), the last `done`'s estimate after a morph, NaN (unknown)
+    /// while one heats and after one that did not finish. The TCA's rest reference is tagged
+    /// with it, so the strain term is learnt from the change of shape between two rests.
+    shape_per_m: Option<f32>,
 }
 
 /// What MEASURED needs of the last morph.
@@ -280,6 +285,7 @@ impl Controller {
             last: None,
             cal_epoch: 0,
             heat_budget: crate::pulse::HeatBudget::default(),
+            shape_per_m: None,
         }
     }
 
@@ -503,7 +509,12 @@ impl Controller {
         // At rest: idle, a morph's rest, a tune's settle step (the reference a tune fits from).
         let tca_driven = !(matches!(doing, Doing::Idle | Doing::Morph(Phase::Rest))
             || self.tune_step() == Some(crate::tune::TuneStep::Settle));
-        self.elec.note_rest(tca_driven, m.t_tca_c, m.t_amb_c);
+        self.note_rest(tca_driven, &m);
+        // Every tick, so a MORPH between ticks starts from this one's.
+        self.seq.set_tca_self(
+            self.tca_self_c().unwrap_or(f32::NAN),
+            self.elec.rest_shape_per_m(),
+        );
         for f in faults {
             if self.fault().is_none() {
                 self.trip(f);
@@ -521,6 +532,30 @@ impl Controller {
             Err(f) => self.trip(f),
         }
         self.outputs
+    }
+
+    /// Feeds the TCA's rest reference ([`Electrical::note_rest`]) with the link's shape, and
+    /// folds the strain report a new shape's reference gives into the calibration where `closed`
+    /// bends on the own temperature (not a replacement: MEASURED reports stay current).
+    fn note_rest(&mut self, tca_driven: bool, m: &Measurements) {
+        // A link that never morphed is as built: locked with its TCA at the surroundings.
+        let shape_per_m = match self.shape_per_m {
+            Some(k) => k,
+            None if m.t_amb_c.is_finite() => {
+                let k = 1e3 / crate::strategy::model::target::final_radius_mm(m.t_amb_c, m.t_amb_c);
+                *self.shape_per_m.insert(k)
+            }
+            None => return,
+        };
+        let cal = &mut self.settings.cal;
+        let tcr_per_k = cal.tca_tcr_ppm_per_k * 1e-6;
+        let report = self
+            .elec
+            .note_rest(tca_driven, m.t_tca_c, m.t_amb_c, shape_per_m, tcr_per_k);
+        if let Some((dkappa_per_m, miss_k)) = report {
+            // A report out of bounds (a coil replaced, a shape mis-estimated) teaches nothing.
+            let _ = cal.fold_strain(dkappa_per_m, miss_k);
+        }
     }
 
     /// Runs this tick of the activity in the slot: the powers it asks for, or the fault it
@@ -571,14 +606,28 @@ impl Controller {
             self.activity.stop();
         }
         for e in events {
-            if let (Event::Seq(SeqEvent::Done { radius_mm, .. }), Some(last)) =
-                (e, self.last.as_mut())
-            {
-                last.done_mm = radius_mm;
-            }
-            self.push(e);
+            self.push_seq(e);
         }
         result
+    }
+
+    /// Queues an activity's event, noting what a morph's say of the link: the radius `done`
+    /// reports (for MEASURED) and the shape (unknown from soften until `done`).
+    fn push_seq(&mut self, e: Event) {
+        match e {
+            Event::Seq(SeqEvent::Done { radius_mm, .. }) => {
+                if let Some(last) = self.last.as_mut() {
+                    last.done_mm = radius_mm;
+                }
+                self.shape_per_m = Some(1e3 / radius_mm);
+            }
+            Event::Seq(SeqEvent::Phase {
+                phase: Phase::Soften,
+                ..
+            }) => self.shape_per_m = Some(f32::NAN),
+            _ => {}
+        }
+        self.push(e);
     }
 
     /// Handles one received line: writes zero or more `data:` lines and exactly one final reply
@@ -758,7 +807,7 @@ impl Controller {
                     });
                 self.activity = Activity::Morph;
                 for e in first {
-                    self.push(Event::Seq(e));
+                    self.push_seq(Event::Seq(e));
                 }
             }
         }
@@ -928,10 +977,15 @@ impl Controller {
                 reply::config_reset(&mut l);
             }
             ConfigCommand::Set { name, value } => {
+                let view = self.settings.cal.self_sensed();
                 match self.settings.set_text(name.as_str(), value.as_str()) {
                     Ok((spec, v)) => {
                         if CALIBRATION_SPECS.iter().any(|c| c.name == spec.name) {
                             self.calibration_replaced();
+                        }
+                        if self.settings.cal.self_sensed() != view {
+                            // The map's reports were of the other view.
+                            self.settings.cal.clear_map();
                         }
                         reply::config_set(&mut l, &row(&spec, v))
                     }
@@ -1115,6 +1169,13 @@ impl Controller {
         if !l.starts_with(protocol::ERROR_TAG) {
             if let Some(m) = self.last.as_mut() {
                 m.counted = true;
+            }
+            // The link's shape is now measured, not estimated: the rest reference at it, read
+            // or still to be read, counts the next morph's strain from the measured shape.
+            let (done, measured) = (1e3 / last.done_mm, 1e3 / radius_mm);
+            if self.shape_per_m == Some(done) {
+                self.shape_per_m = Some(measured);
+                self.elec.retag_rest_shape(done, measured);
             }
         }
         out(&l);

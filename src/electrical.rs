@@ -145,6 +145,11 @@ pub const SELF_REST_MAX_K: f32 = 1.0;
 /// the first 100 rest ticks, then follows with this weight (10 s), so the probe pulses' 0.2 %
 /// noise a reading averages to about 0.03 %, a tenth of a kelvin's worth.
 pub const REST_FILTER_WEIGHT: f32 = 0.01;
+/// Rest ticks a reference at a new shape needs before it replaces the one in use (the mean of
+/// the first ticks, as [`REST_FILTER_WEIGHT`] says: 10 s).
+const REST_WHOLE_TICKS: u16 = (1.0 / REST_FILTER_WEIGHT) as u16;
+/// Two shapes this close are one, 1/m of curvature (a morph's estimate repeats to far better).
+const SAME_SHAPE_PER_M: f32 = 1e-3;
 
 /// The electrical checks' state: per heater, how long each reading has been wrong, and the
 /// filtered resistance; the TCA's resistance at rest.
@@ -163,6 +168,11 @@ pub struct Electrical {
     rest: Option<(f32, f32)>,
     /// Rest ticks in the reference (up to `1 / REST_FILTER_WEIGHT`).
     rest_n: u16,
+    /// The link's curvature when the reference was read, 1/m (NaN: unknown).
+    rest_shape_per_m: f32,
+    /// A reference being read at a new shape, kept apart until it is whole: the sums of its
+    /// resistances (Ω) and ambients (°C), its ticks and its shape (1/m).
+    next: Option<(f32, f32, u16, f32)>,
     /// This tick's resistance of each heater, Ω, where it was read within its range.
     raw: [Option<f32>; 2],
 }
@@ -271,20 +281,82 @@ impl Electrical {
         self.now.map(|c| c.on_a)
     }
 
-    /// Takes this tick's TCA resistance as its reference at ambient `t_amb_c` where the TCA is
+    /// Takes this tick's TCA resistance into its reference at ambient `t_amb_c` where the TCA is
     /// at rest: not driven and its thermistor within [`SELF_REST_MAX_K`] of ambient
-    /// (`t_tca_c`). The reference before every MORPH and TUNE is the last one at rest.
-    pub fn note_rest(&mut self, tca_driven: bool, t_tca_c: f32, t_amb_c: f32) {
+    /// (`t_tca_c`), with the link at curvature `shape_per_m` (1/m, NaN: unknown). The reference
+    /// before every MORPH and TUNE is the last one at rest. At a new shape (a morph has bent the
+    /// link since) a new reference is read beside the one in use; once it is whole it replaces
+    /// it, and the old one's own temperature at it (with coefficient `tcr_per_k`) says what the
+    /// bend did to the coil: returned as a strain report, (the change of curvature, 1/m; how
+    /// far the own temperature read below ambient, K), for
+    /// [`crate::calibration::Calibration::fold_strain`].
+    pub fn note_rest(
+        &mut self,
+        tca_driven: bool,
+        t_tca_c: f32,
+        t_amb_c: f32,
+        shape_per_m: f32,
+        tcr_per_k: f32,
+    ) -> Option<(f32, f32)> {
         let (Some(r), false) = (self.raw[Heater::Tca.index()], tca_driven) else {
-            return;
+            return None;
         };
         if !((t_tca_c - t_amb_c).abs() <= SELF_REST_MAX_K) {
-            return;
+            return None;
         }
-        self.rest_n = self.rest_n.saturating_add(1);
-        let w = (1.0 / self.rest_n as f32).max(REST_FILTER_WEIGHT);
-        let (r0, t0) = self.rest.unwrap_or((r, t_amb_c));
-        self.rest = Some((r0 + w * (r - r0), t0 + w * (t_amb_c - t0)));
+        let same = |a: f32, b: f32| (a - b).abs() <= SAME_SHAPE_PER_M || (a.is_nan() && b.is_nan());
+        let Some((r0, t0)) = self
+            .rest
+            .filter(|_| !same(shape_per_m, self.rest_shape_per_m))
+        else {
+            self.next = None;
+            self.rest_n = self.rest_n.saturating_add(1);
+            let w = (1.0 / self.rest_n as f32).max(REST_FILTER_WEIGHT);
+            let (r0, t0) = self.rest.unwrap_or((r, t_amb_c));
+            self.rest = Some((r0 + w * (r - r0), t0 + w * (t_amb_c - t0)));
+            self.rest_shape_per_m = shape_per_m;
+            return None;
+        };
+        let (sum_r, sum_c, n) = match self.next {
+            Some((sum_r, sum_c, n, at)) if same(at, shape_per_m) => {
+                (sum_r + r, sum_c + t_amb_c, n + 1)
+            }
+            _ => (r, t_amb_c, 1),
+        };
+        if n < REST_WHOLE_TICKS {
+            self.next = Some((sum_r, sum_c, n, shape_per_m));
+            return None;
+        }
+        let (r1, t1) = (sum_r / n as f32, sum_c / n as f32);
+        let report = (
+            shape_per_m - self.rest_shape_per_m,
+            t1 - (t0 + (r1 / r0 - 1.0) / tcr_per_k),
+        );
+        self.rest = Some((r1, t1));
+        self.rest_n = n;
+        self.rest_shape_per_m = shape_per_m;
+        self.next = None;
+        (report.0.is_finite() && report.1.is_finite()).then_some(report)
+    }
+
+    /// The link's shape `from_per_m` turned out to be `to_per_m` (1/m of curvature; a measured
+    /// radius): the rest reference read at it, or being read, is counted from the true one.
+    pub fn retag_rest_shape(&mut self, from_per_m: f32, to_per_m: f32) {
+        if self.rest_shape_per_m.to_bits() == from_per_m.to_bits() {
+            self.rest_shape_per_m = to_per_m;
+        }
+        if let Some((_, _, _, at)) = self
+            .next
+            .as_mut()
+            .filter(|n| n.3.to_bits() == from_per_m.to_bits())
+        {
+            *at = to_per_m;
+        }
+    }
+
+    /// The link's curvature when the TCA's rest reference was read, 1/m (NaN: unknown).
+    pub fn rest_shape_per_m(&self) -> f32 {
+        self.rest_shape_per_m
     }
 
     /// The TCA's own resistance as its mean temperature, °C, with temperature coefficient
@@ -335,6 +407,55 @@ mod tests {
             }
         }
         all
+    }
+
+    /// One rest tick with the TCA at `ohm` (its heater probed, not driven) in 22 °C surroundings
+    /// with the link at `shape_per_m`; the strain report it gives, if any.
+    fn rest_tick(e: &mut Electrical, ohm: f32, shape_per_m: f32) -> Option<(f32, f32)> {
+        let idle = Drive {
+            duty: [0.0; 2],
+            supply_on: true,
+        };
+        let c = Currents {
+            on_a: [0.4, 12.0 / ohm],
+            off_a: [0.0; 2],
+        };
+        let mut f = Faults::new();
+        e.check(Some(c), idle, 12.0, &mut f);
+        e.note_rest(false, 22.2, 22.0, shape_per_m, 1.5e-3)
+    }
+
+    #[test]
+    fn a_new_shapes_rest_reference_replaces_the_old_once_whole_and_reports_the_strain() {
+        let mut e = Electrical::default();
+        for _ in 0..150 {
+            assert_eq!(rest_tick(&mut e, 6.5, 20.0), None);
+        }
+        assert_eq!(e.rest_shape_per_m(), 20.0);
+        // Bent 10 /m tighter, the coil reads 0.3 % lower: 2 K of its own temperature's worth.
+        let bent = 6.5 * (1.0 - 0.003);
+        let mut report = None;
+        for k in 0..REST_WHOLE_TICKS {
+            // The old reference stays in use while the new one is read.
+            assert_eq!(e.rest_shape_per_m(), 20.0, "tick {k}");
+            report = rest_tick(&mut e, bent, 30.0);
+        }
+        let (dkappa, miss_k) = report.expect("a whole reference at the new shape reports");
+        assert!((dkappa - 10.0).abs() < 1e-4, "{dkappa}");
+        assert!((miss_k - 2.0).abs() < 0.05, "{miss_k}");
+        assert_eq!(e.rest_shape_per_m(), 30.0);
+        assert!((e.tca_self_c(1.5e-3).unwrap() - 22.0).abs() < 0.05);
+        // A measured shape re-tags it; an unknown shape (NaN) is a shape of its own.
+        e.retag_rest_shape(30.0, 31.0);
+        assert_eq!(e.rest_shape_per_m(), 31.0);
+        for _ in 0..REST_WHOLE_TICKS {
+            report = rest_tick(&mut e, bent, f32::NAN);
+        }
+        assert_eq!(report, None, "no report from an unknown shape");
+        assert!(e.rest_shape_per_m().is_nan());
+        // A warm TCA is not at rest: nothing is read.
+        assert_eq!(e.note_rest(false, 30.0, 22.0, 40.0, 1.5e-3), None);
+        assert!(e.rest_shape_per_m().is_nan());
     }
 
     #[test]

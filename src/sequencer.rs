@@ -171,6 +171,8 @@ pub struct Sequencer {
     pending: Option<Pending>,
     strategy: Option<AnyStrategy>,
     supply_v: f32,
+    tca_self_c: f32,
+    rest_shape_per_m: f32,
     thresholds: Thresholds,
     timeouts: PhaseTimeouts,
 }
@@ -201,6 +203,8 @@ impl Sequencer {
             pending: None,
             strategy: None,
             supply_v: f32::NAN,
+            tca_self_c: f32::NAN,
+            rest_shape_per_m: f32::NAN,
             thresholds: Thresholds::DEFAULT,
             timeouts: PhaseTimeouts::DEFAULT,
         }
@@ -218,6 +222,14 @@ impl Sequencer {
     /// power the heaters can actually deliver. Call before [`Sequencer::step`].
     pub fn set_supply_v(&mut self, supply_v: f32) {
         self.supply_v = supply_v;
+    }
+
+    /// Tells the sequencer the TCA's own temperature, °C (NaN where not sensed), and the link's
+    /// curvature when its rest reference was read, 1/m (NaN: unknown), so `closed` can bend on
+    /// it. Call every tick, before a morph starts and before [`Sequencer::step`].
+    pub fn set_tca_self(&mut self, tca_self_c: f32, rest_shape_per_m: f32) {
+        self.tca_self_c = tca_self_c;
+        self.rest_shape_per_m = rest_shape_per_m;
     }
 
     /// The running morph's phase ([`Phase::Idle`] when none runs; the controller, which
@@ -280,6 +292,8 @@ impl Sequencer {
             m,
             cal: &p.cal,
             pla_target_c: self.thresholds.pla_soft_target_c,
+            tca_self_c: self.tca_self_c,
+            rest_shape_per_m: self.rest_shape_per_m,
         };
         self.pending = None;
         let strategy = self.strategy.insert(AnyStrategy::new(p.mode, &start));
@@ -365,6 +379,7 @@ impl Sequencer {
             in_phase_s: since_s(now_ms, at.phase_ms),
             since_start_s: since_s(now_ms, at.heat_ms),
             supply_v: self.supply_v,
+            tca_self_c: self.tca_self_c,
             th: &self.thresholds,
         };
         if s.phase_done(&tick) {

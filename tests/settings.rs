@@ -222,7 +222,7 @@ fn saved_settings_survive_a_reboot_and_unsaved_ones_do_not() {
     b.send("CONFIG SET soften_timeout_s 45");
     b.send("CONFIG SET auto_mode boost");
     let r = b.send("SAVE");
-    assert_eq!(r, ["ok saved bytes=94 erases=0"]);
+    assert_eq!(r, ["ok saved bytes=106 erases=0"]);
     b.send("CONFIG SET bend_timeout_s 200");
     let flash = b.rig.flash().unwrap().clone();
 

@@ -785,7 +785,7 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
     let save_wall = t0.elapsed();
     check!(
         emu,
-        saved.last().unwrap().starts_with("ok saved bytes=94 "),
+        saved.last().unwrap().starts_with("ok saved bytes=106 "),
         "{saved:?}"
     );
     println!("emulated SAVE round trip: {save_wall:?} wall time");

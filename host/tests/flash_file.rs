@@ -38,7 +38,7 @@ fn a_saved_setting_survives_a_restart_and_an_unsaved_one_does_not() {
         "{first:?}"
     );
     assert!(
-        first.contains(&"ok saved bytes=94 erases=0".to_string()),
+        first.contains(&"ok saved bytes=106 erases=0".to_string()),
         "{first:?}"
     );
     assert_eq!(std::fs::metadata(&path).unwrap().len(), 4096);

@@ -210,6 +210,7 @@ pub fn run_morph_on<P: Plant>(
     mode: Mode,
     trace: &mut impl FnMut(&TracePoint),
 ) -> RunResult {
+    rig.boot();
     let t0 = rig.now_ms();
     rig.ctrl.handle(
         t0,

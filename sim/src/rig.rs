@@ -76,6 +76,10 @@ pub struct Rig<P = Lumped> {
     saves: u32,
 }
 
+/// How long [`Rig::boot`] runs a fresh rig, ms of link time: a few ticks of current sense give
+/// the TCA's rest reference; a second is what a user takes to type the first line.
+pub const BOOT_MS: u64 = 1000;
+
 impl Rig<Lumped> {
     /// A rig with the default board and the lumped link `setup`, after one control tick (so
     /// the controller has a sensor frame).
@@ -163,6 +167,15 @@ impl<P: Plant> Rig<P> {
     /// The ADC frame the board would read now, stamped `sample_ms`.
     pub fn inputs(&mut self, sample_ms: u64) -> Inputs {
         self.bench.inputs(sample_ms)
+    }
+
+    /// Runs the board up to [`BOOT_MS`] of link time, as a board is up for a moment before its
+    /// first MORPH: where it senses current, that moment gives the TCA its resistance at rest,
+    /// which `closed` bends on once TUNE has fitted its coefficient.
+    pub fn boot(&mut self) {
+        while self.now_ms < BOOT_MS {
+            self.tick();
+        }
     }
 
     /// One control period: sample, step the controller, then let the link run one period

@@ -3,6 +3,7 @@
 //! compensated for the release spring-back.
 
 use super::model::observer::{HeatedNode, LEARN_MAX_RATE_K_PER_S, SENSOR_TAU_S};
+use super::model::own::{OwnTemp, OWN_STILL_K_PER_S};
 use super::model::{target, ModelDrive, PlaView};
 use super::{Start, Strategy, TargetTemps, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
 use crate::vocab::{Measurements, Phase, Powers};
@@ -106,6 +107,14 @@ pub struct Closed {
     map: (f32, f32),
     /// Since when the PLA has read stalled in lock, ms ([`CLOSED_LOCK_STALL_K_PER_S`]).
     stalled_since_ms: Option<u64>,
+    /// The TCA's own temperature, where the morph started with one (a board that senses
+    /// current, after `TUNE` fitted its coefficient): the TCA is then bent and held on it
+    /// instead of on its thermistor.
+    own: Option<OwnTemp>,
+    /// What the own temperature reads low by at the hold, K: the strain factor
+    /// ([`crate::calibration::Calibration::strain_k_m`]) times the bend from the rest
+    /// reference's shape to the lock's (0 where either is unknown).
+    strain_k: f32,
 }
 
 impl Closed {
@@ -115,10 +124,28 @@ impl Closed {
         let map = s.cal.map();
         let need = target::lock_temp_for_final_radius_c(s.radius_mm, s.m.t_amb_c);
         let t = target::calibrated_aim_c(map, need, s.m.t_amb_c);
+        let bend_per_m = crate::lumped::curvature_per_m(need) - s.rest_shape_per_m;
+        let strain_k = s.cal.strain_k_m() * bend_per_m;
         Closed {
             drive: ModelDrive::new(s, t),
             map,
             stalled_since_ms: None,
+            own: OwnTemp::new(s.now_ms, s.tca_self_c).filter(|_| s.cal.self_sensed()),
+            strain_k: if strain_k.is_finite() { strain_k } else { 0.0 },
+        }
+    }
+
+    /// Whether this morph bends on the TCA's own temperature.
+    pub fn self_sensed(&self) -> bool {
+        self.own.is_some()
+    }
+
+    /// The TCA temperature this morph bends and holds on, °C: its own where sensed, else the
+    /// observer's estimate from its thermistor.
+    fn tca_c(&self) -> f32 {
+        match &self.own {
+            Some(own) => own.temp_c() + self.strain_k,
+            None => self.drive.observer().estimate_c(HeatedNode::Tca),
         }
     }
 
@@ -164,8 +191,12 @@ impl Strategy for Closed {
 
     fn phase_done(&mut self, t: &Tick) -> bool {
         self.drive.observe(t.now_ms, t.m);
+        if let Some(own) = self.own.as_mut() {
+            own.update(t.now_ms, t.tca_self_c);
+        }
+        let tca_c = self.tca_c();
         let o = self.drive.observer();
-        let (pla_c, tca_c) = (o.estimate_c(HeatedNode::Pla), o.estimate_c(HeatedNode::Tca));
+        let pla_c = o.estimate_c(HeatedNode::Pla);
         match t.phase {
             Phase::Soften => pla_c >= t.th.soft_threshold_c,
             Phase::Bend => {
@@ -174,8 +205,13 @@ impl Strategy for Closed {
                 // corrected by its thermistor can call a rod soft whose core is still glassy
                 // (the high-fidelity links then lock before the rod has flowed). A PLA
                 // thermistor that reads what the model expects need not wait.
-                let tca_learnt =
-                    o.measured_rate_k_per_s(HeatedNode::Tca).abs() <= LEARN_MAX_RATE_K_PER_S;
+                // On its own temperature: settled, and the rod no longer straining the coil.
+                let tca_learnt = match &self.own {
+                    Some(own) => own.rate_k_per_s().abs() <= OWN_STILL_K_PER_S,
+                    None => {
+                        o.measured_rate_k_per_s(HeatedNode::Tca).abs() <= LEARN_MAX_RATE_K_PER_S
+                    }
+                };
                 let pla_settled =
                     o.measured_rate_k_per_s(HeatedNode::Pla).abs() <= CLOSED_PLA_SETTLED_K_PER_S;
                 let pla_innovation_k = o.innovation_k(HeatedNode::Pla);
@@ -192,17 +228,18 @@ impl Strategy for Closed {
     }
 
     fn radius_estimate_mm(&self, m: &Measurements) -> f32 {
-        let tca_c = self.drive.observer().estimate_c(HeatedNode::Tca);
-        target::calibrated_final_radius_mm(self.map, tca_c, m.t_amb_c)
+        target::calibrated_final_radius_mm(self.map, self.tca_c(), m.t_amb_c)
     }
 
     fn powers(&mut self, phase: Phase, t: &Tick) -> Powers {
         // The model is driven to `target − disturbance`, so the estimate meets the target.
+        // Bending on its own temperature, the TCA's disturbance is what it reads over the model.
         let o = self.drive.observer();
-        let (d_pla, d_tca) = (
-            o.disturbance_k(HeatedNode::Pla),
-            o.disturbance_k(HeatedNode::Tca),
-        );
+        let d_pla = o.disturbance_k(HeatedNode::Pla);
+        let d_tca = match &self.own {
+            Some(_) => self.tca_c() - o.model_c(HeatedNode::Tca),
+            None => o.disturbance_k(HeatedNode::Tca),
+        };
         self.drive.powers(phase, t, d_pla, d_tca)
     }
 

@@ -81,6 +81,9 @@ pub struct Tick<'a> {
     pub since_start_s: f32,
     /// Measured heater supply, V (NaN if unknown).
     pub supply_v: f32,
+    /// The TCA's mean temperature from its own resistance, °C (NaN on a board that does not
+    /// sense current, or before its rest reference: [`crate::electrical`]).
+    pub tca_self_c: f32,
     /// The thresholds and targets this morph runs with.
     pub th: &'a Thresholds,
 }
@@ -142,6 +145,12 @@ pub struct Start<'a> {
     /// The PLA temperature the model strategies hold in soften and bend, °C (the live
     /// `pla_soft_target_c`).
     pub pla_target_c: f32,
+    /// The TCA's own temperature at the start, °C (NaN where not sensed): `closed` bends on it
+    /// where it is known and `TUNE` has fitted its coefficient.
+    pub tca_self_c: f32,
+    /// The link's curvature when the TCA's rest reference was read, 1/m (NaN: unknown): what
+    /// the own temperature's strain term counts from.
+    pub rest_shape_per_m: f32,
 }
 
 /// The strategy a morph runs, one of the four: the single place that dispatches on it.

@@ -741,7 +741,9 @@ impl Tune {
         let lag_k = SENSOR_TAU_S * (self.cool_last.0 - self.cool_first.0) * (n - 1.0) / span_s;
         let ppm = self.cool_ratio_sum / (self.cool_rise_sum + lag_k) * 1e6;
         if let Ok(v) = bounded(field("tca_tcr_ppm_per_k"), ppm) {
+            let old = self.cal.tca_tcr_ppm_per_k;
             self.cal.tca_tcr_ppm_per_k = v;
+            self.cal.rescale_own(old);
         }
     }
 

@@ -74,6 +74,30 @@ pub struct Args {
     /// alone does).
     #[arg(long)]
     pub no_tune: bool,
+    /// Bend on the TCA's own temperature (`tca_self_bend 1`, a board that senses current):
+    /// writes `calibration_self.csv`, `.svg` and `.png` instead.
+    #[arg(long)]
+    pub self_bend: bool,
+}
+
+impl Args {
+    /// The name the outputs start with.
+    fn stem(&self) -> &'static str {
+        if self.self_bend {
+            "calibration_self"
+        } else {
+            "calibration"
+        }
+    }
+
+    /// The calibration a link starts with: the compiled-in one, with the own-temperature bend
+    /// where asked.
+    fn start(&self) -> Calibration {
+        Calibration {
+            tca_self_bend: if self.self_bend { 1.0 } else { 0.0 },
+            ..Calibration::DEFAULT
+        }
+    }
 }
 
 /// A drawn link, cloned for every morph.
@@ -93,6 +117,7 @@ impl Link {
         rig.ctrl
             .set_calibration(*cal)
             .expect("a calibration the controller made is within its bounds");
+        rig.boot();
         rig
     }
 }
@@ -194,6 +219,23 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> MorphRun {
     }
 }
 
+/// Longest rest after a measured morph, s: the hifi links' TCA beads take two to four minutes in
+/// water to come within `SELF_REST_MAX_K` of the bath.
+const REST_MAX_S: f64 = 600.0;
+
+/// Lets the link rest after a measured morph, as a lab does between morphs by hand, until the
+/// TCA's rest reference is read at the new shape (on a board that senses current: what teaches
+/// the own thermometer's strain term) or [`REST_MAX_S`] have passed.
+fn rest_after(rig: &mut Rig<Box<dyn Plant>>) {
+    let stop = rig.now_ms() + (REST_MAX_S * 1000.0) as u64;
+    let shape = |rig: &Rig<Box<dyn Plant>>| rig.ctrl.electrical().rest_shape_per_m();
+    let before = shape(rig);
+    while rig.now_ms() < stop && shape(rig).to_bits() == before.to_bits() {
+        rig.tick();
+        while rig.ctrl.pop_event().is_some() {}
+    }
+}
+
 fn evaluate(
     link: &Link,
     noise: Noise,
@@ -217,9 +259,10 @@ fn evaluate(
         .collect()
 }
 
-/// TUNE on a copy of the link at rest: the calibration it ends with and its end line.
-fn tune(link: &Link, noise: Noise) -> (Calibration, String) {
-    let mut rig = link.rig(noise, &Calibration::DEFAULT);
+/// TUNE on a copy of the link at rest from `start`: the calibration it ends with and its end
+/// line.
+fn tune(link: &Link, noise: Noise, start: &Calibration) -> (Calibration, String) {
+    let mut rig = link.rig(noise, start);
     rig.tick();
     rig.handle_line("TUNE", &mut |_| {});
     let mut end = String::from("(no end line)");
@@ -245,14 +288,15 @@ fn run_link(
     draw: u64,
     air: bool,
     targets: &[f32],
-    seed: u64,
-    no_tune: bool,
+    args: &Args,
 ) -> LinkResult {
-    let mut evals = evaluate(link, noise, &Calibration::DEFAULT, None, targets);
-    let (mut cal, tune_line) = if no_tune {
-        (Calibration::DEFAULT, "(TUNE skipped)".to_string())
+    let start = args.start();
+    let seed = args.seed;
+    let mut evals = evaluate(link, noise, &start, None, targets);
+    let (mut cal, tune_line) = if args.no_tune {
+        (start, "(TUNE skipped)".to_string())
     } else {
-        tune(link, noise)
+        tune(link, noise, &start)
     };
     evals.extend(evaluate(link, noise, &cal, Some(0), targets));
     let (min, max) = table::range_mm();
@@ -272,6 +316,7 @@ fn run_link(
                 },
                 &mut |_| {},
             );
+            rest_after(&mut rig);
             cal = rig.ctrl.calibration();
         }
         evals.extend(evaluate(link, noise, &cal, Some(k + 1), targets));
@@ -416,8 +461,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                                 draw,
                                 air,
                                 &targets,
-                                args.seed,
-                                args.no_tune,
+                                args,
                             )
                         })
                 } else {
@@ -429,8 +473,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                         draw,
                         m.air,
                         &targets,
-                        args.seed,
-                        args.no_tune,
+                        args,
                     ))
                 };
                 let done = {
@@ -476,7 +519,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
             );
         }
     }
-    let csv_path = out.join("calibration.csv");
+    let csv_path = out.join(format!("{}.csv", args.stem()));
     std::fs::write(&csv_path, csv).map_err(|e| format!("{}: {e}", csv_path.display()))?;
     let mut series = Vec::new();
     for plant in ["hifi", "lumped"] {
@@ -584,12 +627,14 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
         series.push((if plant == "hifi" { "hifi" } else { "lumped" }, pts));
     }
     let chart = Chart { series };
-    for name in ["calibration.svg", "calibration.png"] {
+    for ext in ["svg", "png"] {
+        let name = format!("{}.{ext}", args.stem());
         plot::write(&out.join(name), (900, 600), &chart).map_err(String::from)?;
     }
     println!(
-        "\nwrote {}, calibration.svg, calibration.png",
-        csv_path.display()
+        "\nwrote {}, {stem}.svg, {stem}.png",
+        csv_path.display(),
+        stem = args.stem()
     );
     Ok(())
 }

@@ -83,6 +83,12 @@ pub struct Args {
     /// Output directory, relative to the workspace root.
     #[arg(long, default_value = "docs")]
     pub out: String,
+    /// Run `closed` alone, bending on the TCA's own temperature (`tca_self_bend 1` on a board
+    /// that senses current, nothing else calibrated): writes `strategies_self.csv`,
+    /// `strategies_self_oracle.csv` and `strategies_self_pareto*.svg`, beside the
+    /// thermistor-only run's.
+    #[arg(long)]
+    pub self_bend: bool,
 }
 
 /// The two plants, by the name the CSV and the tables give them.
@@ -203,18 +209,34 @@ fn hifi_link(seed: u64, draw: u64) -> Result<(Link, Noise, LinkInfo), String> {
     Ok((Link::Hifi(Box::new(plant)), noise, info))
 }
 
-/// One morph on a copy of `link`.
+/// One morph on a copy of `link`, bending on the TCA's own temperature where `self_bend`.
 fn morph(
     link: &Link,
     noise: Noise,
     target_mm: f32,
     mode: Mode,
+    self_bend: bool,
     trace: &mut impl FnMut(&TracePoint),
 ) -> RunResult {
+    fn on<P: morphlink_plant::Plant>(mut rig: Rig<P>, self_bend: bool) -> Rig<P> {
+        if self_bend {
+            let cal = morphlink::calibration::Calibration {
+                tca_self_bend: 1.0,
+                ..morphlink::calibration::Calibration::DEFAULT
+            };
+            rig.ctrl.set_calibration(cal).expect("the flag is in range");
+        }
+        rig
+    }
     match link {
-        Link::Lumped(p) => run_morph_on(Rig::with_plant(p.clone(), noise), target_mm, mode, trace),
+        Link::Lumped(p) => run_morph_on(
+            on(Rig::with_plant(p.clone(), noise), self_bend),
+            target_mm,
+            mode,
+            trace,
+        ),
         Link::Hifi(p) => run_morph_on(
-            Rig::with_plant((**p).clone(), noise),
+            on(Rig::with_plant((**p).clone(), noise), self_bend),
             target_mm,
             mode,
             trace,
@@ -290,10 +312,15 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
             links.push(l?);
         }
     }
+    let (stem, strategies): (&str, &[Mode]) = if args.self_bend {
+        ("strategies_self", &[Mode::Closed])
+    } else {
+        ("strategies", &STRATEGIES)
+    };
     let mut jobs = Vec::new();
     for (i, _) in links.iter().enumerate() {
         for &t in &targets {
-            for s in STRATEGIES {
+            for &s in strategies {
                 jobs.push((i, t, s));
             }
         }
@@ -308,7 +335,14 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                 strategy,
                 target_mm,
                 link: *info,
-                result: morph(link, *noise, target_mm, strategy, &mut |_| {}),
+                result: morph(
+                    link,
+                    *noise,
+                    target_mm,
+                    strategy,
+                    args.self_bend,
+                    &mut |_| {},
+                ),
             }
         },
     )?;
@@ -329,8 +363,8 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
             run: oracle_on(link, t),
         }
     })?;
-    write_csv(&out.join("strategies.csv"), &rows)?;
-    write_oracle_csv(&out.join("strategies_oracle.csv"), &oracle_rows)?;
+    write_csv(&out.join(format!("{stem}.csv")), &rows)?;
+    write_oracle_csv(&out.join(format!("{stem}_oracle.csv")), &oracle_rows)?;
     let plants: Vec<&'static str> = [(lumped, LUMPED), (hifi, HIFI)]
         .iter()
         .filter(|(on, _)| *on)
@@ -345,12 +379,21 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
         print!("{}", summary.table);
         let suffix = if plant == HIFI { "" } else { "_lumped" };
         pareto_chart(
-            &out.join(format!("strategies_pareto{suffix}.svg")),
+            &out.join(format!("{stem}_pareto{suffix}.svg")),
             plant,
+            if args.self_bend {
+                "closed bending on the TCA's own temperature (uncalibrated), morph time"
+            } else {
+                "morph time"
+            },
             &sel,
             &orc,
             &summary,
         )?;
+        best = summary.best;
+        if args.self_bend {
+            continue;
+        }
         let nominal = if plant == HIFI {
             let spec = HifiSpec::nominal(morphlink::link::LINK, Grid::Reduced)
                 .map_err(|e| format!("hifi nominal: {e}"))?;
@@ -363,13 +406,20 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
             plant,
             &nominal,
         )?;
-        // The headline is the plant that shares the least with the controller.
-        best = summary.best;
+        // The headline is the plant that shares the least with the controller (the last).
     }
     println!(
-        "wrote {}, strategies_oracle.csv, strategies_pareto*.svg, strategies_timeline*.svg",
-        out.join("strategies.csv").display()
+        "wrote {}, {stem}_oracle.csv, {stem}_pareto*.svg{}",
+        out.join(format!("{stem}.csv")).display(),
+        if args.self_bend {
+            ""
+        } else {
+            ", strategies_timeline*.svg"
+        }
     );
+    if args.self_bend {
+        return Ok(());
+    }
     let headline = plants.last().copied().unwrap_or(LUMPED);
     match best {
         Some(b) if b == AUTO_STRATEGY => {
@@ -660,9 +710,11 @@ fn pareto_front(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
 /// Errors above this are drawn at it (the title says how many), %.
 const PARETO_ERROR_CLIP_PCT: f64 = 10.0;
 
+/// `bent_on` names what the chart is of (`morph time`, or the one strategy it shows).
 fn pareto_chart(
     path: &Path,
     plant: &str,
+    bent_on: &str,
     rows: &[&Row],
     oracle_rows: &[&OracleRow],
     summary: &Summary,
@@ -680,7 +732,7 @@ fn pareto_chart(
         .filter(|r| r.result.error_pct.abs() > e_max)
         .count();
     let title = format!(
-        "{plant} plant: morph time vs final radius error (water: dots, air: crosses; triangles: p95 of water runs; black crosses: oracle)"
+        "{plant} plant: {bent_on} vs final radius error (water: dots, air: crosses; triangles: p95 of water runs; black crosses: oracle)"
     );
     let mut notes = vec![format!(
         "{clipped} runs with an error above {e_max:.0} % are drawn as arrows pointing up from the top edge"
@@ -832,7 +884,9 @@ fn timeline_chart(path: &Path, plant: &str, link: &Link) -> Result<(), String> {
         for (s, area) in STRATEGIES.iter().zip(panels.iter()) {
             let mut trace: Vec<TracePoint> = Vec::new();
             let noise = Mismatch::NONE.plant().noise();
-            let r = morph(link, noise, TIMELINE_TARGET_MM, *s, &mut |p| trace.push(*p));
+            let r = morph(link, noise, TIMELINE_TARGET_MM, *s, false, &mut |p| {
+                trace.push(*p)
+            });
             let t_end = trace.last().map(|p| p.t_s).unwrap_or(1.0);
             let title = format!(
                 "{plant} plant, {}: MORPH {} mm, {} at {:.1} s, final {:.2} mm ({:+.2} %)",

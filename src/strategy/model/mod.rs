@@ -3,6 +3,7 @@
 //! temperature from [`target`]), the TCA from the start of soften on.
 
 pub mod observer;
+pub mod own;
 pub mod target;
 
 use super::{Start, TargetTemps, Tick, SOFT_THRESHOLD_C};

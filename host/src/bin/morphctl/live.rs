@@ -183,6 +183,8 @@ pub fn phase_timeout_s(mode: &str, phase: &str) -> Option<f64> {
         m: &m,
         cal: &morphlink::calibration::Calibration::DEFAULT,
         pla_target_c: morphlink::strategy::model::PLA_SOFT_TARGET_C,
+        tca_self_c: f32::NAN,
+        rest_shape_per_m: f32::NAN,
     };
     let own = AnyStrategy::new(mode, &start).get().timeout_s(phase);
     use morphlink::sequencer::{
