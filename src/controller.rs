@@ -177,10 +177,10 @@ pub enum ConfigEvent {
 pub const EVENT_QUEUE: usize = 16;
 
 /// Longest reply to one command line, bytes: its `data:` lines and final line, each with a
-/// `\n`. A bound for a shell that collects a reply before sending it; HELP, the longest, is
-/// about 1000 and CONFIG about 450 with the morph settings alone (checked in
-/// `tests/protocol.rs`); 1536 leaves room for more commands and setting groups.
-pub const MAX_REPLY_BYTES: usize = 1536;
+/// `\n`. A bound for a shell that collects a reply before sending it; CONFIG, the longest, is
+/// about 1670 with its 25 settings and HELP about 1000 (checked in `tests/protocol.rs`); 1792
+/// leaves a line's room (the session's buffers are this and twice this: RAM, docs/firmware.md).
+pub const MAX_REPLY_BYTES: usize = 1792;
 
 /// The controller state.
 pub struct Controller {
@@ -538,13 +538,13 @@ impl Controller {
     /// folds the strain report a new shape's reference gives into the calibration where `closed`
     /// bends on the own temperature (not a replacement: MEASURED reports stay current).
     fn note_rest(&mut self, tca_driven: bool, m: &Measurements) {
-        // A link that never morphed is as built: locked with its TCA at the surroundings.
+        // A link that never morphed is as built: bent by its cold TCA alone (the model's
+        // spring-back at rest is under 2 % of that curvature).
         let shape_per_m = match self.shape_per_m {
             Some(k) => k,
-            None if m.t_amb_c.is_finite() => {
-                let k = 1e3 / crate::strategy::model::target::final_radius_mm(m.t_amb_c, m.t_amb_c);
-                *self.shape_per_m.insert(k)
-            }
+            None if m.t_amb_c.is_finite() => *self
+                .shape_per_m
+                .insert(crate::lumped::curvature_per_m(m.t_amb_c)),
             None => return,
         };
         let cal = &mut self.settings.cal;
@@ -637,7 +637,7 @@ impl Controller {
         &mut self,
         now_ms: u64,
         line: &str,
-        out: &mut impl FnMut(&str),
+        out: &mut dyn FnMut(&str),
     ) -> Option<SimCommand> {
         match protocol::parse_line(line) {
             Ok(None) => None,
@@ -654,7 +654,7 @@ impl Controller {
     }
 
     /// Carries out one command (not `SIM`), writing its reply lines through `out`.
-    pub fn handle(&mut self, now_ms: u64, cmd: Command, out: &mut impl FnMut(&str)) {
+    pub fn handle(&mut self, now_ms: u64, cmd: Command, out: &mut dyn FnMut(&str)) {
         let mut l = OutLine::new();
         match cmd {
             Command::Morph { radius_mm, mode } => self.morph(now_ms, radius_mm, mode, out),
@@ -687,9 +687,15 @@ impl Controller {
                 out(&l);
             }
             Command::Help => {
-                for h in reply::HELP.iter().chain(tune_reply::HELP.iter()) {
+                let sim: &[reply::HelpLine] = if cfg!(feature = "sim") {
+                    &reply::HELP_SIM
+                } else {
+                    &[]
+                };
+                let lines = reply::HELP.iter().chain(sim).chain(&reply::HELP_TAIL);
+                for &h in lines.chain(tune_reply::HELP.iter()) {
                     l.clear();
-                    reply::data_text(&mut l, h);
+                    reply::help_line(&mut l, h);
                     out(&l);
                 }
                 out(protocol::OK);
@@ -722,7 +728,7 @@ impl Controller {
         heater: Heater,
         power_w: f32,
         duration_s: f32,
-        out: &mut impl FnMut(&str),
+        out: &mut dyn FnMut(&str),
     ) {
         let mut l = OutLine::new();
         if self.refused(Start::Heat, &mut l) {
@@ -770,7 +776,7 @@ impl Controller {
         self.activity.pulse().map(|p| p.heater)
     }
 
-    fn morph(&mut self, now_ms: u64, radius_mm: f32, mode: Mode, out: &mut impl FnMut(&str)) {
+    fn morph(&mut self, now_ms: u64, radius_mm: f32, mode: Mode, out: &mut dyn FnMut(&str)) {
         let mut l = OutLine::new();
         if self.refused(Start::Morph, &mut l) {
             return out(&l);
@@ -813,7 +819,7 @@ impl Controller {
         }
     }
 
-    fn reset(&mut self, now_ms: u64, out: &mut impl FnMut(&str)) {
+    fn reset(&mut self, now_ms: u64, out: &mut dyn FnMut(&str)) {
         let mut l = OutLine::new();
         let Some(latched) = self.fault() else {
             reply::reset_nothing(&mut l);
@@ -955,7 +961,7 @@ impl Controller {
         out(&l);
     }
 
-    fn config(&mut self, c: protocol::ConfigCommand, out: &mut impl FnMut(&str)) {
+    fn config(&mut self, c: protocol::ConfigCommand, out: &mut dyn FnMut(&str)) {
         use protocol::ConfigCommand;
         let mut l = OutLine::new();
         if !matches!(c, ConfigCommand::List) && self.refused(Start::Change, &mut l) {
@@ -1015,7 +1021,7 @@ impl Controller {
 
     /// SAVE: refused while a morph runs (a flash erase may stall the CPU for longer than a
     /// control tick, so it happens only with the heaters off); otherwise the shell writes.
-    fn save(&mut self, out: &mut impl FnMut(&str)) {
+    fn save(&mut self, out: &mut dyn FnMut(&str)) {
         let mut l = OutLine::new();
         if !self.storage {
             return out(&protocol::format_error(&reply::ERR_SAVE_UNSUPPORTED));
@@ -1078,7 +1084,7 @@ impl Controller {
         self.activity.tune().map(|t| t.step_now())
     }
 
-    fn start_tune(&mut self, now_ms: u64, out: &mut impl FnMut(&str)) {
+    fn start_tune(&mut self, now_ms: u64, out: &mut dyn FnMut(&str)) {
         let mut l = OutLine::new();
         if self.refused(Start::Tune, &mut l) {
             return out(&l);
@@ -1107,7 +1113,7 @@ impl Controller {
         }
     }
 
-    fn measured(&mut self, radius_mm: f32, out: &mut impl FnMut(&str)) {
+    fn measured(&mut self, radius_mm: f32, out: &mut dyn FnMut(&str)) {
         use crate::strategy::model::target;
         let mut l = OutLine::new();
         // The busy rule of CONFIG SET (the calibration is a setting), in MEASURED's words.

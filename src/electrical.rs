@@ -170,9 +170,9 @@ pub struct Electrical {
     rest_n: u16,
     /// The link's curvature when the reference was read, 1/m (NaN: unknown).
     rest_shape_per_m: f32,
-    /// A reference being read at a new shape, kept apart until it is whole: the sums of its
-    /// resistances (Ω) and ambients (°C), its ticks and its shape (1/m).
-    next: Option<(f32, f32, u16, f32)>,
+    /// The reference at the shape before, while one at a new shape is read (Ω, °C, 1/m): what
+    /// the new one is compared with once whole, for the strain report.
+    prev: Option<(f32, f32, f32)>,
     /// This tick's resistance of each heater, Ω, where it was read within its range.
     raw: [Option<f32>; 2],
 }
@@ -285,10 +285,10 @@ impl Electrical {
     /// at rest: not driven and its thermistor within [`SELF_REST_MAX_K`] of ambient
     /// (`t_tca_c`), with the link at curvature `shape_per_m` (1/m, NaN: unknown). The reference
     /// before every MORPH and TUNE is the last one at rest. At a new shape (a morph has bent the
-    /// link since) a new reference is read beside the one in use; once it is whole it replaces
-    /// it, and the old one's own temperature at it (with coefficient `tcr_per_k`) says what the
-    /// bend did to the coil: returned as a strain report, (the change of curvature, 1/m; how
-    /// far the own temperature read below ambient, K), for
+    /// link since) the reference is read afresh; once it is whole (the mean of
+    /// `1 / REST_FILTER_WEIGHT` ticks), the old one's own temperature at it (with coefficient
+    /// `tcr_per_k`) says what the bend did to the coil: returned as a strain report, (the change
+    /// of curvature, 1/m; how far the own temperature read below ambient, K), for
     /// [`crate::calibration::Calibration::fold_strain`].
     pub fn note_rest(
         &mut self,
@@ -304,38 +304,28 @@ impl Electrical {
         if !((t_tca_c - t_amb_c).abs() <= SELF_REST_MAX_K) {
             return None;
         }
-        let same = |a: f32, b: f32| (a - b).abs() <= SAME_SHAPE_PER_M || (a.is_nan() && b.is_nan());
-        let Some((r0, t0)) = self
-            .rest
-            .filter(|_| !same(shape_per_m, self.rest_shape_per_m))
-        else {
-            self.next = None;
-            self.rest_n = self.rest_n.saturating_add(1);
-            let w = (1.0 / self.rest_n as f32).max(REST_FILTER_WEIGHT);
-            let (r0, t0) = self.rest.unwrap_or((r, t_amb_c));
-            self.rest = Some((r0 + w * (r - r0), t0 + w * (t_amb_c - t0)));
+        let shape = self.rest_shape_per_m;
+        if !((shape - shape_per_m).abs() <= SAME_SHAPE_PER_M
+            || shape.is_nan() && shape_per_m.is_nan())
+        {
+            // A new shape: its reference is read afresh, the old one kept to compare it with.
+            self.prev = self.rest.map(|(r0, t0)| (r0, t0, shape));
+            self.rest_n = 0;
             self.rest_shape_per_m = shape_per_m;
-            return None;
-        };
-        let (sum_r, sum_c, n) = match self.next {
-            Some((sum_r, sum_c, n, at)) if same(at, shape_per_m) => {
-                (sum_r + r, sum_c + t_amb_c, n + 1)
-            }
-            _ => (r, t_amb_c, 1),
-        };
-        if n < REST_WHOLE_TICKS {
-            self.next = Some((sum_r, sum_c, n, shape_per_m));
+        }
+        self.rest_n = self.rest_n.saturating_add(1);
+        let w = (1.0 / self.rest_n as f32).max(REST_FILTER_WEIGHT);
+        let (r0, t0) = self.rest.unwrap_or((r, t_amb_c));
+        let (r1, t1) = (r0 + w * (r - r0), t0 + w * (t_amb_c - t0));
+        self.rest = Some((r1, t1));
+        if self.rest_n < REST_WHOLE_TICKS {
             return None;
         }
-        let (r1, t1) = (sum_r / n as f32, sum_c / n as f32);
+        let (r0, t0, shape0) = self.prev.take()?;
         let report = (
-            shape_per_m - self.rest_shape_per_m,
+            shape_per_m - shape0,
             t1 - (t0 + (r1 / r0 - 1.0) / tcr_per_k),
         );
-        self.rest = Some((r1, t1));
-        self.rest_n = n;
-        self.rest_shape_per_m = shape_per_m;
-        self.next = None;
         (report.0.is_finite() && report.1.is_finite()).then_some(report)
     }
 
@@ -345,18 +335,18 @@ impl Electrical {
         if self.rest_shape_per_m.to_bits() == from_per_m.to_bits() {
             self.rest_shape_per_m = to_per_m;
         }
-        if let Some((_, _, _, at)) = self
-            .next
-            .as_mut()
-            .filter(|n| n.3.to_bits() == from_per_m.to_bits())
-        {
-            *at = to_per_m;
-        }
     }
 
     /// The link's curvature when the TCA's rest reference was read, 1/m (NaN: unknown).
     pub fn rest_shape_per_m(&self) -> f32 {
         self.rest_shape_per_m
+    }
+
+    /// The shape of the rest reference once it is whole (the mean of `1 / REST_FILTER_WEIGHT`
+    /// rest ticks at it: a new shape's strain report is given then), 1/m; None while one is
+    /// being read.
+    pub fn whole_rest_shape_per_m(&self) -> Option<f32> {
+        (self.rest.is_some() && self.rest_n >= REST_WHOLE_TICKS).then_some(self.rest_shape_per_m)
     }
 
     /// The TCA's own resistance as its mean temperature, °C, with temperature coefficient
@@ -432,15 +422,16 @@ mod tests {
             assert_eq!(rest_tick(&mut e, 6.5, 20.0), None);
         }
         assert_eq!(e.rest_shape_per_m(), 20.0);
+        assert_eq!(e.whole_rest_shape_per_m(), Some(20.0));
         // Bent 10 /m tighter, the coil reads 0.3 % lower: 2 K of its own temperature's worth.
         let bent = 6.5 * (1.0 - 0.003);
         let mut report = None;
         for k in 0..REST_WHOLE_TICKS {
-            // The old reference stays in use while the new one is read.
-            assert_eq!(e.rest_shape_per_m(), 20.0, "tick {k}");
+            assert_eq!(report, None, "tick {k}");
             report = rest_tick(&mut e, bent, 30.0);
         }
         let (dkappa, miss_k) = report.expect("a whole reference at the new shape reports");
+        assert_eq!(e.whole_rest_shape_per_m(), Some(30.0));
         assert!((dkappa - 10.0).abs() < 1e-4, "{dkappa}");
         assert!((miss_k - 2.0).abs() < 0.05, "{miss_k}");
         assert_eq!(e.rest_shape_per_m(), 30.0);

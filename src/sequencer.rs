@@ -120,7 +120,7 @@ impl Progress {
         strategy: Option<&mut dyn Strategy>,
         phase: Phase,
         now_ms: u64,
-        emit: &mut impl FnMut(SeqEvent),
+        emit: &mut dyn FnMut(SeqEvent),
     ) {
         self.phase = phase;
         self.phase_ms = now_ms;
@@ -136,7 +136,7 @@ impl Progress {
         });
     }
 
-    fn finish(&mut self, now_ms: u64, emit: &mut impl FnMut(SeqEvent)) {
+    fn finish(&mut self, now_ms: u64, emit: &mut dyn FnMut(SeqEvent)) {
         self.phase = Phase::Idle;
         let t_s = since_s(now_ms, self.start_ms);
         emit(SeqEvent::Done {
@@ -260,7 +260,7 @@ impl Sequencer {
         mode: Mode,
         m: &Measurements,
         cal: &crate::calibration::Calibration,
-        emit: &mut impl FnMut(SeqEvent),
+        emit: &mut dyn FnMut(SeqEvent),
     ) {
         self.at.target_mm = radius_mm;
         self.at.tca_power_w = tca_power_w;
@@ -284,7 +284,7 @@ impl Sequencer {
     /// from the end of a rest: kept out of line so the strategy's construction is in the image
     /// once.
     #[inline(never)]
-    fn heat(&mut self, now_ms: u64, p: Pending, m: &Measurements, emit: &mut impl FnMut(SeqEvent)) {
+    fn heat(&mut self, now_ms: u64, p: Pending, m: &Measurements, emit: &mut dyn FnMut(SeqEvent)) {
         let start = Start {
             now_ms,
             radius_mm: p.radius_mm,
@@ -354,7 +354,7 @@ impl Sequencer {
         &mut self,
         now_ms: u64,
         m: &Measurements,
-        emit: &mut impl FnMut(SeqEvent),
+        emit: &mut dyn FnMut(SeqEvent),
     ) -> Result<Powers, PhaseTimeout> {
         self.check_timeout(now_ms)?;
         if !self.busy() {
@@ -420,7 +420,7 @@ mod tests {
             radius_mm: f32,
             tca_power_w: f32,
             mode: Mode,
-            emit: &mut impl FnMut(SeqEvent),
+            emit: &mut dyn FnMut(SeqEvent),
         ) {
             let amb = crate::link::LINK.surroundings.ambient_c as f32;
             let m = Measurements {

@@ -98,10 +98,15 @@ fn a_healthy_link_tunes_within_bounds_and_raises_no_alarm(link: Link) {
 /// Runs until the TCA's rest reference has been read at the shape the last morph left (the
 /// strain report), at most `max_s`; true if it was.
 fn rest_until_reference(b: &mut Bench, max_s: f64) -> bool {
-    let before = b.rig.ctrl.electrical().rest_shape_per_m();
-    b.run_until(max_s, |b| {
-        b.rig.ctrl.electrical().rest_shape_per_m().to_bits() != before.to_bits()
-    })
+    let whole = |b: &Bench| {
+        b.rig
+            .ctrl
+            .electrical()
+            .whole_rest_shape_per_m()
+            .map(f32::to_bits)
+    };
+    let before = whole(b);
+    b.run_until(max_s, |b| whole(b).is_some_and(|w| Some(w) != before))
 }
 
 fn the_strain_term_is_learnt_at_rest_and_closed_bends_on_the_own_temperature(link: Link) {

@@ -796,7 +796,7 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
     let again = emu.wait_for("event: config ", REPLY).unwrap();
     check!(
         emu,
-        again.last().unwrap() == "event: config loaded settings=22",
+        again.last().unwrap() == "event: config loaded settings=25",
         "{again:?}"
     );
     emu.wait_ready(REPLY).unwrap();

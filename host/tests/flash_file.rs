@@ -44,7 +44,7 @@ fn a_saved_setting_survives_a_restart_and_an_unsaved_one_does_not() {
     assert_eq!(std::fs::metadata(&path).unwrap().len(), 4096);
 
     let second = run(&path, "CONFIG\n");
-    assert_eq!(second[0], "event: config loaded settings=22", "{second:?}");
+    assert_eq!(second[0], "event: config loaded settings=25", "{second:?}");
     assert!(
         second
             .iter()
@@ -71,7 +71,7 @@ fn a_saved_setting_survives_a_restart_and_an_unsaved_one_does_not() {
     );
     assert!(third.iter().any(|l| l.starts_with("ok saved")), "{third:?}");
     let fourth = run(&path, "STATUS\n");
-    assert_eq!(fourth[0], "event: config loaded settings=22", "{fourth:?}");
+    assert_eq!(fourth[0], "event: config loaded settings=25", "{fourth:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

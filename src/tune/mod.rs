@@ -454,7 +454,7 @@ fn since_s(now_ms: u64, then_ms: u64) -> f32 {
 
 impl Tune {
     /// A tune starting at `now_ms` from the calibration `cal` (kept where a fit fails).
-    pub fn new(now_ms: u64, cal: Calibration, emit: &mut impl FnMut(TuneEvent)) -> Self {
+    pub fn new(now_ms: u64, cal: Calibration, emit: &mut dyn FnMut(TuneEvent)) -> Self {
         let t = Tune {
             start_ms: now_ms,
             step: TuneStep::Settle,
@@ -495,7 +495,7 @@ impl Tune {
         self.step
     }
 
-    fn enter(&mut self, step: TuneStep, now_ms: u64, emit: &mut impl FnMut(TuneEvent)) {
+    fn enter(&mut self, step: TuneStep, now_ms: u64, emit: &mut dyn FnMut(TuneEvent)) {
         self.step = step;
         self.step_ms = now_ms;
         self.n = 0;
@@ -547,7 +547,7 @@ impl Tune {
         now_ms: u64,
         m: &Measurements,
         tca_ratio: Option<f32>,
-        emit: &mut impl FnMut(TuneEvent),
+        emit: &mut dyn FnMut(TuneEvent),
     ) -> TuneTick {
         let (pla, tca) = (m.t_pla_c, m.t_tca_c);
         let cooling =
@@ -677,12 +677,12 @@ impl Tune {
         TuneTick::Run(self.step.powers())
     }
 
-    fn fail(&self, why: TuneFailure, emit: &mut impl FnMut(TuneEvent)) -> TuneTick {
+    fn fail(&self, why: TuneFailure, emit: &mut dyn FnMut(TuneEvent)) -> TuneTick {
         emit(TuneEvent::Failed(why));
         TuneTick::Failed(why)
     }
 
-    fn finish(&mut self, now_ms: u64, emit: &mut impl FnMut(TuneEvent)) -> TuneTick {
+    fn finish(&mut self, now_ms: u64, emit: &mut dyn FnMut(TuneEvent)) -> TuneTick {
         if let Some(why) = self.tca_deferred {
             return self.fail(TuneFailure::Fit(Fitted::Own(Heater::Tca), why), emit);
         }
@@ -755,7 +755,7 @@ impl Tune {
         now_ms: u64,
         rise_k: f32,
         t_s: f32,
-        emit: &mut impl FnMut(TuneEvent),
+        emit: &mut dyn FnMut(TuneEvent),
     ) -> TuneTick {
         let mut cal = self.cal;
         cal.convection_w_m2k = TUNE_STILL_AIR_W_M2K;

@@ -228,9 +228,14 @@ const REST_MAX_S: f64 = 600.0;
 /// the own thermometer's strain term) or [`REST_MAX_S`] have passed.
 fn rest_after(rig: &mut Rig<Box<dyn Plant>>) {
     let stop = rig.now_ms() + (REST_MAX_S * 1000.0) as u64;
-    let shape = |rig: &Rig<Box<dyn Plant>>| rig.ctrl.electrical().rest_shape_per_m();
-    let before = shape(rig);
-    while rig.now_ms() < stop && shape(rig).to_bits() == before.to_bits() {
+    let whole = |rig: &Rig<Box<dyn Plant>>| {
+        rig.ctrl
+            .electrical()
+            .whole_rest_shape_per_m()
+            .map(f32::to_bits)
+    };
+    let before = whole(rig);
+    while rig.now_ms() < stop && whole(rig).is_none_or(|w| Some(w) == before) {
         rig.tick();
         while rig.ctrl.pop_event().is_some() {}
     }

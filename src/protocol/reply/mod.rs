@@ -28,23 +28,70 @@ pub use config::*;
 pub use sim::*;
 pub use status::*;
 
-/// HELP text, one `data:` line each.
-pub const HELP: [&str; 15] = [
-    "MORPH <radius_mm> [auto|paper|gated|boost|closed]  morph to a radius (see RANGE)",
-    "STATUS                          phase, temperatures, powers, supply, fault, targets, mode, currents, cut-off",
-    "ABORT                           both heaters off at once, phase idle",
-    "RESET                           clear a latched fault once its cause is gone",
-    "RANGE                           reachable radii in mm",
-    "TABLE                           TCA power / radius table",
-    "VERSION                         firmware and protocol version",
-    "HELP                            this list",
-    "STATS                           control-loop timing (us) and reset cause; hardware only",
-    "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|WAIT|CLEAR|PANIC|STALL  simulated builds only",
-    "SIM WAIT <s>                    run <s> of simulated time, then ok; morph-sim only",
-    "SIM FAULT thermistor-drift <pla|tca|amb> <K/s>  reading drifts from now; negative reads low",
-    "CONFIG [SET <name> <value>|RESET]  list, change or reset the settings",
-    "SAVE                            write the settings to flash (idle only)",
-    "HEAT <pla|tca> <power_w> <s>    one heater at a low power for a while (bring-up)",
+/// One HELP line: a command's form and what it does (written `data: <form>  <what>`, the
+/// descriptions aligned: [`help_line`]).
+pub type HelpLine = (&'static str, &'static str);
+
+/// `data: <form>  <what>`, the form padded to [`HELP_COLUMN`] less two (the alignment is made
+/// here, not stored with every line).
+pub fn help_line(l: &mut OutLine, (form, what): HelpLine) {
+    let _ = write!(l, "{DATA_TAG} {form:<w$}  {what}", w = HELP_COLUMN - 2);
+}
+
+/// The column HELP's descriptions start at (after `data: `), or two spaces past a longer form.
+pub const HELP_COLUMN: usize = 32;
+
+/// HELP text, one `data:` line each: these, then [`HELP_SIM`] in a simulated build, then
+/// [`HELP_TAIL`].
+pub const HELP: [HelpLine; 9] = [
+    (
+        "MORPH <radius_mm> [auto|paper|gated|boost|closed]",
+        "morph to a radius (see RANGE)",
+    ),
+    (
+        "STATUS",
+        "phase, temperatures, powers, supply, fault, targets, mode, currents, cut-off",
+    ),
+    ("ABORT", "both heaters off at once, phase idle"),
+    ("RESET", "clear a latched fault once its cause is gone"),
+    ("RANGE", "reachable radii in mm"),
+    ("TABLE", "TCA power / radius table"),
+    ("VERSION", "firmware and protocol version"),
+    ("HELP", "this list"),
+    (
+        "STATS",
+        "control-loop timing (us) and reset cause; hardware only",
+    ),
+];
+
+/// HELP's `SIM` lines, in a simulated build only (a board's image answers every `SIM` line
+/// `error: unsupported`, so its HELP does not offer them).
+pub const HELP_SIM: [HelpLine; 3] = [
+    (
+        "SIM STATE|FAULT|SUPPLY|AMBIENT|MEDIUM|WAIT|CLEAR|PANIC|STALL",
+        "simulated builds only",
+    ),
+    (
+        "SIM WAIT <s>",
+        "run <s> of simulated time, then ok; morph-sim only",
+    ),
+    (
+        "SIM FAULT thermistor-drift <pla|tca|amb> <K/s>",
+        "reading drifts from now; negative reads low",
+    ),
+];
+
+/// HELP's last lines (after [`HELP_SIM`]).
+pub const HELP_TAIL: [HelpLine; 3] = [
+    (
+        "CONFIG [SET <name> <value>|RESET]",
+        "list, change or reset the settings",
+    ),
+    ("SAVE", "write the settings to flash (idle only)"),
+    (
+        "HEAT <pla|tca> <power_w> <s>",
+        "one heater at a low power for a while (bring-up)",
+    ),
 ];
 
 /// `STATS` on a build that does not time its control loop.
@@ -87,15 +134,16 @@ pub const BOOT_LINE_MAX: usize = 190;
 
 /// Appends the reason of the fatal error that ended the previous run to a [`boot`] line:
 /// ` panic="<reason>"`, the reason truncated so the line stays within [`BOOT_LINE_MAX`], and
-/// any `"`, `\\` or non-printable character shown as `'`/`/`/`?`.
+/// any `"`, `\\` or non-printable byte shown as `'`/`/`/`?` (a character beyond ASCII as one
+/// `?` per byte: bytes, not characters, so the image needs no UTF-8 decoder for it).
 pub fn boot_panic(l: &mut OutLine, reason: &str) {
     let _ = l.push_str(" panic=\"");
     let room = BOOT_LINE_MAX.saturating_sub(l.len() + 1);
-    for c in reason.chars().take(room) {
-        let c = match c {
-            '"' => '\'',
-            '\\' => '/',
-            ' '..='~' => c,
+    for b in reason.bytes().take(room) {
+        let c = match b {
+            b'"' => '\'',
+            b'\\' => '/',
+            b' '..=b'~' => b as char,
             _ => '?',
         };
         let _ = l.push(c);
@@ -147,10 +195,33 @@ mod tests {
 
     #[test]
     fn data_text_is_the_data_line_of_its_text() {
-        for h in HELP {
-            assert_eq!(line(|l| data_text(l, h)), line(|l| data(l, h)), "{h}");
+        for (form, what) in HELP {
+            assert_eq!(
+                line(|l| data_text(l, what)),
+                line(|l| data(l, what)),
+                "{what}"
+            );
+            assert_eq!(
+                line(|l| data_text(l, form)),
+                line(|l| data(l, form)),
+                "{form}"
+            );
         }
         assert_eq!(line(|l| data_text(l, "")).as_str(), "data: ");
+    }
+
+    #[test]
+    fn help_aligns_every_description_at_its_column_or_two_spaces_past_a_long_form() {
+        for h in HELP.iter().chain(&HELP_SIM).chain(&HELP_TAIL) {
+            let l = line(|l| help_line(l, *h));
+            let body = &l["data: ".len()..];
+            let at = body.find(h.1).unwrap();
+            assert_eq!(at, HELP_COLUMN.max(h.0.len() + 2), "{l}");
+            assert!(
+                body.starts_with(h.0) && body[h.0.len()..at].trim().is_empty(),
+                "{l}"
+            );
+        }
     }
 
     #[test]

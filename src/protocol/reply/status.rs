@@ -306,7 +306,7 @@ mod tests {
         assert_eq!(
             l.as_str(),
             "event: boot reset=software board=nucleo-f401re version=0.1.0 \
-             panic=\"panicked at src/x.rs:1:2: 'quoted' / ??\""
+             panic=\"panicked at src/x.rs:1:2: 'quoted' / ???\""
         );
         let long = "x".repeat(500);
         let l = line(|l| {
