@@ -109,7 +109,7 @@ const _: () = assert!(POWER_SCALE_RANGE.1 > 1.0 && POWER_SCALE_RANGE.1 <= 2.0);
 
 /// The calibration's layout version: 2 added [`Calibration::convection_w_m2k`], against
 /// which the rises are read; 3 [`Calibration::tca_tcr_ppm_per_k`], the TCA's own thermometer;
-/// 4 [`Calibration::tca_self_bend`] and the strain term's sums.
+/// 4 [`Calibration::tca_self_bend`] and [`Calibration::tca_strain_k_m`].
 pub const LAYOUT_VERSION: f32 = 4.0;
 
 /// Largest strain factor the own thermometer takes, K·m (see [`Calibration::strain_k_m`]): its
@@ -121,22 +121,18 @@ pub const STRAIN_MAX_K_M: f32 = 3.0;
 pub const STRAIN_MIN_DKAPPA_PER_M: f32 = 1.0;
 /// Largest change of shape a strain report may describe, 1/m (the table's range spans 9 /m).
 pub const STRAIN_MAX_DKAPPA_PER_M: f32 = 50.0;
-/// Reports the strain factor remembers: each new one first scales the older ones' sums by
-/// `1 − 1 / STRAIN_MEMORY`, so a link that changes is followed.
-pub const STRAIN_MEMORY: f32 = 4.0;
-/// Weight of the strain factor's prior (0: the strain term unknown, sign included), 1/m²: a
-/// report over a 10 /m change weighs 100, so one report sets the factor to 99 % of what it
-/// shows, while reports over tiny changes stay near 0.
-pub const STRAIN_PRIOR_PER_M2: f32 = 1.0;
+/// The change of shape at which a strain report counts half, 1/m of curvature: each report's
+/// factor (what the own temperature missed over the change) moves the fitted one by
+/// `Δκ² / (Δκ² + STRAIN_HALF_DKAPPA_PER_M²)` of the way, so a morph across the table's range
+/// (some 6–12 /m) nearly sets it and a small change of shape, whose miss is mostly noise (some
+/// 0.1 K), barely moves it.
+pub const STRAIN_HALF_DKAPPA_PER_M: f32 = 3.0;
 const _: () = assert!(
     STRAIN_MAX_K_M > 0.0
         && STRAIN_MIN_DKAPPA_PER_M > 0.0
         && STRAIN_MAX_DKAPPA_PER_M > STRAIN_MIN_DKAPPA_PER_M
-        && STRAIN_MEMORY >= 1.0
-        && STRAIN_PRIOR_PER_M2 > 0.0
+        && STRAIN_HALF_DKAPPA_PER_M >= STRAIN_MIN_DKAPPA_PER_M
 );
-/// The strain sums' bounds: [`STRAIN_MEMORY`] reports at the largest change.
-const STRAIN_SUM_XX_MAX: f32 = STRAIN_MEMORY * STRAIN_MAX_DKAPPA_PER_M * STRAIN_MAX_DKAPPA_PER_M;
 
 /// The TCA's temperature coefficient of resistance an untuned controller takes, ppm/K: the
 /// silver-coated thread's 1.5e-3/K, an estimate (docs/plant.md); `TUNE` fits the link's own.
@@ -209,7 +205,7 @@ const fn field_info(
 }
 
 /// Number of fields.
-pub const FIELD_COUNT: usize = 19;
+pub const FIELD_COUNT: usize = 18;
 
 /// Every field, in index order (the order of [`Calibration::get`] / [`Calibration::set`]).
 pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
@@ -325,19 +321,10 @@ pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
         "1: closed bends on the TCA's own temperature (current sense; 0: its thermistor)",
     ),
     field_info(
-        "strain_sum_xx_per_m2",
-        "1/m2",
-        (0.0, STRAIN_SUM_XX_MAX),
-        "sum of squared shape changes at rest (the strain term)",
-    ),
-    field_info(
-        "strain_sum_xy_k_per_m",
-        "K/m",
-        (
-            -STRAIN_MAX_K_M * STRAIN_SUM_XX_MAX,
-            STRAIN_MAX_K_M * STRAIN_SUM_XX_MAX,
-        ),
-        "sum of shape change times own-temperature miss at rest",
+        "tca_strain_k_m",
+        "K m",
+        (-STRAIN_MAX_K_M, STRAIN_MAX_K_M),
+        "own temperature's miss per 1/m of bend (learnt at rest after each morph)",
     ),
     field_info(
         "version",
@@ -388,11 +375,9 @@ pub struct Calibration {
     /// default): on its thermistor ([`Calibration::self_sensed`]). A choice, not a fit: the
     /// map's reports are of one view, so switching starts the map afresh.
     pub tca_self_bend: f32,
-    /// The strain term's sums ([`Calibration::fold_strain`]): of the squared changes of shape
-    /// between two rests, 1/m², ...
-    pub strain_sum_xx_per_m2: f32,
-    /// ... and of each change times what the own thermometer missed ambient by after it, K/m.
-    pub strain_sum_xy_k_per_m: f32,
+    /// The own thermometer's strain factor, K·m ([`Calibration::strain_k_m`]), learnt at rest
+    /// after each morph ([`Calibration::fold_strain`]).
+    pub tca_strain_k_m: f32,
     /// Layout version ([`LAYOUT_VERSION`]): a stored calibration of another layout is not this
     /// one.
     pub version: f32,
@@ -479,8 +464,7 @@ impl Calibration {
         convection_w_m2k: LINK.surroundings.h_w_m2k as f32,
         tca_tcr_ppm_per_k: TCA_TCR_NOMINAL_PPM_PER_K,
         tca_self_bend: 0.0,
-        strain_sum_xx_per_m2: 0.0,
-        strain_sum_xy_k_per_m: 0.0,
+        tca_strain_k_m: 0.0,
         version: LAYOUT_VERSION,
     };
 
@@ -502,9 +486,8 @@ impl Calibration {
             13 => &mut self.convection_w_m2k,
             14 => &mut self.tca_tcr_ppm_per_k,
             15 => &mut self.tca_self_bend,
-            16 => &mut self.strain_sum_xx_per_m2,
-            17 => &mut self.strain_sum_xy_k_per_m,
-            18 => &mut self.version,
+            16 => &mut self.tca_strain_k_m,
+            17 => &mut self.version,
             _ => return None,
         })
     }
@@ -534,9 +517,8 @@ impl Calibration {
             13 => self.convection_w_m2k,
             14 => self.tca_tcr_ppm_per_k,
             15 => self.tca_self_bend,
-            16 => self.strain_sum_xx_per_m2,
-            17 => self.strain_sum_xy_k_per_m,
-            18 => self.version,
+            16 => self.tca_strain_k_m,
+            17 => self.version,
             _ => f32::NAN,
         }
     }
@@ -733,7 +715,8 @@ impl Calibration {
         if !r.is_finite() {
             return;
         }
-        self.strain_sum_xy_k_per_m *= r;
+        self.tca_strain_k_m =
+            crate::mathf::clamp(self.tca_strain_k_m * r, -STRAIN_MAX_K_M, STRAIN_MAX_K_M);
         if self.self_sensed() {
             self.map_sum_x_k *= r;
             self.map_sum_xx_k2 *= r * r;
@@ -744,11 +727,10 @@ impl Calibration {
     /// The own thermometer's strain factor, K·m: what it reads low per 1/m the link has bent
     /// tighter since its rest reference (the coil sits off the rod's axis, so the bend strains
     /// it and shifts its resistance; the sign is the link's own). The true temperature is the
-    /// own reading plus this times the change of curvature. Fitted by the least-squares line
-    /// through the origin of the reports at rest ([`Calibration::fold_strain`]), pulled to 0 by
-    /// [`STRAIN_PRIOR_PER_M2`]; 0 outside ±[`STRAIN_MAX_K_M`].
+    /// own reading plus this times the change of curvature; 0 (the default: no source gives the
+    /// term, sign included) until a morph has taught it, and outside ±[`STRAIN_MAX_K_M`].
     pub fn strain_k_m(&self) -> f32 {
-        let s = self.strain_sum_xy_k_per_m / (self.strain_sum_xx_per_m2 + STRAIN_PRIOR_PER_M2);
+        let s = self.tca_strain_k_m;
         if s.abs() <= STRAIN_MAX_K_M {
             s
         } else {
@@ -758,32 +740,28 @@ impl Calibration {
 
     /// Adds one strain report: the link's shape changed by `dkappa_per_m` (1/m of curvature)
     /// between two rests, and at the second the own thermometer, still on the first's
-    /// reference, read `miss_k` below the ambient (K). Returns the new factor; refused, changing
-    /// nothing, for a change under [`STRAIN_MIN_DKAPPA_PER_M`] or over
+    /// reference, read `miss_k` below the ambient (K). The factor moves toward
+    /// `miss / Δκ` by `Δκ² / (Δκ² + STRAIN_HALF_DKAPPA_PER_M²)` of the way; returns it.
+    /// Refused, changing nothing, for a change under [`STRAIN_MIN_DKAPPA_PER_M`] or over
     /// [`STRAIN_MAX_DKAPPA_PER_M`] or a factor past [`STRAIN_MAX_K_M`].
     pub fn fold_strain(&mut self, dkappa_per_m: f32, miss_k: f32) -> Result<f32, ReportRejection> {
         if !(dkappa_per_m.is_finite() && miss_k.is_finite()) {
             return Err(ReportRejection::NotFinite);
         }
+        let d2 = dkappa_per_m * dkappa_per_m;
         if !(dkappa_per_m.abs() >= STRAIN_MIN_DKAPPA_PER_M
             && dkappa_per_m.abs() <= STRAIN_MAX_DKAPPA_PER_M)
         {
             return Err(ReportRejection::Correction(0.0));
         }
-        let keep = 1.0 - 1.0 / STRAIN_MEMORY;
-        let mut next = *self;
-        next.strain_sum_xx_per_m2 = keep * next.strain_sum_xx_per_m2 + dkappa_per_m * dkappa_per_m;
-        next.strain_sum_xy_k_per_m = keep * next.strain_sum_xy_k_per_m + dkappa_per_m * miss_k;
-        let s = next.strain_sum_xy_k_per_m / (next.strain_sum_xx_per_m2 + STRAIN_PRIOR_PER_M2);
+        let share = d2 / (d2 + STRAIN_HALF_DKAPPA_PER_M * STRAIN_HALF_DKAPPA_PER_M);
+        let s = self.strain_k_m() + share * (miss_k / dkappa_per_m - self.strain_k_m());
         if !(s.abs() <= STRAIN_MAX_K_M) {
             return Err(ReportRejection::Correction(
                 s.abs() * STRAIN_MAX_DKAPPA_PER_M,
             ));
         }
-        if let Some(f) = next.first_invalid() {
-            return Err(ReportRejection::Field(f));
-        }
-        *self = next;
+        self.tca_strain_k_m = s;
         Ok(s)
     }
 
@@ -869,12 +847,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_strain_factor_is_fitted_through_the_origin_bounded_and_rescaled_with_the_coefficient() {
+    fn the_strain_factor_follows_its_reports_bounded_and_rescaled_with_the_coefficient() {
         let mut c = Calibration::DEFAULT;
         assert_eq!(c.strain_k_m(), 0.0);
-        // One report over a 10 /m bend that read 5 K low: 0.5 K·m, pulled a little to 0.
+        // One report over a 10 /m bend that read 5 K low: 0.5 K·m, most of the way from 0.
         let s = c.fold_strain(10.0, 5.0).unwrap();
-        assert!((s - 0.5 * 100.0 / 101.0).abs() < 1e-4, "{s}");
+        assert!((s - 0.5 * 100.0 / 109.0).abs() < 1e-4, "{s}");
         assert_eq!(c.strain_k_m(), s);
         // Tiny, huge or non-finite changes and factors past the bound change nothing.
         for (dk, miss) in [
@@ -888,8 +866,8 @@ mod tests {
             assert!(c.fold_strain(dk, miss).is_err(), "{dk} {miss}");
             assert_eq!(c, before);
         }
-        // Older reports fade: after many at 0.2 K·m the factor is near it.
-        for _ in 0..20 {
+        // It follows: after a few reports at 0.2 K·m the factor is there.
+        for _ in 0..5 {
             c.fold_strain(-8.0, -1.6).unwrap();
         }
         assert!((c.strain_k_m() - 0.2).abs() < 0.01, "{}", c.strain_k_m());
@@ -898,9 +876,6 @@ mod tests {
         c.tca_tcr_ppm_per_k = 3000.0;
         c.rescale_own(1500.0);
         assert!((c.strain_k_m() - before / 2.0).abs() < 1e-4);
-        // Sums set by hand to a factor past the bound steer nothing.
-        c.strain_sum_xy_k_per_m = 100.0 * STRAIN_MAX_K_M * c.strain_sum_xx_per_m2;
-        assert_eq!(c.strain_k_m(), 0.0);
         assert!(!c.self_sensed());
         c.tca_self_bend = 1.0;
         assert!(c.self_sensed());

@@ -178,9 +178,10 @@ pub const EVENT_QUEUE: usize = 16;
 
 /// Longest reply to one command line, bytes: its `data:` lines and final line, each with a
 /// `\n`. A bound for a shell that collects a reply before sending it; CONFIG, the longest, is
-/// about 1670 with its 25 settings and HELP about 1000 (checked in `tests/protocol.rs`); 1792
-/// leaves a line's room (the session's buffers are this and twice this: RAM, docs/firmware.md).
-pub const MAX_REPLY_BYTES: usize = 1792;
+/// about 1540 with its 24 settings and HELP about 1000 (checked in `tests/protocol.rs`). The
+/// session's buffers are this and twice this, and the serial task's longest pass under a
+/// flood grows with them (docs/emulation.md): 1600, not more.
+pub const MAX_REPLY_BYTES: usize = 1600;
 
 /// The controller state.
 pub struct Controller {
@@ -687,15 +688,15 @@ impl Controller {
                 out(&l);
             }
             Command::Help => {
-                let sim: &[reply::HelpLine] = if cfg!(feature = "sim") {
+                let sim: &[&str] = if cfg!(feature = "sim") {
                     &reply::HELP_SIM
                 } else {
                     &[]
                 };
                 let lines = reply::HELP.iter().chain(sim).chain(&reply::HELP_TAIL);
-                for &h in lines.chain(tune_reply::HELP.iter()) {
+                for h in lines.chain(tune_reply::HELP.iter()) {
                     l.clear();
-                    reply::help_line(&mut l, h);
+                    reply::data_text(&mut l, h);
                     out(&l);
                 }
                 out(protocol::OK);

@@ -785,7 +785,7 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
     let save_wall = t0.elapsed();
     check!(
         emu,
-        saved.last().unwrap().starts_with("ok saved bytes=106 "),
+        saved.last().unwrap().starts_with("ok saved bytes=102 "),
         "{saved:?}"
     );
     println!("emulated SAVE round trip: {save_wall:?} wall time");
@@ -796,7 +796,7 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
     let again = emu.wait_for("event: config ", REPLY).unwrap();
     check!(
         emu,
-        again.last().unwrap() == "event: config loaded settings=25",
+        again.last().unwrap() == "event: config loaded settings=24",
         "{again:?}"
     );
     emu.wait_ready(REPLY).unwrap();

@@ -16,12 +16,9 @@ pub const CALIBRATION_DOC: &str = "docs/calibration.md";
 pub const CALIBRATION_DOC_SECTION: &str = "Tune and calibrate";
 
 /// HELP lines of the two commands (appended to [`super::reply::HELP`]).
-pub const HELP: [super::reply::HelpLine; 2] = [
-    ("TUNE", "fit the thermal model to this link (heats, <3 min)"),
-    (
-        "MEASURED <radius_mm>",
-        "the radius measured after the last morph (calibrates)",
-    ),
+pub const HELP: [&str; 2] = [
+    "TUNE                            fit the thermal model to this link (heats, <3 min)",
+    "MEASURED <radius_mm>            the radius measured after the last morph (calibrates)",
 ];
 
 /// TUNE accepted: `ok total_s=<s>`.
