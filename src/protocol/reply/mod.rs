@@ -159,17 +159,8 @@ mod tests {
 
     #[test]
     fn data_text_is_the_data_line_of_its_text() {
-        for (form, what) in HELP {
-            assert_eq!(
-                line(|l| data_text(l, what)),
-                line(|l| data(l, what)),
-                "{what}"
-            );
-            assert_eq!(
-                line(|l| data_text(l, form)),
-                line(|l| data(l, form)),
-                "{form}"
-            );
+        for h in HELP.iter().chain(&HELP_SIM).chain(&HELP_TAIL) {
+            assert_eq!(line(|l| data_text(l, h)), line(|l| data(l, h)), "{h}");
         }
         assert_eq!(line(|l| data_text(l, "")).as_str(), "data: ");
     }
