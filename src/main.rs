@@ -34,7 +34,7 @@ mod emulated;
 #[cfg(target_os = "none")]
 mod firmware {
     use core::cell::RefCell;
-    use core::sync::atomic::{AtomicBool, Ordering};
+    use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
     use defmt_rtt as _;
     use embassy_executor::Spawner;
     use embassy_futures::select::{select, select3, Either, Either3};
@@ -224,6 +224,25 @@ mod firmware {
         heaters.apply(o.pla_duty, o.tca_duty, o.supply_on);
     }
 
+    /// When the control loop's last tick started, ms (the low 32 bits of [`Instant`]): the
+    /// serial task keeps out of the window before the next one ([`SERIAL_GUARD_MS`]).
+    static TICK_STARTED_MS: AtomicU32 = AtomicU32::new(0);
+
+    /// The serial task starts no pass this close before a control tick is due, ms: a pass
+    /// (a line answered, a chunk written) then never holds a tick's start up. Each tick's ADC
+    /// burst gives the serial task the CPU again. The floods of docs/emulation.md measure it.
+    const SERIAL_GUARD_MS: u32 = 15;
+    const _: () = assert!(SERIAL_GUARD_MS < TICK_MS as u32 / 4);
+
+    /// The wait out of the window before the next control tick, if now is in it.
+    #[inline(never)]
+    fn tick_window_wait() -> Option<Timer> {
+        let now = Instant::now().as_millis() as u32;
+        let since = now.wrapping_sub(TICK_STARTED_MS.load(Ordering::Relaxed));
+        let to_next = (TICK_MS as u32).saturating_sub(since % TICK_MS as u32);
+        (to_next <= SERIAL_GUARD_MS).then(|| Timer::after_millis(u64::from(to_next) + 1))
+    }
+
     /// The control loop at [`TICK_MS`]; the only feeder of the watchdog.
     async fn control_loop(
         mut sensors: impl AnalogInputs + CurrentSense,
@@ -238,6 +257,7 @@ mod firmware {
                 continue;
             }
             let start = board::cycles();
+            TICK_STARTED_MS.store(Instant::now().as_millis() as u32, Ordering::Relaxed);
             // The frame is stamped when its ADC burst starts, not when the step runs: a burst
             // that stalls (a hung ADC, a starved task) then arrives old, and the supervisor's
             // stale-sensor check (`STALE_AFTER_MS`) refuses it.
@@ -282,6 +302,9 @@ mod firmware {
     ) {
         let mut session: Session<SERIAL_RX_BYTES, OUT_BYTES> = Session::new(&boot);
         loop {
+            if let Some(wait) = tick_window_wait() {
+                wait.await;
+            }
             with_controller(|c| session.refill(c));
             if session.has_input() {
                 let now_ms = Instant::now().as_millis();
