@@ -728,14 +728,10 @@ impl Calibration {
     /// tighter since its rest reference (the coil sits off the rod's axis, so the bend strains
     /// it and shifts its resistance; the sign is the link's own). The true temperature is the
     /// own reading plus this times the change of curvature; 0 (the default: no source gives the
-    /// term, sign included) until a morph has taught it, and outside ±[`STRAIN_MAX_K_M`].
+    /// term, sign included) until a morph has taught it. Within ±[`STRAIN_MAX_K_M`]: the field's
+    /// range, which `set`, a stored load, [`Calibration::fold_strain`] and `rescale_own` keep.
     pub fn strain_k_m(&self) -> f32 {
-        let s = self.tca_strain_k_m;
-        if s.abs() <= STRAIN_MAX_K_M {
-            s
-        } else {
-            0.0
-        }
+        self.tca_strain_k_m
     }
 
     /// Adds one strain report: the link's shape changed by `dkappa_per_m` (1/m of curvature)

@@ -536,8 +536,8 @@ impl Controller {
     }
 
     /// Feeds the TCA's rest reference ([`Electrical::note_rest`]) with the link's shape, and
-    /// folds the strain report a new shape's reference gives into the calibration where `closed`
-    /// bends on the own temperature (not a replacement: MEASURED reports stay current).
+    /// folds the strain report a new shape's reference gives into the calibration, whichever
+    /// view `closed` bends on (not a replacement: MEASURED reports stay current).
     fn note_rest(&mut self, tca_driven: bool, m: &Measurements) {
         // A link that never morphed is as built: bent by its cold TCA alone (the model's
         // spring-back at rest is under 2 % of that curvature).

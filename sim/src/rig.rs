@@ -171,7 +171,7 @@ impl<P: Plant> Rig<P> {
 
     /// Runs the board up to [`BOOT_MS`] of link time, as a board is up for a moment before its
     /// first MORPH: where it senses current, that moment gives the TCA its resistance at rest,
-    /// which `closed` bends on once TUNE has fitted its coefficient.
+    /// which its own temperature (`tca_self_bend`) counts from.
     pub fn boot(&mut self) {
         while self.now_ms < BOOT_MS {
             self.tick();
