@@ -10,7 +10,7 @@ use crate::activity::{Activity, Busy, Start};
 use crate::calibration::{Calibration, CalibrationError, ReportRejection};
 use crate::electrical::{CurrentCounts, Currents, Drive, Electrical, ShuntSense, MAX_SENSED_DUTY};
 use crate::heater::HeaterConfig;
-use crate::part_limit::{limit_shares, under_ceiling_w, CEILING_MARGIN_K};
+use crate::part_limit::{under_ceiling_w, CEILING_MARGIN_K};
 use crate::protocol::{self, reply, tune_reply, Command, Mode, OutLine, SimCommand};
 use crate::pulse::Pulse;
 use crate::sequencer::{SeqEvent, Sequencer};
@@ -341,6 +341,12 @@ impl Controller {
         &self.elec
     }
 
+    /// The supervisor (its expectation and how full its residual tests have been: the tools
+    /// report how close a healthy run came to an alarm).
+    pub fn supervisor(&self) -> &Supervisor {
+        &self.sup
+    }
+
     /// The last good temperatures the supervisor read, °C (what the controller acts on).
     pub fn measurements(&self) -> Measurements {
         self.sup.measurements()
@@ -480,7 +486,7 @@ impl Controller {
     /// the supervisor takes the beads' shares the parts' limits are judged with from it.
     fn calibration_replaced(&mut self) {
         self.cal_epoch = self.cal_epoch.wrapping_add(1);
-        self.sup.set_shares(limit_shares(&self.settings.cal));
+        self.sup.set_calibration(&self.settings.cal);
     }
 
     /// One control tick at `now_ms` with this tick's inputs; returns the duties to apply.
@@ -504,6 +510,8 @@ impl Controller {
             self.outputs = Outputs::default();
         }
         let doing = self.doing();
+        let tca_self_c = self.tca_self_c();
+        self.sup.set_sensing(inputs.current.is_some(), tca_self_c);
         let m = self
             .sup
             .check_all(now_ms, &frame, self.powers, doing, &mut faults);

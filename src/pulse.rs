@@ -8,16 +8,13 @@ use crate::vocab::{Heater, Powers};
 
 /// Highest power a pulse may ask for, a fraction of the heater's cap (PLA 5 W → 1 W, TCA
 /// 2 W → 0.4 W): enough to lift its thermistor a few kelvin in seconds, far below anything
-/// that could soften the PLA or pull the TCA. It is also where the supervisor's
-/// heater-not-heating watch begins (`supervisor::HEATING_MIN_POWER_FRACTION`), so a pulse at
-/// the cap is judged by it as a morph is.
+/// that could soften the PLA or pull the TCA. The supervisor judges a pulse as it judges a
+/// morph: its expectation is fed the pulse's power.
 pub const HEAT_MAX_FRACTION: f32 = 0.2;
 /// Longest pulse, s: a thermistor bead beside its heater answers within a few seconds; a
 /// minute at 1 W warms the PLA by well under its 62 °C glass transition.
 pub const HEAT_MAX_S: f32 = 60.0;
-const _: () = assert!(
-    HEAT_MAX_FRACTION > 0.0 && HEAT_MAX_FRACTION <= crate::supervisor::HEATING_MIN_POWER_FRACTION
-);
+const _: () = assert!(HEAT_MAX_FRACTION > 0.0 && HEAT_MAX_FRACTION <= 0.25);
 
 /// The window HEAT's time is counted over, s: a heater may be pulsed for at most
 /// [`HEAT_MAX_S`] in any such window ([`HeatBudget`]), so chained pulses average at most a

@@ -31,7 +31,7 @@ pub const REST_TIMEOUT_S: f32 = 900.0;
 // Release is fixed-length: it must end well before its timeout.
 const _: () = assert!(RELEASE_S < RELEASE_TIMEOUT_S);
 // The heater-not-heating check judges a heater during soften, before soften can time out.
-const _: () = assert!(crate::supervisor::HEATING_WINDOW_S < SOFTEN_TIMEOUT_S);
+const _: () = assert!(crate::supervisor::HEATER_VERDICT_S < SOFTEN_TIMEOUT_S);
 
 /// The phase timeouts a morph runs with, s: the user-settable values of `crate::settings`
 /// (defaults [`SOFTEN_TIMEOUT_S`], [`BEND_TIMEOUT_S`], [`LOCK_TIMEOUT_S`]). Release keeps

@@ -24,7 +24,7 @@ use crate::sequencer::{PhaseTimeouts, BEND_TIMEOUT_S, LOCK_TIMEOUT_S, SOFTEN_TIM
 use crate::strategy::closed::CLOSED_RIGID_COOL_C;
 use crate::strategy::model::{MODEL_GUARD_K, PLA_SOFT_TARGET_C};
 use crate::strategy::{Thresholds, AUTO_STRATEGY, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
-use crate::supervisor::{HEATING_WINDOW_S, PLA_LIMITS, TCA_LIMITS};
+use crate::supervisor::{HEATER_VERDICT_S, PLA_LIMITS, TCA_LIMITS};
 
 /// One setting: its wire name, unit, default, allowed range and doc.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -113,7 +113,7 @@ const fn mode_index(m: Mode) -> usize {
 
 /// Allowed soften timeout, s: above the heater check's window (a dead heater trips before its
 /// phase can time out) and at most twice the default.
-pub const SOFTEN_TIMEOUT_RANGE_S: (f32, f32) = (HEATING_WINDOW_S + 10.0, 120.0);
+pub const SOFTEN_TIMEOUT_RANGE_S: (f32, f32) = (HEATER_VERDICT_S + 10.0, 120.0);
 /// Allowed bend timeout, s: the slowest healthy bend settles in about 40 s.
 pub const BEND_TIMEOUT_RANGE_S: (f32, f32) = (30.0, 300.0);
 /// Allowed lock timeout, s: lock takes about 15 s under water and minutes in still air.
@@ -148,7 +148,7 @@ const _: () = assert!(RIGID_THRESHOLD_RANGE_C.1 < SOFT_THRESHOLD_RANGE_C.0);
 const _: () = assert!(CLOSED_RIGID_COOL_C < SOFT_THRESHOLD_RANGE_C.0);
 const _: () = assert!(RIGID_THRESHOLD_RANGE_C.0 > PLA_LIMITS.min_c);
 const _: () = assert!(PLA_SOFT_TARGET_RANGE_C.1 < TCA_LIMITS.max_c);
-const _: () = assert!(SOFTEN_TIMEOUT_RANGE_S.0 > HEATING_WINDOW_S);
+const _: () = assert!(SOFTEN_TIMEOUT_RANGE_S.0 > HEATER_VERDICT_S);
 
 /// The morph's settings: what `auto` runs, the phase thresholds and the phase timeouts.
 #[derive(Clone, Copy, Debug, PartialEq)]

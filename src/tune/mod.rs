@@ -35,7 +35,6 @@ use crate::calibration::{Calibration, FieldInfo, FIELDS, SHARE_RULE, TAU_RANGE_S
 use crate::heater::HeaterConfig;
 use crate::link::{CONVECTION_RANGE_W_M2K, LINK};
 use crate::lumped::ResistanceMatrix;
-use crate::supervisor::HEATING_MIN_POWER_FRACTION;
 use crate::vocab::{Heater, Measurements, Powers};
 use fit::{Method, StepFit};
 
@@ -81,10 +80,10 @@ const _: () = assert!(
     TUNE_STILL_AIR_W_M2K >= CONVECTION_RANGE_W_M2K.0
         && TUNE_STILL_AIR_W_M2K <= CONVECTION_RANGE_W_M2K.1
 );
-/// Heaters off after the PLA step before the result counts, s: past heating-while-off's
-/// grace (`supervisor::OFF_GRACE_S`) and three more seconds of its watch, so a heater stuck on
-/// through the tune trips before its record is taken as the link's; only then `tune done`.
-pub const TUNE_VERIFY_S: f32 = crate::supervisor::OFF_GRACE_S + 3.0;
+/// Heaters off after the PLA step before the result counts, s: well past the time the
+/// supervisor's residual tests name a heater stuck on (`supervisor::HEATER_VERDICT_S`), so one
+/// stuck through the tune trips before its record is taken as the link's; only then `tune done`.
+pub const TUNE_VERIFY_S: f32 = crate::supervisor::HEATER_VERDICT_S + 8.0;
 /// Most the ambient thermistor may move from its baseline (1 s means) during a tune, K: a
 /// still bath stays within a few tenths; a bath that moves by more adds its step to every
 /// rise fitted.
@@ -130,9 +129,9 @@ pub const TUNE_TOTAL_S: f32 = TUNE_SETTLE_S + TUNE_TCA_S + TUNE_COOL_S + TUNE_PL
 const _: () = assert!(TUNE_TOTAL_S <= 200.0);
 const _: () = assert!(TUNE_PLA_S / TUNE_SAMPLE_S <= TUNE_MAX_SAMPLES as f32);
 const _: () = assert!(TUNE_TCA_S / TUNE_SAMPLE_S <= TUNE_MAX_SAMPLES as f32);
-// Both steps are judged by the heater-not-heating check, and well under the caps.
-const _: () = assert!(TUNE_PLA_W >= HEATING_MIN_POWER_FRACTION * HeaterConfig::PLA.max_power_w);
-const _: () = assert!(TUNE_TCA_W >= HEATING_MIN_POWER_FRACTION * HeaterConfig::TCA.max_power_w);
+// Both steps lift their beads well clear of the noise, and stay well under the caps.
+const _: () = assert!(TUNE_PLA_W >= 0.2 * HeaterConfig::PLA.max_power_w);
+const _: () = assert!(TUNE_TCA_W >= 0.2 * HeaterConfig::TCA.max_power_w);
 const _: () = assert!(TUNE_PLA_W <= 0.5 * HeaterConfig::PLA.max_power_w);
 const _: () = assert!(TUNE_TCA_W <= 0.5 * HeaterConfig::TCA.max_power_w);
 

@@ -38,7 +38,7 @@ enum Task {
     Emulate(emulate::Args),
     /// Inject every fault in every phase on the hifi and lumped links: the detection-time table.
     Faults(faults::Args),
-    /// ABORT morphs on healthy links: the stored-heat rise `OFF_STORED_MAX_RISE_K` is set above.
+    /// ABORT morphs on healthy links: the heat stored in them must raise no alarm.
     StoredHeat(stored_heat::Args),
     /// TUNE and MEASURED over a mismatch ensemble: docs/calibration.csv, .svg, .png.
     Calibration(calibration::Args),

@@ -9,7 +9,7 @@ pub mod target;
 use super::{Start, TargetTemps, Tick, SOFT_THRESHOLD_C};
 use crate::heater::HeaterConfig;
 use crate::link::R_TT_K_PER_W;
-use crate::supervisor::{HEATING_WINDOW_S, PLA_LIMITS, TCA_LIMITS};
+use crate::supervisor::{HEATER_VERDICT_S, PLA_LIMITS, TCA_LIMITS};
 use crate::vocab::{Measurements, Phase, Powers};
 use observer::{HeatedNode, Observer};
 
@@ -68,10 +68,10 @@ const _: () = assert!(MODEL_KEEP_ALIVE_W > 0.0 && MODEL_KEEP_ALIVE_W * R_TT_K_PE
 /// makes 0.05 K/s about 1 K short of where it would end.
 pub const MODEL_STALL_RATE_K_PER_S: f32 = 0.05;
 /// A stall counts only this long after MORPH, s: after the supervisor's heater-not-heating check
-/// has judged the TCA (on from MORPH, judged within `HEATING_WINDOW_S`), so a dead TCA, which does not rise at
+/// has judged the TCA (on from MORPH, judged within `HEATER_VERDICT_S`), so a dead TCA, which does not rise at
 /// all, trips instead of passing for a stalled one.
-pub const STALL_AFTER_S: f32 = HEATING_WINDOW_S + MODEL_SETTLE_S;
-const _: () = assert!(STALL_AFTER_S > HEATING_WINDOW_S);
+pub const STALL_AFTER_S: f32 = HEATER_VERDICT_S + MODEL_SETTLE_S;
+const _: () = assert!(STALL_AFTER_S > HEATER_VERDICT_S);
 
 /// Power a heater delivers when asked for `w` (W) at the measured supply: capped by the
 /// heater and by full duty (`V²/R`); unknown supply assumes the request is met.

@@ -20,9 +20,9 @@ use std::time::{Duration, Instant};
 pub const REST_SPREAD_K: f64 = 3.0;
 /// Length of each heater's pulse, s: its bead answers within a few seconds (measured rises
 /// below, docs: docs/bringup.md "Bring-up"), and the pulse ends a second before the supervisor's
-/// heater-not-heating window (`HEATING_WINDOW_S`) would judge it, so a dead heater or crossed
+/// heater-not-heating window (`HEATER_VERDICT_S`) would judge it, so a dead heater or crossed
 /// wires get this tool's diagnosis rather than an alarm.
-pub const PULSE_S: f64 = morphlink::supervisor::HEATING_WINDOW_S as f64 - 1.0;
+pub const PULSE_S: f64 = morphlink::supervisor::HEATER_VERDICT_S as f64 - 1.0;
 /// Time after a pulse during which the rise is still followed, s: the beads lag their heater.
 pub const AFTER_PULSE_S: f64 = 10.0;
 /// Least rise of a heater's own thermistor, K. Measured at 20 % of the cap for 10 s
