@@ -1,13 +1,12 @@
 //! The supervisor's one expectation of its sensors: a family of the link's lumped model
 //! ([`crate::lumped::Network`]) fed the powers the heaters were given, whose hull bounds what a
-//! healthy link's thermistors (and, where current is sensed, the TCA's own temperature) can
-//! read. Every residual test judges against it (`residual`).
+//! healthy link's heated thermistors can read. Every residual test judges against it (`residual`).
 //!
 //! Members differ in what the supervisor does not know about this link:
-//! - its surroundings: before `TUNE`, the rim convection of still water (the link file's) and of
-//!   still air ([`TUNE_STILL_AIR_W_M2K`]): with the same heat capacities the airier link rises
-//!   higher and cools slower at every moment, so the two bracket every medium between; after
-//!   `TUNE`, the convection it found;
+//! - its surroundings: before `TUNE`, the two ends of the rim convection a link may have
+//!   ([`CONVECTION_RANGE_W_M2K`]: from half still air's to twice still water's): with the same
+//!   heat capacities the airier link rises higher and cools slower at every moment, so the two
+//!   bracket every medium between; after `TUNE`, the convection it found;
 //! - where its bead sits: on its heated node or on that node's silicone shell (before `TUNE`),
 //!   and what share of the model's rise it reads ([`UNTUNED_GAIN_RANGE`], or the fitted share
 //!   ± [`TUNED_SPREAD`]), of its own heater's and of the other heater's (from none to the top
@@ -20,15 +19,14 @@
 //! other heater's heat, a warm link and a bath that changes are in the networks, not in rules.
 
 use crate::calibration::Calibration;
-use crate::link::LINK;
+use crate::link::CONVECTION_RANGE_W_M2K;
 use crate::lumped::{lag_remaining, node, Network};
-use crate::tune::TUNE_STILL_AIR_W_M2K;
 use crate::vocab::{Heater, Powers};
 
 /// Share of the model's rise a bead reads before `TUNE`, (least, most), 1: the high-fidelity
 /// beads read 0.72–0.93 of their heater's rise, and the drawn links' silicone, heaters and
 /// geometry move the model's own rise by tens of per cent (docs/safety.md, "The expectation").
-pub const UNTUNED_GAIN_RANGE: (f32, f32) = (0.6, 1.25);
+pub const UNTUNED_GAIN_RANGE: (f32, f32) = (0.7, 1.25);
 const _: () = assert!(UNTUNED_GAIN_RANGE.0 > 0.0 && UNTUNED_GAIN_RANGE.0 < 1.0);
 const _: () = assert!(UNTUNED_GAIN_RANGE.1 >= 1.0 && UNTUNED_GAIN_RANGE.1 <= 2.0);
 /// After `TUNE`, each share is the fitted one within this fraction either way, 1: the fit is a
@@ -37,14 +35,11 @@ pub const TUNED_SPREAD: f32 = 0.25;
 const _: () = assert!(TUNED_SPREAD > 0.0 && TUNED_SPREAD < 0.5);
 /// Slowest bead the family reads through, s: the high-fidelity PLA bead reads its rod about
 /// 10 s late.
-pub const BEAD_LAG_MAX_S: f32 = 12.0;
+pub const BEAD_LAG_MAX_S: f32 = 6.0;
 const _: () = assert!(BEAD_LAG_MAX_S >= 1.0 && BEAD_LAG_MAX_S <= 60.0);
 
-/// The channels the family predicts: the PLA and TCA thermistors and the TCA's own
-/// temperature (from its resistance, where current is sensed).
-pub const CHANNELS: usize = 3;
-/// Index of the TCA's own temperature among the [`CHANNELS`].
-pub const OWN: usize = 2;
+/// The channels the family predicts: the PLA and TCA thermistors ([`Heater::index`]).
+const CHANNELS: usize = 2;
 /// Members per channel: convection × node × own share × cross share, each read at once and
 /// through the lag.
 const MEMBERS: usize = 16;
@@ -67,7 +62,7 @@ impl Family {
         let untuned = (lo, hi);
         if !cal.fitted() {
             return Family {
-                h_w_m2k: [LINK.surroundings.h_w_m2k as f32, TUNE_STILL_AIR_W_M2K],
+                h_w_m2k: [CONVECTION_RANGE_W_M2K.1, CONVECTION_RANGE_W_M2K.0],
                 own: [untuned; CHANNELS],
                 cross: [(0.0, hi); CHANNELS],
                 shell: true,
@@ -77,8 +72,8 @@ impl Family {
         let h = cal.model_convection_w_m2k();
         Family {
             h_w_m2k: [h, h],
-            own: [spread(cal.sensor_gain(Heater::Pla)), spread(cal.sensor_gain(Heater::Tca)), untuned],
-            cross: [spread(cal.cross_gain(Heater::Pla)), spread(cal.cross_gain(Heater::Tca)), (0.0, hi)],
+            own: Heater::ALL.map(|h| spread(cal.sensor_gain(h))),
+            cross: Heater::ALL.map(|h| spread(cal.cross_gain(h))),
             shell: false,
         }
     }
@@ -86,11 +81,7 @@ impl Family {
 
 /// The heater a channel belongs to.
 const fn heater_of(channel: usize) -> Heater {
-    if channel == 0 {
-        Heater::Pla
-    } else {
-        Heater::Tca
-    }
+    Heater::ALL[channel]
 }
 
 /// A channel's node and its shell in the network.
@@ -113,7 +104,7 @@ pub struct Expectation {
     /// This tick's hull of every channel, (floor, ceiling), K above the ambient reading.
     bounds_k: [(f32, f32); CHANNELS],
     /// This tick's least model rise of each heater's own heat at its bead, K.
-    own_heat_k: [f32; 2],
+    own_heat_k: [f32; CHANNELS],
 }
 
 impl Expectation {
@@ -162,8 +153,7 @@ impl Expectation {
     }
 
     /// Advances every member `dt_s` under the powers `p` (W) given since the last tick, with
-    /// the readings `t_c` (PLA, TCA thermistors and the TCA's own temperature, NaN where not
-    /// read) and the ambient reading `amb_c`, °C, and takes the hull. A first whole frame starts
+    /// the readings `t_c` (PLA, TCA thermistors) and the ambient reading `amb_c`, °C, and takes the hull. A first whole frame starts
     /// the family from its readings (a warm link is not a fault).
     pub fn update(&mut self, dt_s: f32, p: Powers, t_c: [f32; CHANNELS], amb_c: f32) {
         if !amb_c.is_finite() || !t_c[0].is_finite() || !t_c[1].is_finite() {
@@ -199,7 +189,7 @@ impl Expectation {
                 Heater::Tca => (2, 1),
             };
             let at = nodes_of(ch);
-            let node_count = if f.shell && ch != OWN { 2 } else { 1 };
+            let node_count = if f.shell { 2 } else { 1 };
             let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
             let mut least_own = f32::INFINITY;
             let mut m = 0;
@@ -225,9 +215,7 @@ impl Expectation {
                 }
             }
             self.bounds_k[ch] = (lo, hi);
-            if ch != OWN {
-                self.own_heat_k[h.index()] = least_own;
-            }
+            self.own_heat_k[ch] = least_own;
         }
     }
 }
@@ -247,19 +235,19 @@ mod tests {
     fn run(e: &mut Expectation, s: f32, p: Powers, read: impl Fn(f32) -> [f32; 2]) {
         for i in 0..(s * 10.0) as usize {
             let [pla, tca] = read(i as f32 / 10.0);
-            e.update(0.1, p, [pla, tca, f32::NAN], 22.0);
+            e.update(0.1, p, [pla, tca], 22.0);
         }
     }
 
     #[test]
     fn the_hull_brackets_the_model_itself_in_water_and_in_air() {
-        for h in [LINK.surroundings.h_w_m2k as f32, TUNE_STILL_AIR_W_M2K] {
+        for h in [crate::link::LINK.surroundings.h_w_m2k as f32, crate::tune::TUNE_STILL_AIR_W_M2K] {
             let mut link = Network::new(h, 22.0);
             let mut e = Expectation::new();
             let p = Powers { pla_w: 4.0, tca_w: 1.0 };
             for i in 0..600 {
                 let t = link.temp_c;
-                e.update(0.1, p, [t[node::PLA], t[node::TCA], f32::NAN], 22.0);
+                e.update(0.1, p, [t[node::PLA], t[node::TCA]], 22.0);
                 for ch in 0..2 {
                     let y = t[nodes_of(ch)[0]] - 22.0;
                     let (lo, hi) = e.bounds_k(ch);

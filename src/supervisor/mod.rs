@@ -25,7 +25,6 @@ use crate::calibration::Calibration;
 use crate::part_limit::{estimate_c, limit_shares, UNTUNED_BEAD_SHARES};
 use crate::thermistor::{RangeCheck, Reading};
 use crate::vocab::{Doing, Heater, Measurements, Phase, Powers, Sensor};
-use expect::{CHANNELS, OWN};
 use ramp::{ramp_fault, RampWatch};
 use residual::{Envelope, Side};
 
@@ -197,7 +196,7 @@ pub struct Supervisor {
     still: Still,
     ramp: RampWatch,
     expect: Expectation,
-    envelope: [Envelope; CHANNELS],
+    envelope: [Envelope; 2],
     /// The board senses its heaters' current (the powers fed are the delivered ones).
     sensed: bool,
     /// The TCA's own temperature from its resistance, °C (NaN where not read).
@@ -232,7 +231,7 @@ impl Supervisor {
             still: Still::default(),
             ramp: RampWatch::new(),
             expect: Expectation::new(),
-            envelope: [Envelope::default(); CHANNELS],
+            envelope: [Envelope::default(); 2],
             sensed: false,
             tca_self_c: f32::NAN,
             last_ms: None,
@@ -402,7 +401,7 @@ impl Supervisor {
     fn check_residuals(&mut self, dt_s: f32, found: &mut impl FnMut(Fault), p: Powers) {
         let [pla_c, tca_c, amb_c] = self.last_c;
         self.expect
-            .update(dt_s, p, [pla_c, tca_c, self.tca_self_c], amb_c);
+            .update(dt_s, p, [pla_c, tca_c], amb_c);
         if !self.expect.started() {
             return;
         }
@@ -416,10 +415,8 @@ impl Supervisor {
             }
         };
         let amb_c = good(Sensor::Amb.index());
-        let live = [good(0), good(1), self.tca_self_c];
-        // The TCA's own temperature first: where it is read, a cold TCA is named as the heater.
-        for ch in [OWN, 0, 1] {
-            let temp_c = live[ch];
+        let live = [good(0), good(1)];
+        for (ch, temp_c) in live.into_iter().enumerate() {
             let y_k = temp_c - amb_c;
             let bounds = self.expect.bounds_k(ch);
             let side = self.envelope[ch].update(dt_s, y_k, bounds);
@@ -434,21 +431,25 @@ impl Supervisor {
         }
     }
 
-    /// What a channel that left its hull on `side` by `off_k` (K) means. Where current is
-    /// sensed the powers are known, so a thermistor outside is its own fault, and the TCA's own
-    /// temperature below its floor is a TCA that does not heat: a drifting bead is told from a
-    /// cold TCA. Without it, a bead below while its own heat should show is a heater that does
-    /// not heat, and one above a heater on that nothing commands.
+    /// What a thermistor that left its hull on `side` by `off_k` (K) means. Where current is
+    /// sensed the powers are known, so a thermistor outside is its own fault, unless it is the
+    /// TCA's and the TCA's own temperature (from its resistance) stands below the same floor:
+    /// then the TCA itself is cold (analytical redundancy: a drifting bead is told from a cold
+    /// TCA, and a drifting PLA bead from a stuck PLA heater, which the electrical checks name).
+    /// Without current sense, a bead below while its own heat should show is a heater that
+    /// does not heat, and one above a heater on that nothing commands.
     fn name(&self, ch: usize, side: Side, off_k: f32) -> Fault {
         let heater = if ch == 0 { Heater::Pla } else { Heater::Tca };
-        let code = match (ch == OWN, self.sensed, side) {
-            (true, _, Side::Below) => FaultCode::HeaterNotHeating,
-            (true, _, Side::Above) | (false, true, _) => FaultCode::SensorImplausible,
-            (false, false, Side::Above) => FaultCode::HeatingWhileOff,
-            (false, false, Side::Below) if self.expect.own_heat_k(heater) > RESIDUAL_SLACK_K => {
-                FaultCode::HeaterNotHeating
-            }
-            (false, false, Side::Below) => FaultCode::SensorImplausible,
+        let own_cold = heater == Heater::Tca
+            && self.tca_self_c - self.last_c[Sensor::Amb.index()]
+                < self.expect.bounds_k(ch).0 - RESIDUAL_SLACK_K;
+        let heat_shows = self.expect.own_heat_k(heater) > RESIDUAL_SLACK_K;
+        let code = match (self.sensed, side) {
+            (true, Side::Below) if own_cold => FaultCode::HeaterNotHeating,
+            (true, _) => FaultCode::SensorImplausible,
+            (false, Side::Above) => FaultCode::HeatingWhileOff,
+            (false, Side::Below) if heat_shows => FaultCode::HeaterNotHeating,
+            (false, Side::Below) => FaultCode::SensorImplausible,
         };
         let subject = match code {
             FaultCode::SensorImplausible => Subject::Sensor(heater.sensor()),
@@ -508,7 +509,7 @@ impl Supervisor {
         self.limit_count = [0; 3];
         self.part_count = [0; 2];
         self.still = Still::default();
-        self.envelope = [Envelope::default(); CHANNELS];
+        self.envelope = [Envelope::default(); 2];
         self.expect.restart();
         self.last_ms = None;
         self.peak_share = 0.0;

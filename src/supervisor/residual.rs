@@ -15,11 +15,11 @@
 /// What a healthy reading may stray outside the hull without adding up, K: 20 times the beads'
 /// noise, and the largest healthy excursion measured over the high-fidelity ensemble with
 /// margin (docs/safety.md, "The expectation").
-pub const RESIDUAL_SLACK_K: f32 = 3.0;
+pub const RESIDUAL_SLACK_K: f32 = 2.0;
 const _: () = assert!(RESIDUAL_SLACK_K > 0.5 && RESIDUAL_SLACK_K < 10.0);
 /// The sum of a side's residual beyond the slack at which it trips, K·s: 4 K beyond the slack
 /// for 5 s, 20 K beyond it for 1 s.
-pub const CUSUM_LIMIT_K_S: f32 = 20.0;
+pub const CUSUM_LIMIT_K_S: f32 = 10.0;
 const _: () = assert!(CUSUM_LIMIT_K_S > 0.0 && CUSUM_LIMIT_K_S <= 100.0);
 
 /// The detection delay of a reading drifting away from the hull's edge at `rate_k_per_s`, s:
