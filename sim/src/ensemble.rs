@@ -188,6 +188,9 @@ pub struct RunResult {
     pub error_pct: f64,
     /// Hottest true PLA and TCA temperatures during the run, °C.
     pub max_true_c: [f64; 2],
+    /// The fullest the supervisor's level and change tests came over the run, each a share of
+    /// its limit (1 trips): how close a healthy morph came to an alarm.
+    pub peak_shares: [f32; 2],
 }
 
 /// Runs one morph to `target_mm` in `mode` on the lumped link `plant`, calling `trace` every
@@ -268,6 +271,7 @@ pub fn run_morph_on<P: Plant>(
         final_mm,
         error_pct: (final_mm - target_mm as f64) / target_mm as f64 * 100.0,
         max_true_c: max_c,
+        peak_shares: rig.ctrl.supervisor().peak_shares(),
     }
 }
 

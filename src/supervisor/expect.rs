@@ -29,6 +29,12 @@ use crate::vocab::{Heater, Powers};
 pub const UNTUNED_GAIN_RANGE: (f32, f32) = (0.7, 1.25);
 const _: () = assert!(UNTUNED_GAIN_RANGE.0 > 0.0 && UNTUNED_GAIN_RANGE.0 < 1.0);
 const _: () = assert!(UNTUNED_GAIN_RANGE.1 >= 1.0 && UNTUNED_GAIN_RANGE.1 <= 2.0);
+/// Least share of the model's rise from the other heater a bead reads before `TUNE`, 1: the
+/// high-fidelity link couples its heaters less than the model in places (the PLA's heat at the
+/// TCA's bead in soften), yet never by half; a TCA that dies while the PLA's heat still warms
+/// its bead is told from a live one by this share.
+pub const UNTUNED_CROSS_LEAST: f32 = 0.5;
+const _: () = assert!(UNTUNED_CROSS_LEAST >= 0.0 && UNTUNED_CROSS_LEAST <= UNTUNED_GAIN_RANGE.0);
 /// After `TUNE`, each share is the fitted one within this fraction either way, 1: the fit is a
 /// steady rise, and the model's transients differ from the link's by this much of it.
 pub const TUNED_SPREAD: f32 = 0.25;
@@ -64,7 +70,7 @@ impl Family {
             return Family {
                 h_w_m2k: [CONVECTION_RANGE_W_M2K.1, CONVECTION_RANGE_W_M2K.0],
                 own: [untuned; CHANNELS],
-                cross: [(0.0, hi); CHANNELS],
+                cross: [(UNTUNED_CROSS_LEAST, hi); CHANNELS],
                 shell: true,
             };
         }
@@ -101,6 +107,10 @@ pub struct Expectation {
     /// `None` until the first whole frame (or after [`Expectation::restart`]).
     nets: Option<[[Network; 3]; 2]>,
     lagged_k: [[f32; MEMBERS]; CHANNELS],
+    /// Each member's reading at once, K (last tick's until the update).
+    now_k: [[f32; MEMBERS]; CHANNELS],
+    /// This tick's least and greatest change of any member since the last tick, K.
+    change_k: [(f32, f32); CHANNELS],
     /// This tick's hull of every channel, (floor, ceiling), K above the ambient reading.
     bounds_k: [(f32, f32); CHANNELS],
     /// This tick's least model rise of each heater's own heat at its bead, K.
@@ -114,6 +124,8 @@ impl Expectation {
             family: Family::of(&Calibration::DEFAULT),
             nets: None,
             lagged_k: [[0.0; MEMBERS]; CHANNELS],
+            now_k: [[0.0; MEMBERS]; CHANNELS],
+            change_k: [(0.0, 0.0); CHANNELS],
             bounds_k: [(f32::NAN, f32::NAN); CHANNELS],
             own_heat_k: [0.0; 2],
         }
@@ -144,6 +156,12 @@ impl Expectation {
     /// family starts).
     pub fn bounds_k(&self, channel: usize) -> (f32, f32) {
         self.bounds_k[channel]
+    }
+
+    /// The least and the greatest change of any member of `channel` over the last update, K:
+    /// how fast a healthy reading can fall and rise now.
+    pub fn change_k(&self, channel: usize) -> (f32, f32) {
+        self.change_k[channel]
     }
 
     /// The least rise the family gives `heater`'s own heat at its bead now, K: how much of the
@@ -177,6 +195,7 @@ impl Expectation {
                 let h = self.family.h_w_m2k;
                 let nets = self.nets.insert([start(h[0]), start(h[1])]);
                 self.lagged_k = [[f32::NAN; MEMBERS]; CHANNELS];
+                self.now_k = [[f32::NAN; MEMBERS]; CHANNELS];
                 nets
             }
         };
@@ -192,6 +211,7 @@ impl Expectation {
             let node_count = if f.shell { 2 } else { 1 };
             let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
             let mut least_own = f32::INFINITY;
+            let (mut fall, mut rise) = (0.0f32, 0.0f32);
             let mut m = 0;
             for net in nets.iter() {
                 for &n in &at[..node_count] {
@@ -202,11 +222,19 @@ impl Expectation {
                         for c in [f.cross[ch].0, f.cross[ch].1] {
                             let now_k = free_k + g * own_k + c * cross_k;
                             let lag = &mut self.lagged_k[ch][m];
+                            let was = [self.now_k[ch][m], *lag];
                             *lag = if lag.is_finite() {
                                 now_k + (*lag - now_k) * keep
                             } else {
                                 now_k
                             };
+                            self.now_k[ch][m] = now_k;
+                            for (d, w) in [now_k, *lag].into_iter().zip(was) {
+                                if w.is_finite() {
+                                    fall = fall.min(d - w);
+                                    rise = rise.max(d - w);
+                                }
+                            }
                             lo = lo.min(now_k).min(*lag);
                             hi = hi.max(now_k).max(*lag);
                             m += 1;
@@ -215,6 +243,7 @@ impl Expectation {
                 }
             }
             self.bounds_k[ch] = (lo, hi);
+            self.change_k[ch] = (fall, rise);
             self.own_heat_k[ch] = least_own;
         }
     }

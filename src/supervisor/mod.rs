@@ -13,20 +13,24 @@ pub mod limits;
 pub mod ramp;
 pub mod residual;
 
-pub use expect::{Expectation, BEAD_LAG_MAX_S, TUNED_SPREAD, UNTUNED_GAIN_RANGE};
+pub use expect::{
+    Expectation, BEAD_LAG_MAX_S, TUNED_SPREAD, UNTUNED_CROSS_LEAST, UNTUNED_GAIN_RANGE,
+};
 pub use limits::*;
 pub use ramp::{
     AMB_RAMP_MAX_K_PER_S, AMB_RAMP_SEGMENTS, AMB_RAMP_SEGMENT_S, AMB_RAMP_SETTLING_SHARE,
     AMB_RAMP_STEADY_SHARE,
 };
-pub use residual::{drift_delay_s, CUSUM_LIMIT_K_S, RESIDUAL_SLACK_K};
+pub use residual::{
+    drift_delay_s, CHANGE_LIMIT_K, CHANGE_SLACK_K_PER_S, CUSUM_LIMIT_K_S, RESIDUAL_SLACK_K,
+};
 
 use crate::calibration::Calibration;
 use crate::part_limit::{estimate_c, limit_shares, UNTUNED_BEAD_SHARES};
 use crate::thermistor::{RangeCheck, Reading};
 use crate::vocab::{Doing, Heater, Measurements, Phase, Powers, Sensor};
 use ramp::{ramp_fault, RampWatch};
-use residual::{Envelope, Side};
+use residual::{Change, Envelope, Side};
 
 /// What tripped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -197,6 +201,7 @@ pub struct Supervisor {
     ramp: RampWatch,
     expect: Expectation,
     envelope: [Envelope; 2],
+    change: [Change; 2],
     /// The board senses its heaters' current (the powers fed are the delivered ones).
     sensed: bool,
     /// The TCA's own temperature from its resistance, °C (NaN where not read).
@@ -209,8 +214,9 @@ pub struct Supervisor {
     parts_c: [f32; 2],
     /// Leaky counts of estimates over their part's limit (as `limit_count`).
     part_count: [u8; 2],
-    /// The fullest any residual test has been since the last RESET, its share of the limit.
-    peak_share: f32,
+    /// The fullest the level and the change tests have been since the last RESET, each a
+    /// share of its limit.
+    peak_share: [f32; 2],
 }
 
 impl Default for Supervisor {
@@ -232,13 +238,14 @@ impl Supervisor {
             ramp: RampWatch::new(),
             expect: Expectation::new(),
             envelope: [Envelope::default(); 2],
+            change: [Change::default(); 2],
             sensed: false,
             tca_self_c: f32::NAN,
             last_ms: None,
             shares: UNTUNED_BEAD_SHARES,
             parts_c: [f32::NAN; 2],
             part_count: [0; 2],
-            peak_share: 0.0,
+            peak_share: [0.0; 2],
         }
     }
 
@@ -267,6 +274,11 @@ impl Supervisor {
     /// The fullest any residual test has been since the supervisor started or was re-armed,
     /// as a share of its limit (1 trips): how close a healthy run came to an alarm.
     pub fn peak_share(&self) -> f32 {
+        self.peak_share[0].max(self.peak_share[1])
+    }
+
+    /// [`Supervisor::peak_share`] of the level tests and of the change tests apart.
+    pub fn peak_shares(&self) -> [f32; 2] {
         self.peak_share
     }
 
@@ -419,9 +431,11 @@ impl Supervisor {
         for (ch, temp_c) in live.into_iter().enumerate() {
             let y_k = temp_c - amb_c;
             let bounds = self.expect.bounds_k(ch);
-            let side = self.envelope[ch].update(dt_s, y_k, bounds);
-            self.peak_share = self.peak_share.max(self.envelope[ch].share());
-            if let Some(side) = side {
+            let level = self.envelope[ch].update(dt_s, y_k, bounds);
+            let change = self.change[ch].update(dt_s, y_k, self.expect.change_k(ch));
+            let shares = [self.envelope[ch].share(), self.change[ch].share()];
+            self.peak_share = [0, 1].map(|i| self.peak_share[i].max(shares[i]));
+            if let Some(side) = level.or(change) {
                 let off_k = match side {
                     Side::Below => y_k - bounds.0,
                     Side::Above => y_k - bounds.1,
@@ -510,9 +524,10 @@ impl Supervisor {
         self.part_count = [0; 2];
         self.still = Still::default();
         self.envelope = [Envelope::default(); 2];
+        self.change = [Change::default(); 2];
         self.expect.restart();
         self.last_ms = None;
-        self.peak_share = 0.0;
+        self.peak_share = [0.0; 2];
     }
 }
 #[cfg(test)]

@@ -19,8 +19,19 @@ pub const RESIDUAL_SLACK_K: f32 = 2.0;
 const _: () = assert!(RESIDUAL_SLACK_K > 0.5 && RESIDUAL_SLACK_K < 10.0);
 /// The sum of a side's residual beyond the slack at which it trips, K·s: 4 K beyond the slack
 /// for 5 s, 20 K beyond it for 1 s.
-pub const CUSUM_LIMIT_K_S: f32 = 10.0;
+pub const CUSUM_LIMIT_K_S: f32 = 8.0;
 const _: () = assert!(CUSUM_LIMIT_K_S > 0.0 && CUSUM_LIMIT_K_S <= 100.0);
+
+/// The change test's slack: how much faster than the fastest member a healthy reading may
+/// fall or rise without adding up, K/s (the model's transients against the high-fidelity
+/// beads', measured over its ensemble: docs/safety.md, "The expectation").
+pub const CHANGE_SLACK_K_PER_S: f32 = 0.2;
+const _: () = assert!(CHANGE_SLACK_K_PER_S > 0.0 && CHANGE_SLACK_K_PER_S < 5.0);
+/// How far a reading may fall (or rise) beyond the fastest member's change, less the slack,
+/// before the change test trips, K: 15 times the beads' noise, which the sum of changes
+/// telescopes to once.
+pub const CHANGE_LIMIT_K: f32 = 3.0;
+const _: () = assert!(CHANGE_LIMIT_K > 0.5 && CHANGE_LIMIT_K < 20.0);
 
 /// The detection delay of a reading drifting away from the hull's edge at `rate_k_per_s`, s:
 /// the design number of the drift aim (`rate² t² / 2` beyond the slack's time adds up to the
@@ -62,6 +73,47 @@ pub enum Side {
     /// Above the ceiling: warmer than every member (a heater on that nothing commands, a bead
     /// drifting up).
     Above,
+}
+
+/// The change test of one channel: a CUSUM per side of how much further the reading moved
+/// than the member that moved furthest that way, anchored at the reading (so the hull's width
+/// does not hide it): a heater that dies under a held power loses its bead's rise at several
+/// K/s while every member holds; one stuck on lifts it while every member falls.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Change {
+    last_k: Option<f32>,
+    fall_k: f32,
+    rise_k: f32,
+}
+
+impl Change {
+    /// Judges the reading `y_k` (K above ambient) over `dt_s` against the members' least and
+    /// greatest change `(fall, rise)` (K) over the same step.
+    pub fn update(&mut self, dt_s: f32, y_k: f32, (fall, rise): (f32, f32)) -> Option<Side> {
+        if !y_k.is_finite() {
+            self.last_k = None;
+            return None;
+        }
+        let Some(last) = self.last_k.replace(y_k) else {
+            return None;
+        };
+        let d_k = y_k - last;
+        let slack_k = CHANGE_SLACK_K_PER_S * dt_s;
+        self.fall_k = (self.fall_k + (fall - d_k) - slack_k).max(0.0);
+        self.rise_k = (self.rise_k + (d_k - rise) - slack_k).max(0.0);
+        if self.fall_k > CHANGE_LIMIT_K {
+            Some(Side::Below)
+        } else if self.rise_k > CHANGE_LIMIT_K {
+            Some(Side::Above)
+        } else {
+            None
+        }
+    }
+
+    /// The fuller side's share of the limit, 1.
+    pub fn share(&self) -> f32 {
+        self.fall_k.max(self.rise_k) / CHANGE_LIMIT_K
+    }
 }
 
 /// Both sides of one channel.

@@ -669,6 +669,22 @@ fn summarize(rows: &[&Row], oracle_rows: &[&OracleRow]) -> Summary {
             );
         }
     }
+    // How close the healthy runs came to a residual test's alarm (a run that ended in one is
+    // counted as a false alarm above).
+    for (i, test) in ["level", "change"].into_iter().enumerate() {
+        if let Some(r) = rows.iter().max_by(|a, b| {
+            a.result.peak_shares[i].total_cmp(&b.result.peak_shares[i])
+        }) {
+            let _ = writeln!(
+                table,
+                "\nFullest {test} test over these runs: {:.2} of its limit ({} {} mm, {}).",
+                r.result.peak_shares[i],
+                r.strategy.as_str(),
+                r.target_mm,
+                if r.link.air { "air" } else { "water" }
+            );
+        }
+    }
     let (o50, o95, out) = oracle_times(oracle_rows);
     let _ = writeln!(
         table,
