@@ -9,8 +9,9 @@
 //!   bracket every medium between; after `TUNE`, the convection it found;
 //! - where its bead sits: on its heated node or on that node's silicone shell (before `TUNE`),
 //!   and what share of the model's rise it reads ([`UNTUNED_GAIN_RANGE`], or the fitted share
-//!   ± [`TUNED_SPREAD`]), of its own heater's and of the other heater's (from none to the top
-//!   share: the high-fidelity link couples its heaters less than the model);
+//!   ± [`TUNED_SPREAD`]), of its own heater's and of the other heater's (from
+//!   [`UNTUNED_CROSS_LEAST`] to the model's own: the high-fidelity link couples its heaters
+//!   less than the model);
 //! - how late it reads: at once or through a first-order lag of [`BEAD_LAG_MAX_S`].
 //!
 //! The model is linear in its heat inputs, so each convection runs three networks: one from the
@@ -26,14 +27,14 @@ use crate::vocab::{Heater, Powers};
 /// Share of the model's rise a bead reads before `TUNE`, (least, most), 1: the high-fidelity
 /// beads read 0.72–0.93 of their heater's rise, and the drawn links' silicone, heaters and
 /// geometry move the model's own rise by tens of per cent (docs/safety.md, "The expectation").
-pub const UNTUNED_GAIN_RANGE: (f32, f32) = (0.7, 1.25);
+pub const UNTUNED_GAIN_RANGE: (f32, f32) = (0.65, 1.25);
 const _: () = assert!(UNTUNED_GAIN_RANGE.0 > 0.0 && UNTUNED_GAIN_RANGE.0 < 1.0);
 const _: () = assert!(UNTUNED_GAIN_RANGE.1 >= 1.0 && UNTUNED_GAIN_RANGE.1 <= 2.0);
 /// Least share of the model's rise from the other heater a bead reads before `TUNE`, 1: the
 /// high-fidelity link couples its heaters less than the model in places (the PLA's heat at the
 /// TCA's bead in soften), yet never by half; a TCA that dies while the PLA's heat still warms
 /// its bead is told from a live one by this share.
-pub const UNTUNED_CROSS_LEAST: f32 = 0.5;
+pub const UNTUNED_CROSS_LEAST: f32 = 0.35;
 const _: () = assert!(UNTUNED_CROSS_LEAST >= 0.0 && UNTUNED_CROSS_LEAST <= UNTUNED_GAIN_RANGE.0);
 /// After `TUNE`, each share is the fitted one within this fraction either way, 1: the fit is a
 /// steady rise, and the model's transients differ from the link's by this much of it.
@@ -41,13 +42,17 @@ pub const TUNED_SPREAD: f32 = 0.25;
 const _: () = assert!(TUNED_SPREAD > 0.0 && TUNED_SPREAD < 0.5);
 /// Slowest bead the family reads through, s: the high-fidelity PLA bead reads its rod about
 /// 10 s late.
-pub const BEAD_LAG_MAX_S: f32 = 6.0;
+pub const BEAD_LAG_MAX_S: f32 = 12.0;
 const _: () = assert!(BEAD_LAG_MAX_S >= 1.0 && BEAD_LAG_MAX_S <= 60.0);
 
+/// The lags a member is also read through, shares of [`BEAD_LAG_MAX_S`]: a bead between them
+/// lies between their readings, and a fast one's change is near the shortest's.
+const LAG_SHARES: [f32; 3] = [0.2, 0.5, 1.0];
+const LAGS: usize = LAG_SHARES.len();
 /// The channels the family predicts: the PLA and TCA thermistors ([`Heater::index`]).
 const CHANNELS: usize = 2;
 /// Members per channel: convection × node × own share × cross share, each read at once and
-/// through the lag.
+/// through each of the lags.
 const MEMBERS: usize = 16;
 
 /// The family's free parameters for one calibration.
@@ -70,7 +75,7 @@ impl Family {
             return Family {
                 h_w_m2k: [CONVECTION_RANGE_W_M2K.1, CONVECTION_RANGE_W_M2K.0],
                 own: [untuned; CHANNELS],
-                cross: [(UNTUNED_CROSS_LEAST, hi); CHANNELS],
+                cross: [(UNTUNED_CROSS_LEAST, 1.0); CHANNELS],
                 shell: true,
             };
         }
@@ -106,7 +111,7 @@ pub struct Expectation {
     family: Family,
     /// `None` until the first whole frame (or after [`Expectation::restart`]).
     nets: Option<[[Network; 3]; 2]>,
-    lagged_k: [[f32; MEMBERS]; CHANNELS],
+    lagged_k: [[[f32; LAGS]; MEMBERS]; CHANNELS],
     /// Each member's reading at once, K (last tick's until the update).
     now_k: [[f32; MEMBERS]; CHANNELS],
     /// This tick's least and greatest change of any member since the last tick, K.
@@ -123,7 +128,7 @@ impl Expectation {
         Expectation {
             family: Family::of(&Calibration::DEFAULT),
             nets: None,
-            lagged_k: [[0.0; MEMBERS]; CHANNELS],
+            lagged_k: [[[0.0; LAGS]; MEMBERS]; CHANNELS],
             now_k: [[0.0; MEMBERS]; CHANNELS],
             change_k: [(0.0, 0.0); CHANNELS],
             bounds_k: [(f32::NAN, f32::NAN); CHANNELS],
@@ -194,12 +199,12 @@ impl Expectation {
                 };
                 let h = self.family.h_w_m2k;
                 let nets = self.nets.insert([start(h[0]), start(h[1])]);
-                self.lagged_k = [[f32::NAN; MEMBERS]; CHANNELS];
+                self.lagged_k = [[[f32::NAN; LAGS]; MEMBERS]; CHANNELS];
                 self.now_k = [[f32::NAN; MEMBERS]; CHANNELS];
                 nets
             }
         };
-        let keep = lag_remaining(dt_s, BEAD_LAG_MAX_S);
+        let keep = LAG_SHARES.map(|share| lag_remaining(dt_s, share * BEAD_LAG_MAX_S));
         let f = &self.family;
         for ch in 0..CHANNELS {
             let h = heater_of(ch);
@@ -211,7 +216,7 @@ impl Expectation {
             let node_count = if f.shell { 2 } else { 1 };
             let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
             let mut least_own = f32::INFINITY;
-            let (mut fall, mut rise) = (0.0f32, 0.0f32);
+            let (mut fall, mut rise) = (f32::INFINITY, f32::NEG_INFINITY);
             let mut m = 0;
             for net in nets.iter() {
                 for &n in &at[..node_count] {
@@ -221,29 +226,33 @@ impl Expectation {
                     for g in [f.own[ch].0, f.own[ch].1] {
                         for c in [f.cross[ch].0, f.cross[ch].1] {
                             let now_k = free_k + g * own_k + c * cross_k;
-                            let lag = &mut self.lagged_k[ch][m];
-                            let was = [self.now_k[ch][m], *lag];
-                            *lag = if lag.is_finite() {
-                                now_k + (*lag - now_k) * keep
-                            } else {
-                                now_k
-                            };
-                            self.now_k[ch][m] = now_k;
-                            for (d, w) in [now_k, *lag].into_iter().zip(was) {
-                                if w.is_finite() {
-                                    fall = fall.min(d - w);
-                                    rise = rise.max(d - w);
+                            let mut moved = |d: f32, was: f32| {
+                                if was.is_finite() {
+                                    fall = fall.min(d - was);
+                                    rise = rise.max(d - was);
                                 }
+                                lo = lo.min(d);
+                                hi = hi.max(d);
+                            };
+                            moved(now_k, self.now_k[ch][m]);
+                            self.now_k[ch][m] = now_k;
+                            for (lag, keep) in self.lagged_k[ch][m].iter_mut().zip(keep) {
+                                let was = *lag;
+                                *lag = if was.is_finite() {
+                                    now_k + (was - now_k) * keep
+                                } else {
+                                    now_k
+                                };
+                                moved(*lag, was);
                             }
-                            lo = lo.min(now_k).min(*lag);
-                            hi = hi.max(now_k).max(*lag);
                             m += 1;
                         }
                     }
                 }
             }
             self.bounds_k[ch] = (lo, hi);
-            self.change_k[ch] = (fall, rise);
+            // No change yet on the first tick.
+            self.change_k[ch] = if fall <= rise { (fall, rise) } else { (0.0, 0.0) };
             self.own_heat_k[ch] = least_own;
         }
     }

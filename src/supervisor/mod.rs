@@ -22,7 +22,8 @@ pub use ramp::{
     AMB_RAMP_STEADY_SHARE,
 };
 pub use residual::{
-    drift_delay_s, CHANGE_LIMIT_K, CHANGE_SLACK_K_PER_S, CUSUM_LIMIT_K_S, RESIDUAL_SLACK_K,
+    drift_delay_s, CHANGE_LIMIT_K, CHANGE_SLACK_K_PER_S, CHANGE_SMOOTH_S, CUSUM_LIMIT_K_S,
+    RESIDUAL_SLACK_K,
 };
 
 use crate::calibration::Calibration;
@@ -435,17 +436,21 @@ impl Supervisor {
             let change = self.change[ch].update(dt_s, y_k, self.expect.change_k(ch));
             let shares = [self.envelope[ch].share(), self.change[ch].share()];
             self.peak_share = [0, 1].map(|i| self.peak_share[i].max(shares[i]));
-            if let Some(side) = level.or(change) {
-                let off_k = match side {
-                    Side::Below => y_k - bounds.0,
-                    Side::Above => y_k - bounds.1,
-                };
+            // The value: how far outside the hull, or how far beyond every member's change.
+            let off_k = match (level, change) {
+                (Some(Side::Below), _) => Some((Side::Below, bounds.0 - y_k)),
+                (Some(Side::Above), _) => Some((Side::Above, y_k - bounds.1)),
+                (None, Some(side)) => Some((side, self.change[ch].sum_k(side))),
+                (None, None) => None,
+            };
+            if let Some((side, off_k)) = off_k {
                 found(self.name(ch, side, off_k));
             }
         }
     }
 
-    /// What a thermistor that left its hull on `side` by `off_k` (K) means. Where current is
+    /// What a thermistor that left its hull (or outran every member's change) on `side` by
+    /// `off_k` (K) means. Where current is
     /// sensed the powers are known, so a thermistor outside is its own fault, unless it is the
     /// TCA's and the TCA's own temperature (from its resistance) stands below the same floor:
     /// then the TCA itself is cold (analytical redundancy: a drifting bead is told from a cold
@@ -484,7 +489,8 @@ impl Supervisor {
 
     /// Whether a latched fault's condition has cleared on this frame (RESET is allowed), or
     /// the fault that is still present. Sensor checks need a good reading now, not four; a
-    /// heater whose sensor still stands above every member of the expectation still heats.
+    /// heater whose sensor still stands above every member of the expectation, or still rises
+    /// faster than all of them, still heats.
     pub fn condition_clear(&self, now_ms: u64, frame: &Frame) -> Result<(), Fault> {
         fresh(now_ms, frame)?;
         for sensor in Sensor::ALL {
@@ -501,7 +507,8 @@ impl Supervisor {
                     value: est,
                 });
             }
-            if self.envelope[heater.index()].above_now {
+            let i = heater.index();
+            if self.envelope[i].above_now || self.change[i].sum_k(Side::Above) > CHANGE_LIMIT_K {
                 return Err(Fault {
                     code: FaultCode::HeatingWhileOff,
                     subject: Subject::Heater(heater),

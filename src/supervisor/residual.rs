@@ -25,13 +25,17 @@ const _: () = assert!(CUSUM_LIMIT_K_S > 0.0 && CUSUM_LIMIT_K_S <= 100.0);
 /// The change test's slack: how much faster than the fastest member a healthy reading may
 /// fall or rise without adding up, K/s (the model's transients against the high-fidelity
 /// beads', measured over its ensemble: docs/safety.md, "The expectation").
-pub const CHANGE_SLACK_K_PER_S: f32 = 0.2;
+pub const CHANGE_SLACK_K_PER_S: f32 = 0.1;
 const _: () = assert!(CHANGE_SLACK_K_PER_S > 0.0 && CHANGE_SLACK_K_PER_S < 5.0);
 /// How far a reading may fall (or rise) beyond the fastest member's change, less the slack,
-/// before the change test trips, K: 15 times the beads' noise, which the sum of changes
-/// telescopes to once.
-pub const CHANGE_LIMIT_K: f32 = 3.0;
+/// before the change test trips, K: the sum of changes telescopes, so the readings' noise
+/// enters it once, smoothed ([`CHANGE_SMOOTH_S`]) to a few hundredths of a kelvin.
+pub const CHANGE_LIMIT_K: f32 = 1.5;
 const _: () = assert!(CHANGE_LIMIT_K > 0.5 && CHANGE_LIMIT_K < 20.0);
+/// The change test reads a first-order average of the reading with this time constant, s:
+/// the beads' noise (up to 0.2 K rms a reading) averaged over 20 readings, at a second's delay.
+pub const CHANGE_SMOOTH_S: f32 = 1.0;
+const _: () = assert!(CHANGE_SMOOTH_S > 0.0 && CHANGE_SMOOTH_S <= 3.0);
 
 /// The detection delay of a reading drifting away from the hull's edge at `rate_k_per_s`, s:
 /// the design number of the drift aim (`rate² t² / 2` beyond the slack's time adds up to the
@@ -94,9 +98,12 @@ impl Change {
             self.last_k = None;
             return None;
         }
-        let Some(last) = self.last_k.replace(y_k) else {
+        let Some(last) = self.last_k else {
+            self.last_k = Some(y_k);
             return None;
         };
+        let y_k = last + (y_k - last) * crate::mathf::clamp(dt_s / CHANGE_SMOOTH_S, 0.0, 1.0);
+        self.last_k = Some(y_k);
         let d_k = y_k - last;
         let slack_k = CHANGE_SLACK_K_PER_S * dt_s;
         self.fall_k = (self.fall_k + (fall - d_k) - slack_k).max(0.0);
@@ -113,6 +120,14 @@ impl Change {
     /// The fuller side's share of the limit, 1.
     pub fn share(&self) -> f32 {
         self.fall_k.max(self.rise_k) / CHANGE_LIMIT_K
+    }
+
+    /// How far the reading has moved beyond every member on `side`, less the slack, K.
+    pub fn sum_k(&self, side: Side) -> f32 {
+        match side {
+            Side::Below => self.fall_k,
+            Side::Above => self.rise_k,
+        }
     }
 }
 
