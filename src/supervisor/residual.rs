@@ -32,8 +32,8 @@ const _: () = assert!(CHANGE_SLACK_K_PER_S > 0.0 && CHANGE_SLACK_K_PER_S < 5.0);
 /// enters it once, smoothed ([`CHANGE_SMOOTH_S`]) to a few hundredths of a kelvin.
 pub const CHANGE_LIMIT_K: f32 = 1.5;
 const _: () = assert!(CHANGE_LIMIT_K > 0.5 && CHANGE_LIMIT_K < 20.0);
-/// The change test reads a first-order average of the reading with this time constant, s:
-/// the beads' noise (up to 0.2 K rms a reading) averaged over 20 readings, at a second's delay.
+/// The change test averages each step's excess change over this time constant, s: the beads'
+/// noise (up to 0.2 K rms a reading) averaged over 20 readings, at a second's delay.
 pub const CHANGE_SMOOTH_S: f32 = 1.0;
 const _: () = assert!(CHANGE_SMOOTH_S > 0.0 && CHANGE_SMOOTH_S <= 3.0);
 
@@ -86,6 +86,8 @@ pub enum Side {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Change {
     last_k: Option<f32>,
+    /// This step's excess fall and rise, averaged ([`CHANGE_SMOOTH_S`]), K per step.
+    excess_k: [f32; 2],
     fall_k: f32,
     rise_k: f32,
 }
@@ -98,16 +100,19 @@ impl Change {
             self.last_k = None;
             return None;
         }
-        let Some(last) = self.last_k else {
-            self.last_k = Some(y_k);
+        let Some(last) = self.last_k.replace(y_k) else {
             return None;
         };
-        let y_k = last + (y_k - last) * crate::mathf::clamp(dt_s / CHANGE_SMOOTH_S, 0.0, 1.0);
-        self.last_k = Some(y_k);
         let d_k = y_k - last;
+        // The excess is averaged, not the reading alone: a change every member and the reading
+        // share (the ambient reading's) then cancels whatever its pace.
+        let share = crate::mathf::clamp(dt_s / CHANGE_SMOOTH_S, 0.0, 1.0);
+        for (e, now) in self.excess_k.iter_mut().zip([fall - d_k, d_k - rise]) {
+            *e += (now - *e) * share;
+        }
         let slack_k = CHANGE_SLACK_K_PER_S * dt_s;
-        self.fall_k = (self.fall_k + (fall - d_k) - slack_k).max(0.0);
-        self.rise_k = (self.rise_k + (d_k - rise) - slack_k).max(0.0);
+        self.fall_k = (self.fall_k + self.excess_k[0] - slack_k).max(0.0);
+        self.rise_k = (self.rise_k + self.excess_k[1] - slack_k).max(0.0);
         if self.fall_k > CHANGE_LIMIT_K {
             Some(Side::Below)
         } else if self.rise_k > CHANGE_LIMIT_K {
