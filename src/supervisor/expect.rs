@@ -27,14 +27,14 @@ use crate::vocab::{Heater, Powers};
 /// Share of the model's rise a bead reads before `TUNE`, (least, most), 1: the high-fidelity
 /// beads read 0.72–0.93 of their heater's rise, and the drawn links' silicone, heaters and
 /// geometry move the model's own rise by tens of per cent (docs/safety.md, "The expectation").
-pub const UNTUNED_GAIN_RANGE: (f32, f32) = (0.65, 1.25);
+pub const UNTUNED_GAIN_RANGE: (f32, f32) = (0.7, 1.25);
 const _: () = assert!(UNTUNED_GAIN_RANGE.0 > 0.0 && UNTUNED_GAIN_RANGE.0 < 1.0);
 const _: () = assert!(UNTUNED_GAIN_RANGE.1 >= 1.0 && UNTUNED_GAIN_RANGE.1 <= 2.0);
 /// Least share of the model's rise from the other heater a bead reads before `TUNE`, 1: the
 /// high-fidelity link couples its heaters less than the model in places (the PLA's heat at the
 /// TCA's bead in soften), yet never by half; a TCA that dies while the PLA's heat still warms
 /// its bead is told from a live one by this share.
-pub const UNTUNED_CROSS_LEAST: f32 = 0.35;
+pub const UNTUNED_CROSS_LEAST: f32 = 0.5;
 const _: () = assert!(UNTUNED_CROSS_LEAST >= 0.0 && UNTUNED_CROSS_LEAST <= UNTUNED_GAIN_RANGE.0);
 /// After `TUNE`, each share is the fitted one within this fraction either way, 1: the fit is a
 /// steady rise, and the model's transients differ from the link's by this much of it.

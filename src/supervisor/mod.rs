@@ -489,8 +489,8 @@ impl Supervisor {
 
     /// Whether a latched fault's condition has cleared on this frame (RESET is allowed), or
     /// the fault that is still present. Sensor checks need a good reading now, not four; a
-    /// heater whose sensor still stands above every member of the expectation, or still rises
-    /// faster than all of them, still heats.
+    /// heater whose sensor still stands above every member of the expectation, or still stands
+    /// past half the change test's limit beyond every member's change, still heats.
     pub fn condition_clear(&self, now_ms: u64, frame: &Frame) -> Result<(), Fault> {
         fresh(now_ms, frame)?;
         for sensor in Sensor::ALL {
@@ -508,7 +508,8 @@ impl Supervisor {
                 });
             }
             let i = heater.index();
-            if self.envelope[i].above_now || self.change[i].sum_k(Side::Above) > CHANGE_LIMIT_K {
+            let c = &self.change[i];
+            if self.envelope[i].above_now || c.sum_k(Side::Above) > 0.5 * CHANGE_LIMIT_K {
                 return Err(Fault {
                     code: FaultCode::HeatingWhileOff,
                     subject: Subject::Heater(heater),
