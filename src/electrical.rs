@@ -6,7 +6,8 @@
 //! after the supply's cut-off opened (cut-off failed). A board without current sense gives no
 //! currents, and none of this runs (docs/safety.md, "Current sense").
 
-use crate::supervisor::{Fault, FaultCode, Faults, Subject};
+use crate::fault::{Fault, FaultCode, Subject};
+use crate::supervisor::Faults;
 use crate::vocab::Heater;
 
 /// Heater PWM frequency, Hz (every board's: `boards/src/stm32.rs`).

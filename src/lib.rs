@@ -16,6 +16,7 @@ pub mod bench;
 pub mod calibration;
 pub mod controller;
 pub mod electrical;
+pub mod fault;
 pub mod fixed;
 pub mod heater;
 pub mod link;

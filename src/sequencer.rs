@@ -92,10 +92,10 @@ pub struct PhaseTimeout(pub Phase);
 
 impl PhaseTimeout {
     /// The fault it latches: `phase-timeout <phase>`.
-    pub fn fault(self) -> crate::supervisor::Fault {
-        crate::supervisor::Fault {
-            code: crate::supervisor::FaultCode::PhaseTimeout,
-            subject: crate::supervisor::Subject::Phase(self.0),
+    pub fn fault(self) -> crate::fault::Fault {
+        crate::fault::Fault {
+            code: crate::fault::FaultCode::PhaseTimeout,
+            subject: crate::fault::Subject::Phase(self.0),
             value: f32::NAN,
         }
     }

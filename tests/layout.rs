@@ -190,3 +190,35 @@ fn the_supervisor_imports_no_strategy_and_the_vocabulary_nothing() {
         graph["vocab"]
     );
 }
+
+/// The supervisor's budget (issue 27): at most 800 lines of code (comments, blank lines and
+/// tests apart) and at most 25 named constants, each of which its module explains and
+/// range-checks.
+#[test]
+fn the_supervisor_stays_within_its_code_and_constant_budget() {
+    let (mut lines, mut consts) = (0, Vec::new());
+    for (p, s) in sources("src/supervisor") {
+        let body = s.split("#[cfg(test)]").next().unwrap();
+        for l in code(body).lines().map(str::trim) {
+            if l.is_empty() {
+                continue;
+            }
+            lines += 1;
+            let named = l.strip_prefix("pub ").unwrap_or(l).strip_prefix("const ");
+            if let Some(name) = named.and_then(|r| r.split(':').next()) {
+                if name != "_" && name.chars().all(|c| c.is_ascii_uppercase() || c == '_') {
+                    consts.push(format!("{} {name}", p.display()));
+                }
+            }
+        }
+    }
+    println!("supervisor: {lines} lines of code, {} constants", consts.len());
+    assert!(lines <= 800, "{lines} lines of code");
+    // The sizes of the expectation's arrays (`CHANNELS`, `MEMBERS`, `LAGS`) are counts, not
+    // tuned.
+    let tuned: Vec<_> = consts
+        .iter()
+        .filter(|c| !["CHANNELS", "MEMBERS", "LAGS"].iter().any(|n| c.ends_with(&format!(" {n}"))))
+        .collect();
+    assert!(tuned.len() <= 25, "{} tuned constants: {tuned:?}", tuned.len());
+}

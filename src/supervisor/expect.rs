@@ -252,7 +252,11 @@ impl Expectation {
             }
             self.bounds_k[ch] = (lo, hi);
             // No change yet on the first tick.
-            self.change_k[ch] = if fall <= rise { (fall, rise) } else { (0.0, 0.0) };
+            self.change_k[ch] = if fall <= rise {
+                (fall, rise)
+            } else {
+                (0.0, 0.0)
+            };
             self.own_heat_k[ch] = least_own;
         }
     }
@@ -279,17 +283,26 @@ mod tests {
 
     #[test]
     fn the_hull_brackets_the_model_itself_in_water_and_in_air() {
-        for h in [crate::link::LINK.surroundings.h_w_m2k as f32, crate::tune::TUNE_STILL_AIR_W_M2K] {
+        for h in [
+            crate::link::LINK.surroundings.h_w_m2k as f32,
+            crate::tune::TUNE_STILL_AIR_W_M2K,
+        ] {
             let mut link = Network::new(h, 22.0);
             let mut e = Expectation::new();
-            let p = Powers { pla_w: 4.0, tca_w: 1.0 };
+            let p = Powers {
+                pla_w: 4.0,
+                tca_w: 1.0,
+            };
             for i in 0..600 {
                 let t = link.temp_c;
                 e.update(0.1, p, [t[node::PLA], t[node::TCA]], 22.0);
                 for ch in 0..2 {
                     let y = t[nodes_of(ch)[0]] - 22.0;
                     let (lo, hi) = e.bounds_k(ch);
-                    assert!(y >= lo - 1e-3 && y <= hi + 1e-3, "{h} {ch} at {i}: {lo} {y} {hi}");
+                    assert!(
+                        y >= lo - 1e-3 && y <= hi + 1e-3,
+                        "{h} {ch} at {i}: {lo} {y} {hi}"
+                    );
                 }
                 link.advance(0.1, p.tca_w, p.pla_w, 22.0);
             }
@@ -316,7 +329,10 @@ mod tests {
         let mut cal = Calibration::DEFAULT;
         cal.pla_rise_k_per_w *= 0.8;
         assert!(cal.fitted());
-        let p = Powers { pla_w: 2.0, tca_w: 0.0 };
+        let p = Powers {
+            pla_w: 2.0,
+            tca_w: 0.0,
+        };
         let width = |cal: &Calibration| {
             let mut e = Expectation::new();
             e.set_calibration(cal);

@@ -148,7 +148,12 @@ pub struct Envelope {
 impl Envelope {
     /// Judges one reading `y_k` against the hull `(floor, ceiling)` (K above the ambient
     /// reading) over `dt_s`: the side that has added up to the limit, if any.
-    pub fn update(&mut self, dt_s: f32, y_k: f32, (floor_k, ceiling_k): (f32, f32)) -> Option<Side> {
+    pub fn update(
+        &mut self,
+        dt_s: f32,
+        y_k: f32,
+        (floor_k, ceiling_k): (f32, f32),
+    ) -> Option<Side> {
         self.above_now = y_k - ceiling_k > RESIDUAL_SLACK_K;
         if self.below.update(dt_s, floor_k - y_k) {
             return Some(Side::Below);
@@ -172,7 +177,9 @@ mod tests {
     /// Seconds until a residual `r(t)` (K beyond the hull) trips, at 0.1 s ticks.
     fn trip_s(r: impl Fn(f32) -> f32) -> Option<f32> {
         let mut c = Cusum::default();
-        (0..6000).map(|i| i as f32 / 10.0).find(|&t| c.update(0.1, r(t)))
+        (0..6000)
+            .map(|i| i as f32 / 10.0)
+            .find(|&t| c.update(0.1, r(t)))
     }
 
     #[test]
@@ -182,13 +189,24 @@ mod tests {
         assert!((t - CUSUM_LIMIT_K_S / d).abs() <= 0.2, "{t}");
         assert_eq!(trip_s(|_| RESIDUAL_SLACK_K - 0.01), None);
         // Noise of 20 × the slack's reach, alternating, never adds up.
-        assert_eq!(trip_s(|t| if (t * 10.0) as u32 % 2 == 0 { 8.0 } else { -8.0 }), None);
+        assert_eq!(
+            trip_s(|t| if (t * 10.0) as u32 % 2 == 0 {
+                8.0
+            } else {
+                -8.0
+            }),
+            None
+        );
     }
 
     #[test]
     fn a_drift_from_the_edge_trips_at_its_design_delay() {
         let t = trip_s(|t| 0.2 * t).unwrap();
-        assert!((t - drift_delay_s(0.2)).abs() <= 0.5, "{t} vs {}", drift_delay_s(0.2));
+        assert!(
+            (t - drift_delay_s(0.2)).abs() <= 0.5,
+            "{t} vs {}",
+            drift_delay_s(0.2)
+        );
     }
 
     #[test]

@@ -245,19 +245,19 @@ pub fn run(args: &Args) -> Result<(), String> {
             .zip(&results)
             .filter(|((l, _, _), _)| links[*l].family == family)
             .collect();
-        let worst = |f: fn(&Rises) -> f32| {
+        let worst = |f: fn(&Rises) -> f32, unit: &str| {
             rows.iter()
                 .max_by(|x, y| f(x.1).total_cmp(&f(y.1)))
                 .map(|((l, mode, a), r)| {
-                    format!("{:.2} ({}, ABORT {a} s into {mode})", f(r), links[*l].name)
+                    format!("{:.2}{unit} ({}, ABORT {a} s into {mode})", f(r), links[*l].name)
                 })
                 .unwrap_or_default()
         };
         println!(
-            "| {family} | {} | {} K | {} | {} |",
+            "| {family} | {} | {} | {} | {} |",
             rows.len(),
-            worst(|r| r.raw_k),
-            worst(|r| r.share),
+            worst(|r| r.raw_k, " K"),
+            worst(|r| r.share, ""),
             rows.iter().filter(|(_, r)| r.alarm.is_some()).count()
         );
     }
