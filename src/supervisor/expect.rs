@@ -7,7 +7,7 @@
 //!   ([`CONVECTION_RANGE_W_M2K`]: from half still air's to twice still water's): with the same
 //!   heat capacities the airier link rises higher and cools slower at every moment, so the two
 //!   bracket every medium between; after `TUNE`, the convection it found;
-//! - where its bead sits: on its heated node or on that node's silicone shell (before `TUNE`),
+//! - where its bead sits: on its heated node or on that node's silicone shell,
 //!   and what share of the model's rise it reads ([`UNTUNED_GAIN_RANGE`], or the fitted share
 //!   ± [`TUNED_SPREAD`]), of its own heater's and of the other heater's (from
 //!   [`UNTUNED_CROSS_LEAST`] to the model's own: the high-fidelity link couples its heaters
@@ -63,7 +63,7 @@ struct Family {
     /// Each channel's (least, most) share of its own heater's and of the other's rise.
     own: [(f32, f32); CHANNELS],
     cross: [(f32, f32); CHANNELS],
-    /// Whether a bead may sit on its node's shell (before `TUNE`).
+    /// Whether a bead may sit on its node's shell.
     shell: bool,
 }
 
@@ -80,12 +80,16 @@ impl Family {
             };
         }
         let spread = |g: f32| (g * (1.0 - TUNED_SPREAD), g * (1.0 + TUNED_SPREAD));
+        // TUNE tells water from still air; within either the link's own convection is the fit's
+        // within a factor (1 − 2 × spread), whose steady part the fitted shares hold.
         let h = cal.model_convection_w_m2k();
+        let (lo_h, hi_h) = CONVECTION_RANGE_W_M2K;
+        let f = 1.0 - 2.0 * TUNED_SPREAD;
         Family {
-            h_w_m2k: [h, h],
+            h_w_m2k: [(h / f).min(hi_h), (h * f).max(lo_h)],
             own: Heater::ALL.map(|h| spread(cal.sensor_gain(h))),
             cross: Heater::ALL.map(|h| spread(cal.cross_gain(h))),
-            shell: false,
+            shell: true,
         }
     }
 }
@@ -340,6 +344,6 @@ mod tests {
             let (lo, hi) = e.bounds_k(0);
             hi - lo
         };
-        assert!(width(&cal) < 0.5 * width(&Calibration::DEFAULT));
+        assert!(width(&cal) < 0.8 * width(&Calibration::DEFAULT));
     }
 }

@@ -396,6 +396,7 @@ impl Supervisor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::vocab::Phase;
 
     /// A frame sampled at `ms` reading `pla` and `tca` (and a 22 °C bath), each with a few
     /// hundredths of a kelvin of deterministic noise, as a live ADC reading has.
