@@ -351,7 +351,7 @@ fn a_dead_heater_where_it_is_off_or_dies_in_lock_is_caught_by_the_next_morph(lin
             continue;
         }
         // A heater dead where it is off is found by the next morph; a TCA that dies in lock (or
-        // in boost's 2 s bend) trips in that morph as a rule (`HELD_MAX_FALL_K`; the branch
+        // in boost's 2 s bend) trips in that morph as a rule (the change test; the branch
         // below), else the next one trips it.
         let boost_bend: &[(Phase, &str)] = if mode == "boost" {
             &[(Phase::Bend, "pla"), (Phase::Bend, "tca")]
@@ -1053,7 +1053,10 @@ fn a_tca_dying_in_bend_or_lock_trips_before_done(link: Link) {
                         assert!(b.rig.now_ms() < t0 + 600_000, "{mode} {target} {phase:?}");
                         b.tick();
                         if b.rig.ctrl.idle() {
-                            assert!(morphs < 1, "{mode} {target} {phase:?}: not by the next morph");
+                            assert!(
+                                morphs < 1,
+                                "{mode} {target} {phase:?}: not by the next morph"
+                            );
                             morphs += 1;
                             assert_eq!(b.send(&format!("MORPH {target} {mode}")), ["ok"]);
                         }
@@ -1120,7 +1123,10 @@ fn a_stuck_pla_heater_trips_before_the_rod_passes_its_limit(link: Link) {
                 assert_names(&a, "RESIDUAL_SLACK_K");
                 assert_latched(&mut b, "heating-while-off");
             }
-            assert!(rod_c < PLA_LIMITS.max_c as f64, "{mode} {phase:?}: rod {rod_c} C");
+            assert!(
+                rod_c < PLA_LIMITS.max_c as f64,
+                "{mode} {phase:?}: rod {rod_c} C"
+            );
             // The MOSFET still heats: RESET waits until the heater is repaired and the rod
             // has cooled back.
             assert_reset_rules(&mut b, &["SIM CLEAR"], 240.0);

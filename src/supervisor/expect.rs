@@ -49,6 +49,7 @@ const _: () = assert!(BEAD_LAG_MAX_S >= 1.0 && BEAD_LAG_MAX_S <= 60.0);
 /// lies between their readings, and a fast one's change is near the shortest's.
 const LAG_SHARES: [f32; 3] = [0.2, 0.5, 1.0];
 const LAGS: usize = LAG_SHARES.len();
+const _: () = assert!(LAG_SHARES[0] > 0.0 && LAG_SHARES[0] < LAG_SHARES[1] && LAG_SHARES[2] == 1.0);
 /// The channels the family predicts: the PLA and TCA thermistors ([`Heater::index`]).
 const CHANNELS: usize = 2;
 /// Members per channel: convection × node × own share × cross share, each read at once and

@@ -71,14 +71,14 @@ impl RampWatch {
         if !temp_c.is_finite() {
             return Ok(());
         }
-        const SEGMENT_MS: u64 = (AMB_RAMP_SEGMENT_S * 1000.0) as u64;
+        let segment_ms = (AMB_RAMP_SEGMENT_S * 1000.0) as u64;
         if let Some((start_ms, _, _)) = self.segment {
-            if sample_ms.saturating_sub(start_ms) >= 2 * SEGMENT_MS {
+            if sample_ms.saturating_sub(start_ms) >= 2 * segment_ms {
                 *self = RampWatch::new();
             }
         }
         let (start_ms, sum_c, n) = self.segment.get_or_insert((sample_ms, 0.0, 0));
-        if sample_ms.saturating_sub(*start_ms) < SEGMENT_MS {
+        if sample_ms.saturating_sub(*start_ms) < segment_ms {
             *sum_c += temp_c;
             *n = n.saturating_add(1);
             return Ok(());

@@ -97,7 +97,11 @@ fn cases(tuned: bool) -> Vec<FaultCase> {
             v.push(FaultCase {
                 name: format!("thermistor-drift {sensor} {rate:+.1} K/s"),
                 line: format!("SIM FAULT thermistor-drift {sensor} {rate}"),
-                aim_s: Some(if tuned { AIM_SENSOR_S } else { AIM_DRIFT_UNTUNED_S }),
+                aim_s: Some(if tuned {
+                    AIM_SENSOR_S
+                } else {
+                    AIM_DRIFT_UNTUNED_S
+                }),
                 observable: Observable::AtInjection,
             });
         }

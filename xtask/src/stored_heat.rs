@@ -249,7 +249,11 @@ pub fn run(args: &Args) -> Result<(), String> {
             rows.iter()
                 .max_by(|x, y| f(x.1).total_cmp(&f(y.1)))
                 .map(|((l, mode, a), r)| {
-                    format!("{:.2}{unit} ({}, ABORT {a} s into {mode})", f(r), links[*l].name)
+                    format!(
+                        "{:.2}{unit} ({}, ABORT {a} s into {mode})",
+                        f(r),
+                        links[*l].name
+                    )
                 })
                 .unwrap_or_default()
         };

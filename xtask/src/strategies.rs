@@ -672,9 +672,10 @@ fn summarize(rows: &[&Row], oracle_rows: &[&OracleRow]) -> Summary {
     // How close the healthy runs came to a residual test's alarm (a run that ended in one is
     // counted as a false alarm above).
     for (i, test) in ["level", "change"].into_iter().enumerate() {
-        if let Some(r) = rows.iter().max_by(|a, b| {
-            a.result.peak_shares[i].total_cmp(&b.result.peak_shares[i])
-        }) {
+        if let Some(r) = rows
+            .iter()
+            .max_by(|a, b| a.result.peak_shares[i].total_cmp(&b.result.peak_shares[i]))
+        {
             let _ = writeln!(
                 table,
                 "\nFullest {test} test over these runs: {:.2} of its limit ({} {} mm, {}).",

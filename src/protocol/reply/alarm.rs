@@ -58,7 +58,10 @@ impl fmt::Display for FaultText<'_> {
                 write!(l, "heater-not-heating {s} reads {v} K under what its power gives; check wiring, MOSFET")
             }
             FaultCode::HeatingWhileOff => {
-                write!(l, "heating-while-off {s} reads {v} K over what its power gives; check its MOSFET")
+                write!(
+                    l,
+                    "heating-while-off {s} reads {v} K over what its power gives; check its MOSFET"
+                )
             }
             FaultCode::StaleSensor => write!(l, "stale-sensor no sensor frame for {v} s"),
             FaultCode::SupplyOutOfRange => write!(
