@@ -563,16 +563,15 @@ impl Calibration {
         resistance_matrix(h)
     }
 
-    /// Whether this link's thermal model has been fitted (`TUNE`, or its rises or convection
-    /// set): any rise or the convection differs from the compiled-in link's. The supervisor's
-    /// expectation then takes the fit instead of bracketing the surroundings.
+    /// Whether this link's thermistors' rises have been fitted (`TUNE`, or set): any of them
+    /// differs from the compiled-in link's. The supervisor's expectation then takes the fit
+    /// instead of bracketing the surroundings; a convection set alone is no fit of the beads.
     pub fn fitted(&self) -> bool {
         let d = Calibration::DEFAULT;
         self.pla_rise_k_per_w != d.pla_rise_k_per_w
             || self.tca_rise_k_per_w != d.tca_rise_k_per_w
             || self.pla_to_tca_k_per_w != d.pla_to_tca_k_per_w
             || self.tca_to_pla_k_per_w != d.tca_to_pla_k_per_w
-            || self.convection_w_m2k != d.convection_w_m2k
     }
 
     /// Whether every rise is the share [`SHARE_RULE`] allows of the model's own at

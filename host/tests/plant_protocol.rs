@@ -190,8 +190,9 @@ fn a_plant_that_answers_an_error_ends_the_run() {
 
 #[test]
 fn a_plant_that_dies_mid_morph_ends_the_run() {
-    // Answers hello and 50 steps (5 s: the morph is softening), then exits.
-    let cmd = "i=0; while [ $i -le 50 ] && read l; do \
+    // Answers hello and 30 steps (3 s: the morph is softening, and its readings that never
+    // move are not yet a dead heater), then exits.
+    let cmd = "i=0; while [ $i -le 30 ] && read l; do \
                echo 'ok t_pla_c=22 t_tca_c=22 t_amb_c=22 supply_v=12 radius_mm=46'; \
                i=$((i+1)); done";
     let run = morph_sim(&["--plant-cmd", cmd], "MORPH 38\n");

@@ -114,6 +114,9 @@ const fn nodes_of(channel: usize) -> [usize; 2] {
 #[derive(Clone, Copy, Debug)]
 pub struct Expectation {
     family: Family,
+    /// The calibration's family (the fitted one once `TUNE` has run); `family` is the
+    /// compiled-in one instead while a `TUNE` runs ([`Expectation::tuning`]).
+    calibrated: Family,
     /// `None` until the first whole frame (or after [`Expectation::restart`]).
     nets: Option<[[Network; 3]; 2]>,
     lagged_k: [[[f32; LAGS]; MEMBERS]; CHANNELS],
@@ -132,6 +135,7 @@ impl Expectation {
     pub fn new() -> Self {
         Expectation {
             family: Family::of(&Calibration::DEFAULT),
+            calibrated: Family::of(&Calibration::DEFAULT),
             nets: None,
             lagged_k: [[[0.0; LAGS]; MEMBERS]; CHANNELS],
             now_k: [[0.0; MEMBERS]; CHANNELS],
@@ -144,7 +148,15 @@ impl Expectation {
     /// Takes the family of `cal` (the fitted one once `TUNE` has run) and starts again from the
     /// next readings.
     pub fn set_calibration(&mut self, cal: &Calibration) {
-        let family = Family::of(cal);
+        self.calibrated = Family::of(cal);
+        self.tuning(false);
+    }
+
+    /// Whether a `TUNE` runs: it is judged by the compiled-in family, since the calibration it
+    /// replaces may no longer describe the link (moved from still air into water, say). A
+    /// change of family starts it again from the next readings.
+    pub fn tuning(&mut self, tuning: bool) {
+        let family = [self.calibrated, Family::of(&Calibration::DEFAULT)][tuning as usize];
         if family != self.family {
             self.family = family;
             self.restart();

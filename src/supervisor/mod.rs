@@ -128,13 +128,9 @@ impl Supervisor {
         self.parts_c
     }
 
-    /// The fullest any residual test has been since the supervisor started or was re-armed,
-    /// as a share of its limit (1 trips): how close a healthy run came to an alarm.
-    pub fn peak_share(&self) -> f32 {
-        self.peak_share[0].max(self.peak_share[1])
-    }
-
-    /// [`Supervisor::peak_share`] of the level tests and of the change tests apart.
+    /// The fullest the level tests and the change tests have each been since the supervisor
+    /// started or was re-armed, as a share of its limit (1 trips): how close a healthy run came
+    /// to an alarm.
     pub fn peak_shares(&self) -> [f32; 2] {
         self.peak_share
     }
@@ -193,7 +189,7 @@ impl Supervisor {
     /// Runs every check on one frame, whatever runs (a latched fault included: the controller
     /// calls it every tick), and collects every fault present into `faults`, in check order.
     /// `commanded` are the powers of the previous tick (W); `doing` what commanded them (the
-    /// model judges every activity alike: it is kept for the callers' sake). Returns the last
+    /// model judges every activity alike; a `TUNE` against the compiled-in link). Returns the last
     /// good temperatures. Every sensor is read even when an earlier one is faulty, so
     /// [`Supervisor::live`] stays live.
     pub fn check_all(
@@ -204,7 +200,7 @@ impl Supervisor {
         doing: impl Into<Doing>,
         faults: &mut Faults,
     ) -> Measurements {
-        let _ = doing.into();
+        self.expect.tuning(doing.into() == Doing::Tune);
         let mut found = |f: Fault| {
             let _ = faults.push(f);
         };

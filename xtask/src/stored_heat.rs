@@ -130,7 +130,8 @@ impl<P: Plant> RunOn for Rig<P> {
                 r.raw_k = r.raw_k.max(lowest(&mut min_k[i]));
             }
         }
-        r.share = self.ctrl.supervisor().peak_share();
+        let [level, change] = self.ctrl.supervisor().peak_shares();
+        r.share = level.max(change);
         r
     }
     fn rerun(&mut self, mode: &str, abort_s: u64, delay_s: u64) -> Rerun {

@@ -20,8 +20,8 @@ use std::time::{Duration, Instant};
 pub const REST_SPREAD_K: f64 = 3.0;
 /// Length of each heater's pulse, s: its bead answers within a few seconds (measured rises
 /// below, docs: docs/bringup.md "Bring-up"), and the pulse ends a second before the supervisor's
-/// heater-not-heating window (`HEATER_VERDICT_S`) would judge it, so a dead heater or crossed
-/// wires get this tool's diagnosis rather than an alarm.
+/// residual tests' verdict time for a dead heater (`HEATER_VERDICT_S`); crossed wires may trip
+/// them sooner, and the tool then judges the rise it saw.
 pub const PULSE_S: f64 = morphlink::supervisor::HEATER_VERDICT_S as f64 - 1.0;
 /// Time after a pulse during which the rise is still followed, s: the beads lag their heater.
 pub const AFTER_PULSE_S: f64 = 10.0;
@@ -198,7 +198,8 @@ fn poll(link: &mut Link, say: &mut dyn FnMut(&str)) -> Result<([f64; 3], f64, St
 }
 
 /// Runs the checks on `link` (link seconds pass `speed` times faster than host seconds);
-/// `say` gets each line to print (events, progress). An alarm during a pulse stops it.
+/// `say` gets each line to print (events, progress). An alarm during a pulse ends that pulse
+/// (its rise so far is judged) and the next runs once RESET is accepted.
 pub fn run(link: &mut Link, speed: f64, say: &mut dyn FnMut(&str)) -> Result<Vec<Check>, Stop> {
     let wait = |s: f64| Duration::from_secs_f64(s / speed);
     let (_, _, first) = poll(link, say)?;
@@ -253,18 +254,18 @@ pub fn run(link: &mut Link, speed: f64, say: &mut dyn FnMut(&str)) -> Result<Vec
         let mut peak = [f64::NEG_INFINITY; 3];
         let until = Instant::now() + wait(PULSE_S + AFTER_PULSE_S);
         let mut alarm = None;
-        while Instant::now() < until {
+        let mut tripped = false;
+        while Instant::now() < until && !tripped {
             let (t, _, _) = poll(link, &mut |l| {
                 if classify(l) == LineKind::Alarm {
                     alarm = Some(l.to_string());
                 }
                 say(l)
             })?;
-            if let Some(a) = alarm.take() {
-                return Err(Stop::Refused(format!(
-                    "the supervisor tripped during the {} pulse: {a}",
-                    heater.as_str()
-                )));
+            if alarm.take().is_some() {
+                // The supervisor names a wiring fault within seconds too: the rise so far is
+                // this tool's diagnosis, and the next pulse runs once RESET is accepted.
+                tripped = true;
             }
             for i in 0..3 {
                 peak[i] = peak[i].max(t[i] - before[i]);
@@ -272,13 +273,11 @@ pub fn run(link: &mut Link, speed: f64, say: &mut dyn FnMut(&str)) -> Result<Vec
             std::thread::sleep(wait(POLL_S));
             if let Some(l) = link.recv(Duration::ZERO)? {
                 say(&l);
-                if classify(&l) == LineKind::Alarm {
-                    return Err(Stop::Refused(format!(
-                        "the supervisor tripped during the {} pulse: {l}",
-                        heater.as_str()
-                    )));
-                }
+                tripped |= classify(&l) == LineKind::Alarm;
             }
+        }
+        if tripped {
+            reset_when_clear(link, speed, heater, say)?;
         }
         say(&format!(
             "{} pulse ({power_w} W, {PULSE_S} s): pla {:+.2} K, tca {:+.2} K, amb {:+.2} K",
@@ -290,6 +289,31 @@ pub fn run(link: &mut Link, speed: f64, say: &mut dyn FnMut(&str)) -> Result<Vec
         rises.push(Rise { k: peak });
     }
     Ok(judge(&rest, Some((rises[0], rises[1]))))
+}
+
+/// After a trip during `heater`'s pulse: sends RESET until the device accepts it (its
+/// condition has cleared once the link cools back), for at most [`AFTER_PULSE_S`] × 6 link
+/// seconds, else stops.
+fn reset_when_clear(
+    link: &mut Link,
+    speed: f64,
+    heater: Heater,
+    say: &mut dyn FnMut(&str),
+) -> Result<(), Stop> {
+    let until = Instant::now() + Duration::from_secs_f64(6.0 * AFTER_PULSE_S / speed);
+    while Instant::now() < until {
+        say("> RESET");
+        let (_, reply) = link.command("RESET", REPLY_TIMEOUT_S, &mut |l| say(l))?;
+        say(&format!("< {reply}"));
+        if classify(&reply) == LineKind::Ok {
+            return Ok(());
+        }
+        std::thread::sleep(Duration::from_secs_f64(1.0 / speed));
+    }
+    Err(Stop::Refused(format!(
+        "the supervisor tripped during the {} pulse and RESET was refused since",
+        heater.as_str()
+    )))
 }
 
 /// The phase word of a STATUS line.
