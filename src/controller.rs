@@ -481,6 +481,24 @@ impl Controller {
         };
     }
 
+    /// What the last tick's duties deliver at the supply read now, W: the expectation's
+    /// input (a heater at full duty gives less than was asked; on a board that senses current,
+    /// at its measured resistance).
+    fn delivered(&self) -> Powers {
+        let w = |cfg: HeaterConfig, h: Heater, duty: f32| {
+            let resistance_ohm = self.elec.ohm(h).unwrap_or(cfg.resistance_ohm);
+            HeaterConfig {
+                resistance_ohm,
+                ..cfg
+            }
+            .power_w(duty, self.supply_v)
+        };
+        Powers {
+            pla_w: w(self.cfg.pla_heater, Heater::Pla, self.outputs.pla_duty),
+            tca_w: w(self.cfg.tca_heater, Heater::Tca, self.outputs.tca_duty),
+        }
+    }
+
     /// The calibration in force was replaced (TUNE done, CONFIG SET or RESET, settings loaded
     /// or restored): a MEASURED report for an earlier morph no longer describes the link, and
     /// the supervisor takes the beads' shares the parts' limits are judged with from it.
@@ -514,7 +532,7 @@ impl Controller {
         self.sup.set_sensing(inputs.current.is_some(), tca_self_c);
         let m = self
             .sup
-            .check_all(now_ms, &frame, self.powers, doing, &mut faults);
+            .check_all(now_ms, &frame, self.delivered(), doing, &mut faults);
         // At rest: idle, a morph's rest, a tune's settle step (the reference a tune fits from).
         let tca_driven = !(matches!(doing, Doing::Idle | Doing::Morph(Phase::Rest))
             || self.tune_step() == Some(crate::tune::TuneStep::Settle));

@@ -26,8 +26,8 @@ pub enum FaultCode {
     SupplyOutOfRange,
     /// A morph phase overran its timeout.
     PhaseTimeout,
-    /// A heated sensor did not move while its heater's power changed (a hung ADC channel, a
-    /// bead frozen to something else).
+    /// A sensor's reading repeated to the last bit for `FROZEN_STILL_S` (a hung ADC channel):
+    /// a live reading moves by its noise.
     SensorFrozen,
     /// A heated sensor left the expectation where the heater's power is known (drifting,
     /// swapped, off its heater), or the ambient one drifts steadily.
@@ -121,9 +121,11 @@ impl Fault {
                 "PLA_LIMITS, TCA_LIMITS, AMB_LIMITS"
             }
             (FaultCode::HeaterNotHeating, _) => {
-                "RESIDUAL_SLACK_K, CUSUM_LIMIT_K_S, UNTUNED_GAIN_RANGE"
+                "RESIDUAL_SLACK_K, CUSUM_LIMIT_K_S, CHANGE_LIMIT_K, UNTUNED_GAIN_RANGE"
             }
-            (FaultCode::HeatingWhileOff, _) => "RESIDUAL_SLACK_K, CUSUM_LIMIT_K_S, BEAD_LAG_MAX_S",
+            (FaultCode::HeatingWhileOff, _) => {
+                "RESIDUAL_SLACK_K, CUSUM_LIMIT_K_S, CHANGE_LIMIT_K, BEAD_LAG_MAX_S"
+            }
             (FaultCode::StaleSensor, _) => "STALE_AFTER_MS",
             (FaultCode::SupplyOutOfRange, _) => {
                 "SUPPLY_MIN_V, SUPPLY_MAX_V, SUPPLY_READ_TOLERANCE_V"
@@ -140,7 +142,9 @@ impl Fault {
             (FaultCode::SensorImplausible, Subject::Sensor(Sensor::Amb)) => {
                 "AMB_RAMP_MAX_K_PER_S, AMB_RAMP_SETTLING_SHARE"
             }
-            (FaultCode::SensorImplausible, _) => "RESIDUAL_SLACK_K, CUSUM_LIMIT_K_S, TUNED_SPREAD",
+            (FaultCode::SensorImplausible, _) => {
+                "RESIDUAL_SLACK_K, CUSUM_LIMIT_K_S, CHANGE_LIMIT_K, TUNED_SPREAD"
+            }
             (FaultCode::HeaterOpen, _) => "OPEN_MAX_SHARE, ELECTRICAL_TICKS",
             (FaultCode::HeaterShort, _) => "SHORT_MIN_A, ELECTRICAL_TICKS",
             (FaultCode::HeaterResistance, Subject::Heater(Heater::Pla)) => {

@@ -57,6 +57,22 @@ impl HeaterConfig {
             0.0
         }
     }
+
+    /// Mean power in watts delivered at `duty` (clamped to [0, 1]) from `supply_v` volts:
+    /// `d·V²/R`, what the supervisor's expectation is fed (a duty clamped at 1 delivers less
+    /// than was asked). Returns 0 for non-finite inputs, a non-positive supply or an invalid
+    /// resistance. Not capped: it reports what the hardware would do (e.g. a stuck MOSFET).
+    pub fn power_w(&self, duty: f32, supply_v: f32) -> f32 {
+        let valid = duty.is_finite()
+            && supply_v.is_finite()
+            && supply_v > 0.0
+            && self.resistance_ohm.is_finite()
+            && self.resistance_ohm > 0.0;
+        if !valid {
+            return 0.0;
+        }
+        duty.clamp(0.0, 1.0) * supply_v * supply_v / self.resistance_ohm
+    }
 }
 
 // The paper's 4 W PLA softening phase must fit under the PLA cap, and the TCA estimate must stay
@@ -118,23 +134,6 @@ impl CommandWatchdog {
 mod tests {
     use super::*;
 
-    /// Only the tests need this (the firmware never reads it back).
-    impl HeaterConfig {
-        /// Mean power in watts delivered at `duty` (clamped to [0, 1]) from `supply_v` volts:
-        /// `d·V²/R`. Returns 0 for non-finite inputs, a non-positive supply or an invalid
-        /// resistance. Not capped: it reports what the hardware would do (e.g. a stuck MOSFET).
-        fn power_w(&self, duty: f32, supply_v: f32) -> f32 {
-            let valid = duty.is_finite()
-                && supply_v.is_finite()
-                && supply_v > 0.0
-                && self.resistance_ohm.is_finite()
-                && self.resistance_ohm > 0.0;
-            if !valid {
-                return 0.0;
-            }
-            duty.clamp(0.0, 1.0) * supply_v * supply_v / self.resistance_ohm
-        }
-    }
     use proptest::prelude::*;
 
     #[test]

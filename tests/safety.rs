@@ -1327,7 +1327,41 @@ fn a_heater_of_the_wrong_resistance_is_named_at_idle() {
     }
 }
 
+/// At the lowest supply the supervisor accepts (9 V) the PLA heater at full duty delivers
+/// 2.7 W of the 4 W that paper's and gated's soften ask: the expectation is fed what the duties
+/// deliver, so a healthy morph ends `done` or by its phase timeout on either board, never by a
+/// residual test.
+fn a_low_supply_raises_no_false_alarm(link: Link) {
+    for (sensing, tune) in [(false, false), (true, false), (false, true), (true, true)] {
+        for mode in ["paper", "gated", "closed"] {
+            let mut b = Bench::on(link);
+            if !sensing {
+                b = b.thermistors_only();
+            }
+            b.run_for(2.0);
+            if tune {
+                assert!(b.send("TUNE")[0].starts_with("ok"));
+                assert!(b.run_until(400.0, |b| !b.rig.ctrl.tuning()));
+                assert!(b.alarms_since(0).is_empty(), "{:?}", b.lines);
+            }
+            assert!(b.send("SIM SUPPLY 9")[0].starts_with("ok"));
+            b.run_for(2.0);
+            let t_s = b.morph(38.0, mode);
+            println!(
+                "{link:?} sensing={sensing} tune={tune} {mode}: {t_s:.1} s, {:?}",
+                b.phases()
+            );
+            let alarms = b.alarms_since(0);
+            assert!(
+                alarms.iter().all(|a| a.starts_with("alarm: phase-timeout")),
+                "{link:?} sensing={sensing} tune={tune} {mode}: {alarms:?}"
+            );
+        }
+    }
+}
+
 on_both_links!(
+    a_low_supply_raises_no_false_alarm,
     a_short_or_open_heater_is_named_within_half_a_second_in_every_phase,
     a_cut_off_that_does_not_open_is_named_after_the_short,
     a_reading_frozen_in_lock_or_release_trips_within_the_still_time,

@@ -28,6 +28,7 @@ on_both_links!(
     measured_refuses_bad_input_and_changes_nothing,
     an_implausible_report_says_which_bound_and_changes_nothing,
     the_strain_term_is_learnt_at_rest_and_closed_bends_on_the_own_temperature,
+    a_heater_stuck_in_a_second_tune_keeps_reset_refused_while_it_heats,
 );
 
 /// Runs TUNE to its end; returns the line that ended it.
@@ -434,4 +435,45 @@ fn an_implausible_report_says_which_bound_and_changes_nothing(link: Link) {
     assert_eq!(b.rig.ctrl.calibration(), Calibration::DEFAULT);
     let r = b.send("MEASURED 44.2");
     assert!(r[0].starts_with("ok map_offset_k="), "{r:?}");
+}
+
+/// On a link already tuned, a PLA heater stuck on (and the cut-off stuck closed, so it keeps
+/// heating) in a second TUNE's PLA step trips, and every RESET is refused while it heats: the
+/// trip ends the TUNE, so the supervisor goes back from the compiled-in family to the fitted
+/// one, and that switch must not forget how far above every member the reading stands. Once
+/// repaired and cooled, RESET is taken.
+fn a_heater_stuck_in_a_second_tune_keeps_reset_refused_while_it_heats(link: Link) {
+    let mut b = Bench::on(link).thermistors_only();
+    b.run_for(2.0);
+    let end = tune(&mut b);
+    assert!(end.starts_with("event: tune done"), "{end}");
+    b.run_for(600.0);
+    assert_eq!(b.send("TUNE"), [format!("ok total_s={TUNE_TOTAL_S:.0}")]);
+    assert!(b.run_until(200.0, |b| b
+        .rig
+        .ctrl
+        .tune_step()
+        .is_some_and(|s| s.as_str() == "pla")));
+    assert!(b.send("SIM FAULT cutoff-stuck")[0].starts_with("ok"));
+    assert!(b.send("SIM FAULT heater-stuck pla")[0].starts_with("ok"));
+    let from = b.lines.len();
+    assert!(b.run_until(60.0, |b| b.lines[from..]
+        .iter()
+        .any(|l| classify(l) == LineKind::Alarm)));
+    assert!(!b.rig.ctrl.tuning());
+    for _ in 0..600 {
+        b.tick();
+        let r = b.send("RESET");
+        assert!(
+            r[0].starts_with("error: fault-active"),
+            "{r:?}: {:?}",
+            &b.lines[from..]
+        );
+    }
+    assert!(b.send("SIM CLEAR")[0].starts_with("ok"));
+    let taken = (0..6000).any(|_| {
+        b.tick();
+        b.send("RESET")[0].starts_with("ok")
+    });
+    assert!(taken, "RESET never taken after the repair");
 }

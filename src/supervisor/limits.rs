@@ -35,6 +35,12 @@ pub const AMB_LIMITS: Limits = Limits {
 pub const SUPPLY_MIN_V: f32 = 9.0;
 /// Highest heater supply, V: +25 % of 12 V; above it one PWM step is too coarse for the TCA.
 pub const SUPPLY_MAX_V: f32 = 15.0;
+// Each limit stays 10 K or more under what it protects (the rod melts near 150 °C, the TCA was
+// annealed at 160 °C, the model assumes a bath below 60 °C), the supply's around the 12 V
+// design supply, and a frame is stale within two seconds.
+const _: () = assert!(PLA_LIMITS.max_c <= 140.0 && TCA_LIMITS.max_c <= 140.0);
+const _: () = assert!(AMB_LIMITS.max_c <= 60.0 && PLA_LIMITS.min_c < AMB_LIMITS.max_c);
+const _: () = assert!(SUPPLY_MIN_V >= 6.0 && SUPPLY_MIN_V < 12.0 && SUPPLY_MAX_V <= 24.0);
 /// The supply limits are judged on the reading to this much either side, V: half the 0.1 V
 /// step the alarm reports the reading in, so a supply the alarm would print as within its range
 /// never trips (a 9.0 V supply reads 8.9999 V through the divider and the ADC's steps).
@@ -43,6 +49,7 @@ const _: () = assert!(SUPPLY_READ_TOLERANCE_V >= 0.0 && SUPPLY_READ_TOLERANCE_V 
 /// A sensor frame older than this counts as stale, ms. Klipper allows 7 s for hot ends with
 /// time constants of minutes; the TCA's fast thermal part is about 1 s, so 1 s (10 ticks).
 pub const STALE_AFTER_MS: u64 = 1000;
+const _: () = assert!(STALE_AFTER_MS >= 200 && STALE_AFTER_MS <= 2000);
 /// Out-of-limit readings before a temperature trip (Klipper: 4 samples), counted by a leaky
 /// counter: +1 for a reading out of limits, −1 for one within, so one noisy reading never trips
 /// but an intermittent excursion (every other reading) does.

@@ -188,9 +188,9 @@ impl Supervisor {
 
     /// Runs every check on one frame, whatever runs (a latched fault included: the controller
     /// calls it every tick), and collects every fault present into `faults`, in check order.
-    /// `commanded` are the powers of the previous tick (W); `doing` what commanded them (the
-    /// model judges every activity alike; a `TUNE` against the compiled-in link). Returns the last
-    /// good temperatures. Every sensor is read even when an earlier one is faulty, so
+    /// `commanded` are the powers the previous tick's duties delivered (W); `doing` what
+    /// commanded them (the model judges every activity alike; a `TUNE` against the compiled-in
+    /// link). Returns the last good temperatures. Every sensor is read even when an earlier one is faulty, so
     /// [`Supervisor::live`] stays live.
     pub fn check_all(
         &mut self,
@@ -252,7 +252,7 @@ impl Supervisor {
         if let Err(f) = self.ramp.update(frame.sample_ms, amb_c) {
             found(f);
         }
-        // A gap (a stale stretch) is taken as one tick's worth: the powers of it are unknown.
+        // A gap (a stale stretch) counts at most 1 s: the powers of it are unknown.
         let dt_s = self.last_ms.map_or(0.0, |ms| {
             (now_ms.saturating_sub(ms) as f32 / 1000.0).min(1.0)
         });
@@ -269,15 +269,9 @@ impl Supervisor {
         if !self.expect.started() {
             return;
         }
-        // The last good readings, where this frame has one: a reading past its limit is the
-        // limits' to judge.
-        let good = |s: usize| {
-            if self.live_c[s].is_finite() {
-                self.last_c[s]
-            } else {
-                f32::NAN
-            }
-        };
+        // The last good readings, where this frame has one (NaN where not): a reading past
+        // its limit is the limits' to judge.
+        let good = |s: usize| [f32::NAN, self.last_c[s]][self.live_c[s].is_finite() as usize];
         let amb_c = good(Sensor::Amb.index());
         let live = [good(0), good(1)];
         for (ch, temp_c) in live.into_iter().enumerate() {
@@ -361,10 +355,12 @@ impl Supervisor {
             let i = heater.index();
             let c = &self.change[i];
             if self.envelope[i].above_now || c.sum_k(Side::Above) > 0.5 * CHANGE_LIMIT_K {
+                // How far above the hull it reads, or how far it rose beyond every member.
+                let y_k = self.last_c[heater.sensor().index()] - self.last_c[Sensor::Amb.index()];
                 return Err(Fault {
                     code: FaultCode::HeatingWhileOff,
                     subject: Subject::Heater(heater),
-                    value: f32::NAN,
+                    value: (y_k - self.expect.bounds_k(i).1).max(c.sum_k(Side::Above)),
                 });
             }
         }
@@ -375,13 +371,13 @@ impl Supervisor {
     }
 
     /// Forgets counters and residual sums (after RESET) and starts the expectation again from
-    /// the next readings, keeping last temperatures and the ambient ramp watch (RESET is only
+    /// the next readings, keeping last temperatures, the still-reading watch (a reading still
+    /// frozen trips again at once, not 5 s later) and the ambient ramp watch (RESET is only
     /// allowed once it no longer sees a ramp).
     pub fn rearm(&mut self) {
         self.range = [RangeCheck::new(RangeCheck::DEFAULT_CONSECUTIVE); 3];
         self.limit_count = [0; 3];
         self.part_count = [0; 2];
-        self.still = Still::default();
         self.envelope = [Envelope::default(); 2];
         self.change = [Change::default(); 2];
         self.expect.restart();

@@ -31,7 +31,8 @@ pub const AMB_RAMP_STEADY_SHARE: f32 = 0.5;
 /// most 0.74 of its largest for beads up to 10 s and 0.89 up to 25 s (the 2.25 s bead in water:
 /// 0.26), wherever the step falls in a segment; a drift's changes stay alike.
 pub const AMB_RAMP_SETTLING_SHARE: f32 = 0.9;
-const _: () = assert!(AMB_RAMP_MAX_K_PER_S > 0.0 && AMB_RAMP_SEGMENT_S >= 1.0);
+const _: () = assert!(AMB_RAMP_MAX_K_PER_S > 0.0 && AMB_RAMP_MAX_K_PER_S < 1.0);
+const _: () = assert!(AMB_RAMP_SEGMENT_S >= 1.0);
 const _: () = assert!(AMB_RAMP_SEGMENTS >= 2 && AMB_RAMP_SEGMENTS <= 8);
 const _: () = assert!(AMB_RAMP_STEADY_SHARE > 0.0 && AMB_RAMP_STEADY_SHARE < 1.0);
 const _: () = assert!(AMB_RAMP_SETTLING_SHARE > 0.0 && AMB_RAMP_SETTLING_SHARE < 1.0);
@@ -66,7 +67,8 @@ impl RampWatch {
     /// steady ramp faster than [`AMB_RAMP_MAX_K_PER_S`] trips `sensor-implausible amb` with
     /// its rate, K/s. A reading that is not a temperature (an open or shorted sample, which the
     /// range check judges) is skipped, so an intermittent contact cannot hide a drift; a gap
-    /// longer than a segment starts the watch over (means across it are not comparable).
+    /// longer than a segment starts the watch over (means across it are not comparable), its
+    /// latch kept.
     pub fn update(&mut self, sample_ms: u64, temp_c: f32) -> Result<(), Fault> {
         if !temp_c.is_finite() {
             return Ok(());
@@ -74,7 +76,8 @@ impl RampWatch {
         let segment_ms = (AMB_RAMP_SEGMENT_S * 1000.0) as u64;
         if let Some((start_ms, _, _)) = self.segment {
             if sample_ms.saturating_sub(start_ms) >= 2 * segment_ms {
-                *self = RampWatch::new();
+                // The latch stays: RESET waits for a whole watch without a ramp.
+                (self.segment, self.count) = (None, 0);
             }
         }
         let (start_ms, sum_c, n) = self.segment.get_or_insert((sample_ms, 0.0, 0));

@@ -18,7 +18,7 @@
 pub const RESIDUAL_SLACK_K: f32 = 2.0;
 const _: () = assert!(RESIDUAL_SLACK_K > 0.5 && RESIDUAL_SLACK_K < 10.0);
 /// The sum of a side's residual beyond the slack at which it trips, K·s: 4 K beyond the slack
-/// for 5 s, 20 K beyond it for 1 s.
+/// for 2 s, 8 K beyond it for 1 s.
 pub const CUSUM_LIMIT_K_S: f32 = 8.0;
 const _: () = assert!(CUSUM_LIMIT_K_S > 0.0 && CUSUM_LIMIT_K_S <= 100.0);
 
