@@ -440,8 +440,8 @@ fn an_implausible_report_says_which_bound_and_changes_nothing(link: Link) {
 /// On a link already tuned, a PLA heater stuck on (and the cut-off stuck closed, so it keeps
 /// heating) in a second TUNE's PLA step trips, and every RESET is refused while it heats: the
 /// trip ends the TUNE, so the supervisor goes back from the compiled-in family to the fitted
-/// one, and that switch must not forget how far above every member the reading stands. Once
-/// repaired and cooled, RESET is taken.
+/// one, and that switch must not clear what holds RESET. Once repaired and cooled, RESET is
+/// taken.
 fn a_heater_stuck_in_a_second_tune_keeps_reset_refused_while_it_heats(link: Link) {
     let mut b = Bench::on(link).thermistors_only();
     b.run_for(2.0);

@@ -154,17 +154,13 @@ impl Expectation {
 
     /// Whether a `TUNE` runs: it is judged by the compiled-in family, since the calibration it
     /// replaces may no longer describe the link (moved from still air into water, say). A
-    /// change of family keeps the link's state and the lagged readings (only the convections
-    /// and shares change), so a reading the tests hold outside is not forgotten (a `TUNE` that
-    /// trips switches back while its fault is latched, and RESET waits on the hull).
+    /// change of family starts it again from the next readings (a `TUNE` that trips switches
+    /// back while its fault is latched: the change test's rise sum, kept, holds RESET then).
     pub fn tuning(&mut self, tuning: bool) {
         let family = [self.calibrated, Family::of(&Calibration::DEFAULT)][tuning as usize];
         if family != self.family {
             self.family = family;
-            for (nets, h) in self.nets.iter_mut().flatten().zip(family.h_w_m2k) {
-                nets.iter_mut().for_each(|n| n.set_convection(h));
-            }
-            self.now_k = [[f32::NAN; MEMBERS]; CHANNELS];
+            self.restart();
         }
     }
 
