@@ -1,5 +1,5 @@
 //! The supervisor's one expectation of its sensors: a family of the link's lumped model
-//! ([`crate::lumped::Network`]) fed the powers the heaters were given, whose hull bounds what a
+//! ([`crate::lumped::Network`]) fed the powers the duties deliver, whose hull bounds what a
 //! healthy link's heated thermistors can read. Every residual test judges against it (`residual`).
 //!
 //! Members differ in what the supervisor does not know about this link:

@@ -169,7 +169,7 @@ impl Supervisor {
         Measurements::from_array(self.last_c)
     }
 
-    /// Checks one frame with the powers commanded in the previous tick by `doing`. Returns the
+    /// Checks one frame with the powers the previous tick delivered for `doing`. Returns the
     /// temperatures to control from, or the first fault found (see [`Supervisor::check_all`]).
     pub fn check(
         &mut self,
