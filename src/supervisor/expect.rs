@@ -193,9 +193,10 @@ impl Expectation {
         self.own_heat_k[heater.index()]
     }
 
-    /// Advances every member `dt_s` under the powers `p` (W) given since the last tick, with
-    /// the readings `t_c` (PLA, TCA thermistors) and the ambient reading `amb_c`, °C, and takes the hull. A first whole frame starts
-    /// the family from its readings (a warm link is not a fault).
+    /// Advances every member `dt_s` under the powers `p` (W) delivered since the last tick,
+    /// with the readings `t_c` (PLA, TCA thermistors) and the ambient reading `amb_c`, °C, and
+    /// takes the hull. A first whole frame starts the family from its readings (a warm link is
+    /// not a fault).
     pub fn update(&mut self, dt_s: f32, p: Powers, t_c: [f32; CHANNELS], amb_c: f32) {
         if !amb_c.is_finite() || !t_c[0].is_finite() || !t_c[1].is_finite() {
             return;

@@ -190,8 +190,8 @@ impl Supervisor {
     /// calls it every tick), and collects every fault present into `faults`, in check order.
     /// `commanded` are the powers the previous tick's duties delivered (W); `doing` what
     /// commanded them (the model judges every activity alike; a `TUNE` against the compiled-in
-    /// link). Returns the last good temperatures. Every sensor is read even when an earlier one is faulty, so
-    /// [`Supervisor::live`] stays live.
+    /// link). Returns the last good temperatures. Every sensor is read even when an earlier one
+    /// is faulty, so [`Supervisor::live`] stays live.
     pub fn check_all(
         &mut self,
         now_ms: u64,
