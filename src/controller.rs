@@ -462,40 +462,42 @@ impl Controller {
             tca_w: capped(Heater::Tca, p.tca_w),
         };
         self.powers = p;
-        // Where current is sensed the watts are the measured resistance's, and every period
-        // keeps its off-window.
-        let elec = &self.elec;
-        let duty = |cfg: HeaterConfig, h: Heater, w: f32| match elec.ohm(h) {
-            Some(resistance_ohm) => HeaterConfig {
-                resistance_ohm,
-                ..cfg
-            }
-            .duty(w, supply_v)
-            .min(MAX_SENSED_DUTY),
-            None => cfg.duty(w, supply_v),
+        // Where current is sensed every period keeps its off-window.
+        let duty = |h: Heater, w: f32| {
+            let most = if self.elec.ohm(h).is_some() {
+                MAX_SENSED_DUTY
+            } else {
+                1.0
+            };
+            self.heater(h).duty(w, supply_v).min(most)
         };
         self.outputs = Outputs {
-            pla_duty: duty(self.cfg.pla_heater, Heater::Pla, p.pla_w),
-            tca_duty: duty(self.cfg.tca_heater, Heater::Tca, p.tca_w),
+            pla_duty: duty(Heater::Pla, p.pla_w),
+            tca_duty: duty(Heater::Tca, p.tca_w),
             supply_on: true,
         };
     }
 
-    /// What the last tick's duties deliver at the supply read now, W: the expectation's
-    /// input (a heater at full duty gives less than was asked; on a board that senses current,
-    /// at its measured resistance).
-    fn delivered(&self) -> Powers {
-        let w = |cfg: HeaterConfig, h: Heater, duty: f32| {
-            let resistance_ohm = self.elec.ohm(h).unwrap_or(cfg.resistance_ohm);
-            HeaterConfig {
-                resistance_ohm,
-                ..cfg
-            }
-            .power_w(duty, self.supply_v)
+    /// `h`'s heater as the watts are reckoned with: its configuration, at its measured
+    /// resistance where current is sensed.
+    fn heater(&self, h: Heater) -> HeaterConfig {
+        let cfg = match h {
+            Heater::Pla => self.cfg.pla_heater,
+            Heater::Tca => self.cfg.tca_heater,
         };
+        HeaterConfig {
+            resistance_ohm: self.elec.ohm(h).unwrap_or(cfg.resistance_ohm),
+            ..cfg
+        }
+    }
+
+    /// What the last tick's duties deliver at the supply read now, W: the expectation's
+    /// input (a heater at full duty gives less than was asked).
+    fn delivered(&self) -> Powers {
+        let w = |h: Heater, duty: f32| self.heater(h).power_w(duty, self.supply_v);
         Powers {
-            pla_w: w(self.cfg.pla_heater, Heater::Pla, self.outputs.pla_duty),
-            tca_w: w(self.cfg.tca_heater, Heater::Tca, self.outputs.tca_duty),
+            pla_w: w(Heater::Pla, self.outputs.pla_duty),
+            tca_w: w(Heater::Tca, self.outputs.tca_duty),
         }
     }
 

@@ -157,7 +157,11 @@ impl Expectation {
     /// change of family starts it again from the next readings (a `TUNE` that trips switches
     /// back while its fault is latched: the change test's rise sum, kept, holds RESET then).
     pub fn tuning(&mut self, tuning: bool) {
-        let family = [self.calibrated, Family::of(&Calibration::DEFAULT)][tuning as usize];
+        let family = if tuning {
+            Family::of(&Calibration::DEFAULT)
+        } else {
+            self.calibrated
+        };
         if family != self.family {
             self.family = family;
             self.restart();

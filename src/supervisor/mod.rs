@@ -175,11 +175,11 @@ impl Supervisor {
         &mut self,
         now_ms: u64,
         frame: &Frame,
-        commanded: Powers,
+        delivered: Powers,
         doing: impl Into<Doing>,
     ) -> Result<Measurements, Fault> {
         let mut faults = Faults::new();
-        let m = self.check_all(now_ms, frame, commanded, doing, &mut faults);
+        let m = self.check_all(now_ms, frame, delivered, doing, &mut faults);
         match faults.first() {
             Some(f) => Err(*f),
             None => Ok(m),
@@ -188,7 +188,7 @@ impl Supervisor {
 
     /// Runs every check on one frame, whatever runs (a latched fault included: the controller
     /// calls it every tick), and collects every fault present into `faults`, in check order.
-    /// `commanded` are the powers the previous tick's duties delivered (W); `doing` what
+    /// `delivered` are the powers the previous tick's duties delivered (W); `doing` what
     /// commanded them (the model judges every activity alike; a `TUNE` against the compiled-in
     /// link). Returns the last good temperatures. Every sensor is read even when an earlier one
     /// is faulty, so [`Supervisor::live`] stays live.
@@ -196,7 +196,7 @@ impl Supervisor {
         &mut self,
         now_ms: u64,
         frame: &Frame,
-        commanded: Powers,
+        delivered: Powers,
         doing: impl Into<Doing>,
         faults: &mut Faults,
     ) -> Measurements {
@@ -257,7 +257,7 @@ impl Supervisor {
             (now_ms.saturating_sub(ms) as f32 / 1000.0).min(1.0)
         });
         self.last_ms = Some(now_ms);
-        self.check_residuals(dt_s, &mut found, commanded);
+        self.check_residuals(dt_s, &mut found, delivered);
         self.measurements()
     }
 
