@@ -96,6 +96,9 @@ pub struct Bench<P> {
     /// The current sense's own noise, apart from the thermistors' (so a board with current
     /// sense reads its thermistors exactly as one without).
     current_rng: u64,
+    /// The supply at the board's terminals, V, where a shared supply sags under the load of
+    /// several links ([`Bench::set_terminal_v`]); `None`: the plant's own supply.
+    terminal_v: Option<f64>,
 }
 
 /// Approximately standard normal noise from `rng` (xorshift; the sum of four uniforms).
@@ -128,6 +131,7 @@ impl<P: Plant> Bench<P> {
             output: [CommandWatchdog::default(); 3],
             rng: noise.seed | 1,
             current_rng: (noise.seed ^ 0xc0ff_ee00_1234_5678) | 1,
+            terminal_v: None,
         }
     }
 
@@ -209,13 +213,36 @@ impl<P: Plant> Bench<P> {
 
     /// Lets the plant run `dt_s` from `now_ms` with the duties the output stage applies then.
     pub fn run(&mut self, now_ms: u64, dt_s: f64) {
+        let duty = self.reaching(now_ms);
+        self.plant.step(dt_s, duty);
+    }
+
+    /// The duties that reach the heaters at `now_ms`: the output stage's, with the cut-off,
+    /// an open or stuck heater and the probe pulse of current sense.
+    pub fn reaching(&self, now_ms: u64) -> Duties {
         let out = self.applied(now_ms);
         let (supplied, sensing) = (self.supplied(now_ms), self.senses_current());
-        let duty = Duties {
+        Duties {
             pla: self.delivered(0, out.pla_duty, supplied, sensing),
             tca: self.delivered(1, out.tca_duty, supplied, sensing),
-        };
+        }
+    }
+
+    /// Lets the plant run `dt_s` with `duty` (a shared supply's rig works out what reaches
+    /// each heater over the period itself: [`Bench::reaching`] at the sagging voltage).
+    pub fn run_duties(&mut self, dt_s: f64, duty: Duties) {
         self.plant.step(dt_s, duty);
+    }
+
+    /// The supply the board reads at its terminals from now on, V (`None`: the plant's own):
+    /// a shared supply sagging under several links' load.
+    pub fn set_terminal_v(&mut self, v: Option<f64>) {
+        self.terminal_v = v;
+    }
+
+    /// The supply at the board's terminals, V.
+    fn supply_at_terminals(&self, s: &morphlink_plant::Sample) -> f64 {
+        self.terminal_v.unwrap_or(s.supply_v)
     }
 
     /// One heater's current reading through its shunt amplifier, summed counts: `amps` with
@@ -235,7 +262,7 @@ impl<P: Plant> Bench<P> {
     fn currents(&mut self, sample_ms: u64, s: &morphlink_plant::Sample) -> Option<CurrentCounts> {
         let ohm = s.heater_ohm.filter(|_| self.current_sense)?;
         let v = if self.supplied(sample_ms) {
-            s.supply_v
+            self.supply_at_terminals(s)
         } else {
             0.0
         };
@@ -289,7 +316,7 @@ impl<P: Plant> Bench<P> {
         }
         Inputs {
             thermistor_counts: counts,
-            supply_counts: self.board.supply.counts(s.supply_v as f32),
+            supply_counts: self.board.supply.counts(self.supply_at_terminals(s) as f32),
             sample_ms,
             current: None,
         }

@@ -192,6 +192,11 @@ pub struct Controller {
     /// The heaters seen electrically (current sense).
     elec: Electrical,
     powers: Powers,
+    /// What the activity asked last tick under the parts' ceilings, before the allowance, W.
+    wanted: Powers,
+    /// Most power each heater may take, W: unlimited, or the shared supply's share
+    /// ([`crate::budget`], set by [`crate::links::Links`] every tick).
+    allowance: Powers,
     outputs: Outputs,
     supply_v: f32,
     events: Deque<Event, EVENT_QUEUE>,
@@ -272,6 +277,8 @@ impl Controller {
             frame: None,
             elec: Electrical::default(),
             powers: Powers::default(),
+            wanted: Powers::default(),
+            allowance: Powers::UNLIMITED,
             outputs: Outputs::default(),
             supply_v: f32::NAN,
             events: Deque::new(),
@@ -362,6 +369,87 @@ impl Controller {
         self.powers
     }
 
+    /// What the activity asked in the last tick before the allowance cut it, W: what the
+    /// supply's scheduler shares out by.
+    pub fn wanted(&self) -> Powers {
+        self.wanted
+    }
+
+    /// Sets the most power each heater may take from the next tick on, W (the supply budget's
+    /// share, [`crate::budget::allocate`]); every activity's powers are capped to it before
+    /// they become duties, and the model strategies' observers are fed the capped powers.
+    pub fn set_allowance(&mut self, allow_w: Powers) {
+        let sane = |w: f32| if w.is_nan() { 0.0 } else { w.max(0.0) };
+        self.allowance = Powers {
+            pla_w: sane(allow_w.pla_w),
+            tca_w: sane(allow_w.tca_w),
+        };
+    }
+
+    /// The resistance each heater is reckoned with, Ω (measured where current is sensed):
+    /// what the supply's scheduler turns allowances into duties and currents with.
+    pub fn heater_ohm(&self) -> [f32; 2] {
+        [Heater::Pla, Heater::Tca].map(|h| self.heater(h).resistance_ohm)
+    }
+
+    /// The supply voltage read in the last tick, V (NaN before the first).
+    pub fn supply_v(&self) -> f32 {
+        self.supply_v
+    }
+
+    /// What holds what runs now, W: in soften and bend the rod at its soft target, from soften
+    /// to lock the TCA at its table power (each [`crate::budget::RESERVE_MARGIN`] times what
+    /// the calibration says holds it), a TUNE or HEAT step at its own power. The supply's
+    /// scheduler never cuts a link below it.
+    pub fn reserve_w(&self) -> Powers {
+        match self.doing() {
+            Doing::Morph(phase) => {
+                let tca_w = self.last.map_or(0.0, |l| l.power_w);
+                self.morph_reserve_w(phase, tca_w)
+            }
+            Doing::Tune => Powers {
+                pla_w: crate::tune::TUNE_PLA_W,
+                tca_w: crate::tune::TUNE_TCA_W,
+            },
+            Doing::Heat(_) => self.wanted,
+            Doing::Idle => Powers::default(),
+        }
+    }
+
+    /// What a morph to `radius_mm` reserves in soften, W (its admission under a shared
+    /// budget); `None` for a radius outside the table.
+    pub fn soften_reserve_w(&self, radius_mm: f32) -> Option<Powers> {
+        let table_w = table::power_for_radius_w(radius_mm).ok()?;
+        let tca_w =
+            (table_w * self.settings.cal.power_scale()).min(HeaterConfig::TCA.max_power_w);
+        Some(self.morph_reserve_w(Phase::Soften, tca_w))
+    }
+
+    /// [`Controller::reserve_w`] of a morph in `phase` whose table gave the TCA `tca_w`.
+    fn morph_reserve_w(&self, phase: Phase, tca_w: f32) -> Powers {
+        use crate::budget::RESERVE_MARGIN;
+        let amb_c = self.sup.measurements().t_amb_c;
+        let amb_c = if amb_c.is_finite() { amb_c } else { 20.0 };
+        let rise_k = self.settings.morph.thresholds().pla_soft_target_c - amb_c;
+        let r_pp = self.settings.cal.model_resistances().r_pp;
+        let hold_w = (rise_k.max(0.0) / r_pp).min(HeaterConfig::PLA.max_power_w);
+        // A resting morph keeps its soften's reserve: it was admitted with it.
+        let pla_on = matches!(phase, Phase::Rest | Phase::Soften | Phase::Bend);
+        let tca_on = matches!(phase, Phase::Rest | Phase::Soften | Phase::Bend | Phase::Lock);
+        Powers {
+            pla_w: if pla_on {
+                (hold_w * RESERVE_MARGIN).min(HeaterConfig::PLA.max_power_w)
+            } else {
+                0.0
+            },
+            tca_w: if tca_on {
+                (tca_w * RESERVE_MARGIN).min(HeaterConfig::TCA.max_power_w)
+            } else {
+                0.0
+            },
+        }
+    }
+
     /// True while no morph runs and no fault is latched.
     pub fn idle(&self) -> bool {
         self.phase() == Phase::Idle
@@ -417,6 +505,7 @@ impl Controller {
         let ran = self.activity.stop();
         self.seq.abort();
         self.powers = Powers::default();
+        self.wanted = Powers::default();
         // Heaters off; the cut-off as it was (a trip opens it).
         self.outputs = Outputs {
             supply_on: self.outputs.supply_on && self.fault.is_none(),
@@ -461,6 +550,8 @@ impl Controller {
             pla_w: capped(Heater::Pla, p.pla_w),
             tca_w: capped(Heater::Tca, p.tca_w),
         };
+        self.wanted = p;
+        let p = p.min(self.allowance);
         self.powers = p;
         // Where current is sensed every period keeps its off-window.
         let duty = |h: Heater, w: f32| {
@@ -601,6 +692,7 @@ impl Controller {
             Activity::Idle => Ok(Powers::default()),
             Activity::Morph => {
                 self.seq.set_supply_v(supply_v);
+                self.seq.set_allowance(self.allowance);
                 let r = self.seq.step(now_ms, m, &mut |e| {
                     let _ = events.push(Event::Seq(e));
                 });
@@ -798,6 +890,12 @@ impl Controller {
             return false;
         }
         true
+    }
+
+    /// Writes into `l` why a MORPH would be refused now (a fault latched, an activity
+    /// running, no reading yet); returns whether it would be.
+    pub fn morph_refusal(&self, l: &mut OutLine) -> bool {
+        self.refused(Start::Morph, l)
     }
 
     /// The running `HEAT` pulse's heater, if one runs.

@@ -13,6 +13,7 @@
 pub mod activity;
 #[cfg(feature = "sim")]
 pub mod bench;
+pub mod budget;
 pub mod calibration;
 pub mod controller;
 pub mod electrical;
@@ -20,6 +21,7 @@ pub mod fault;
 pub mod fixed;
 pub mod heater;
 pub mod link;
+pub mod links;
 pub mod lumped;
 pub mod mathf;
 pub mod part_limit;

@@ -171,6 +171,7 @@ pub struct Sequencer {
     pending: Option<Pending>,
     strategy: Option<AnyStrategy>,
     supply_v: f32,
+    allow_w: Powers,
     tca_self_c: f32,
     rest_shape_per_m: f32,
     thresholds: Thresholds,
@@ -203,6 +204,7 @@ impl Sequencer {
             pending: None,
             strategy: None,
             supply_v: f32::NAN,
+            allow_w: Powers::UNLIMITED,
             tca_self_c: f32::NAN,
             rest_shape_per_m: f32::NAN,
             thresholds: Thresholds::DEFAULT,
@@ -222,6 +224,13 @@ impl Sequencer {
     /// power the heaters can actually deliver. Call before [`Sequencer::step`].
     pub fn set_supply_v(&mut self, supply_v: f32) {
         self.supply_v = supply_v;
+    }
+
+    /// Tells the sequencer the most power each heater may take this tick, W (the supply
+    /// budget's share, [`crate::budget`]; unlimited on a board with one link). Call before
+    /// [`Sequencer::step`].
+    pub fn set_allowance(&mut self, allow_w: Powers) {
+        self.allow_w = allow_w;
     }
 
     /// Tells the sequencer the TCA's own temperature, °C (NaN where not sensed), and the link's
@@ -381,6 +390,7 @@ impl Sequencer {
             supply_v: self.supply_v,
             tca_self_c: self.tca_self_c,
             th: &self.thresholds,
+            allow_w: self.allow_w,
         };
         if s.phase_done(&tick) {
             match at.phase {

@@ -196,6 +196,20 @@ pub struct Powers {
 }
 
 impl Powers {
+    /// No allowance below the heaters' own caps (a board with one link, no budget).
+    pub const UNLIMITED: Powers = Powers {
+        pla_w: f32::INFINITY,
+        tca_w: f32::INFINITY,
+    };
+
+    /// Each heater's power, at most `other`'s, W.
+    pub fn min(self, other: Powers) -> Powers {
+        Powers {
+            pla_w: self.pla_w.min(other.pla_w),
+            tca_w: self.tca_w.min(other.tca_w),
+        }
+    }
+
     /// The power of one heater, W.
     pub fn of(&self, h: Heater) -> f32 {
         match h {

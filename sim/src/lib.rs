@@ -10,6 +10,8 @@
 
 pub mod ensemble;
 pub mod oracle;
+pub mod multi;
 pub mod rig;
 
+pub use multi::{MultiRig, SharedSupply};
 pub use rig::{LinkSetup, Rig};

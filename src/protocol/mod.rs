@@ -11,6 +11,7 @@
 
 pub mod client;
 pub mod command;
+pub mod links;
 pub mod reply;
 pub mod serial;
 pub mod tune_reply;

@@ -86,6 +86,10 @@ pub struct Tick<'a> {
     pub tca_self_c: f32,
     /// The thresholds and targets this morph runs with.
     pub th: &'a Thresholds,
+    /// Most power each heater may take this tick, W: the heater caps, or less where several
+    /// links share one supply budget ([`crate::budget`]); the model strategies' observers are
+    /// fed what the heaters can deliver under it.
+    pub allow_w: Powers,
 }
 
 /// What one strategy decides. The sequencer calls, each tick of a morph: [`Strategy::phase_done`]

@@ -11,6 +11,7 @@ mod calibration;
 mod emulate;
 mod faults;
 mod flash;
+mod gait;
 mod limits;
 mod self_sense;
 mod stored_heat;
@@ -48,6 +49,8 @@ enum Task {
     Warm(warm::Args),
     /// The TCA's self-sensed temperature against its true mean over the hifi ensemble.
     SelfSense(self_sense::Args),
+    /// Several links on one supply budget: the makespan, the budget and the current limit held.
+    Gait(gait::Args),
     /// Build a board's firmware (its feature) and flash it with probe-rs (its chip).
     Flash(flash::Args),
     /// Build a board's firmware, flash and run it, printing the defmt log (probe-rs run).
@@ -70,6 +73,7 @@ fn main() -> ExitCode {
         Task::Limits(a) => limits::run(&a),
         Task::Warm(a) => warm::run(&a),
         Task::SelfSense(a) => self_sense::run(&a),
+        Task::Gait(a) => gait::run_task(&a),
         Task::Flash(a) => flash::run(flash::Action::Flash, &a, &ws),
         Task::Run(a) => flash::run(flash::Action::Run, &a, &ws),
     });

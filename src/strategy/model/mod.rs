@@ -84,6 +84,12 @@ fn deliverable_w(heater: &HeaterConfig, w: f32, supply_v: f32) -> f32 {
     }
 }
 
+/// The most the model may ask of the TCA this tick, W: its boost cap, or less under a shared
+/// supply's allowance.
+fn tca_most_w(t: &Tick) -> f32 {
+    TCA_BOOST_MAX_W.min(t.allow_w.tca_w)
+}
+
 /// Which heaters the model drives in `phase`: (PLA, TCA). The PLA is heated through soften and
 /// bend; the TCA from soften on until lock ends, so it holds the shape while the PLA cools.
 fn driven(phase: Phase) -> (bool, bool) {
@@ -226,7 +232,7 @@ impl ModelDrive {
             || passive
             || (tca_c < self.tca_target_c
                 && self.applied.tca_w
-                    >= deliverable_w(&HeaterConfig::TCA, TCA_BOOST_MAX_W, t.supply_v) - 1e-3
+                    >= deliverable_w(&HeaterConfig::TCA, tca_most_w(t), t.supply_v) - 1e-3
                 && self.observer.measured_rate_k_per_s(HeatedNode::Tca) < MODEL_STALL_RATE_K_PER_S
                 && t.since_start_s > STALL_AFTER_S);
         let overshooting = tca_c > self.tca_target_c + MODEL_PASSIVE_OVERSHOOT_K;
@@ -251,13 +257,14 @@ impl ModelDrive {
         let o = &self.observer;
         let m = t.m;
         let (pla_on, tca_on) = driven(phase);
+        let pla_most_w = PLA_BOOST_MAX_W.min(t.allow_w.pla_w);
         let pla_w = if pla_on {
-            o.power_to_reach_w(HeatedNode::Pla, self.pla_target_c - d_pla, PLA_BOOST_MAX_W)
+            o.power_to_reach_w(HeatedNode::Pla, self.pla_target_c - d_pla, pla_most_w)
         } else {
             0.0
         };
         let tca_w = if tca_on {
-            o.power_to_reach_w(HeatedNode::Tca, self.tca_target_c - d_tca, TCA_BOOST_MAX_W)
+            o.power_to_reach_w(HeatedNode::Tca, self.tca_target_c - d_tca, tca_most_w(t))
         } else {
             0.0
         };
@@ -275,10 +282,12 @@ impl ModelDrive {
         let pla_w = keep(pla_on, pla_w, m.t_pla_c > self.pla_target_c + MODEL_GUARD_K);
         let tca_w = keep(tca_on, tca_w, m.t_tca_c > self.tca_target_c + MODEL_GUARD_K);
         let p = Powers { pla_w, tca_w };
+        // What the heaters deliver under the allowance (the controller caps them to it).
         self.applied = Powers {
             pla_w: deliverable_w(&HeaterConfig::PLA, p.pla_w, t.supply_v),
             tca_w: deliverable_w(&HeaterConfig::TCA, p.tca_w, t.supply_v),
-        };
+        }
+        .min(t.allow_w);
         p
     }
 }

@@ -1,0 +1,626 @@
+//! Several links on one board and one supply: a [`Controller`] per link (its own activity,
+//! calibration, settings, supervisor and alarms) and the supply's scheduler
+//! ([`crate::budget`]) between them. Per tick: queued morphs that now fit start, the scheduler
+//! shares the budget out as allowances and PWM phases, then each link's controller steps with
+//! its own inputs under its allowance. Per line: the address (`@<n>`, `@*`) picks the link;
+//! `GAIT`, `LINKS` and the supply's settings are the board's own.
+//!
+//! A fault on one link stops that link only (each link has its own cut-off, docs/bringup.md);
+//! a fault every link sees (the supply out of range, the shared ambient bead lost) trips every
+//! link's own supervisor, so every link stops and says why. With one link and no budget set,
+//! every line and tick is exactly the controller's own.
+
+use crate::budget::{self, Class, Demand, LinkShare, Share, SupplyBudget, MAX_LINKS};
+use crate::controller::{Config, Controller, Inputs, Outputs};
+use crate::heater::HeaterConfig;
+use crate::protocol::links::{self as wire, Address, LinksCommand, SupplySetting};
+use crate::protocol::{self, Command, ConfigCommand, Mode, OutLine, SimCommand};
+use crate::vocab::{Doing, Phase, Powers};
+use heapless::{Deque, Vec};
+
+/// One link's outputs: its duties and cut-off, and where in the PWM period each heater's
+/// on-window starts (fractions of the period: PLA, TCA).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LinkOutputs {
+    /// Duties and the link's cut-off.
+    pub out: Outputs,
+    /// Start of each heater's on-window, fraction of the period (PLA, TCA).
+    pub phase: [f32; 2],
+}
+
+/// A MORPH waiting for room in the budget.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Queued {
+    radius_mm: f32,
+    mode: Mode,
+    reserve_w: Powers,
+    /// Queue order (lower first).
+    at: u32,
+}
+
+/// Depth of the board's own event queue (queued, dropped): one per link and room to spare.
+const LINK_EVENTS: usize = 2 * MAX_LINKS;
+
+/// The links of one board, at most `N`.
+pub struct Links<const N: usize> {
+    ctrl: Vec<Controller, N>,
+    budget: SupplyBudget,
+    /// When each link's activity was admitted (scheduler order).
+    since: [u32; N],
+    was_busy: [bool; N],
+    queued: [Option<Queued>; N],
+    next_order: u32,
+    shares: [LinkShare; N],
+    events: Deque<OutLine, LINK_EVENTS>,
+    /// Where the round-robin over the links' events goes on.
+    next_event: usize,
+}
+
+impl<const N: usize> Links<N> {
+    /// `count` links (1 to `N`) with the board settings `cfg`, at rest, no budget.
+    pub fn new(cfg: Config, count: usize) -> Self {
+        let count = count.clamp(1, N.min(MAX_LINKS));
+        let mut ctrl = Vec::new();
+        for _ in 0..count {
+            let _ = ctrl.push(Controller::new(cfg));
+        }
+        Links {
+            ctrl,
+            budget: SupplyBudget::UNLIMITED,
+            since: [0; N],
+            was_busy: [false; N],
+            queued: [None; N],
+            next_order: 1,
+            shares: [[Share::default(); 2]; N],
+            events: Deque::new(),
+            next_event: 0,
+        }
+    }
+
+    /// How many links.
+    pub fn count(&self) -> usize {
+        self.ctrl.len()
+    }
+
+    /// Link `k`'s controller (0-based).
+    pub fn link(&self, k: usize) -> &Controller {
+        &self.ctrl[k]
+    }
+
+    /// Link `k`'s controller, to load its settings or feed its timing (0-based).
+    pub fn link_mut(&mut self, k: usize) -> &mut Controller {
+        &mut self.ctrl[k]
+    }
+
+    /// The shared supply's budget and current limit.
+    pub fn budget(&self) -> SupplyBudget {
+        self.budget
+    }
+
+    /// Whether link `k` has a MORPH waiting for the budget.
+    pub fn queued(&self, k: usize) -> bool {
+        self.queued.get(k).is_some_and(|q| q.is_some())
+    }
+
+    /// This tick's share of link `k` (allowance and phase of PLA, TCA).
+    pub fn share(&self, k: usize) -> LinkShare {
+        self.shares[k]
+    }
+
+    /// Link `k`'s outputs now (also right after a command: ABORT zeroes them at once), each
+    /// duty clipped to its window.
+    pub fn outputs(&self, k: usize) -> LinkOutputs {
+        let o = self.ctrl[k].outputs();
+        let s = self.shares[k];
+        LinkOutputs {
+            out: Outputs {
+                pla_duty: budget::clip_duty(o.pla_duty, &s[0]),
+                tca_duty: budget::clip_duty(o.tca_duty, &s[1]),
+                ..o
+            },
+            phase: [s[0].phase, s[1].phase],
+        }
+    }
+
+    /// True while no link is busy and none has a morph queued.
+    pub fn idle(&self) -> bool {
+        (0..self.count()).all(|k| !self.ctrl[k].busy() && !self.queued(k))
+    }
+
+    /// The supply voltage the links read, V: the highest (the cut-offs sit after the sense,
+    /// so each reads the same supply; the highest is the safe side for currents).
+    pub fn supply_v(&self) -> f32 {
+        self.ctrl
+            .iter()
+            .map(|c| c.supply_v())
+            .filter(|v| v.is_finite())
+            .fold(f32::NAN, f32::max)
+    }
+
+    fn demand(&self, k: usize) -> Demand {
+        let c = &self.ctrl[k];
+        let class = match c.doing() {
+            Doing::Tune | Doing::Heat(_) => Class::Fixed,
+            Doing::Morph(Phase::Bend | Phase::Lock) => Class::Holding,
+            Doing::Morph(Phase::Soften | Phase::Rest) => Class::Softening,
+            Doing::Morph(_) | Doing::Idle => Class::Idle,
+        };
+        Demand {
+            class,
+            since: self.since[k],
+            wanted_w: c.wanted(),
+            reserve_w: c.reserve_w(),
+            ohm: c.heater_ohm(),
+        }
+    }
+
+    fn demands(&self) -> Vec<Demand, N> {
+        (0..self.count()).map(|k| self.demand(k)).collect()
+    }
+
+    /// What the running links hold, W.
+    fn held_w(&self) -> f32 {
+        self.demands()
+            .iter()
+            .filter(|d| d.class != Class::Idle)
+            .map(|d| d.reserve_w.pla_w + d.reserve_w.tca_w)
+            .sum()
+    }
+
+    /// One control tick at `now_ms`: `inputs[k]` is link `k`'s frame (its thermistors and
+    /// currents, the shared ambient and supply), `out[k]` gets its outputs.
+    pub fn step(&mut self, now_ms: u64, inputs: &[Inputs], out: &mut [LinkOutputs]) {
+        self.start_queued(now_ms);
+        for k in 0..self.count() {
+            let busy = self.ctrl[k].busy();
+            if busy && !self.was_busy[k] {
+                self.since[k] = self.next_order;
+                self.next_order = self.next_order.wrapping_add(1);
+            }
+            self.was_busy[k] = busy;
+        }
+        let n = self.count();
+        if self.budget.binding() {
+            let demands = self.demands();
+            let v = self.supply_v();
+            budget::allocate(&self.budget, v, &demands, &mut self.shares[..n]);
+        } else {
+            for s in self.shares[..n].iter_mut() {
+                *s = [Share::UNLIMITED; 2];
+            }
+        }
+        for k in 0..n.min(inputs.len()).min(out.len()) {
+            let s = self.shares[k];
+            self.ctrl[k].set_allowance(Powers {
+                pla_w: s[0].allow_w,
+                tca_w: s[1].allow_w,
+            });
+            self.ctrl[k].step(now_ms, &inputs[k]);
+            out[k] = self.outputs(k);
+        }
+    }
+
+    /// Starts the queued morphs the budget now has room for, oldest first; one that does not
+    /// fit keeps every later one waiting (no overtaking).
+    fn start_queued(&mut self, now_ms: u64) {
+        while let Some(k) = (0..self.count())
+            .filter(|&k| self.queued[k].is_some())
+            .min_by_key(|&k| self.queued[k].map_or(u32::MAX, |q| q.at))
+        {
+            let q = self.queued[k].expect("filtered");
+            let ohm = self.ctrl[k].heater_ohm();
+            if !budget::admits(&self.budget, self.supply_v(), &self.demands(), q.reserve_w, ohm) {
+                return;
+            }
+            self.queued[k] = None;
+            let mut refusal = OutLine::new();
+            let cmd = Command::Morph {
+                radius_mm: q.radius_mm,
+                mode: q.mode,
+            };
+            self.ctrl[k].handle(now_ms, cmd, &mut |l: &str| {
+                if l != protocol::OK {
+                    refusal.clear();
+                    let _ = refusal.push_str(l);
+                }
+            });
+            if !refusal.is_empty() {
+                let mut e = OutLine::new();
+                wire::queued_dropped_event(&mut e, &refusal);
+                self.push_event(k, &e);
+            }
+        }
+    }
+
+    /// Queues a board event line of link `k` (addressed where there are several links).
+    fn push_event(&mut self, k: usize, line: &str) {
+        let l = self.addressed(k, line);
+        if self.events.is_full() {
+            self.events.pop_front();
+        }
+        let _ = self.events.push_back(l);
+    }
+
+    /// `line` as link `k` sends it: `@<k> ` first where there are several links.
+    fn addressed(&self, k: usize, line: &str) -> OutLine {
+        let mut l = OutLine::new();
+        if self.count() > 1 {
+            wire::addressed(&mut l, k, line);
+        } else {
+            let _ = l.push_str(line);
+        }
+        l
+    }
+
+    /// The next unsolicited line of any link (the board's own first, then the links in
+    /// turn), addressed where there are several links.
+    pub fn pop_event_line(&mut self) -> Option<OutLine> {
+        if let Some(l) = self.events.pop_front() {
+            return Some(l);
+        }
+        let n = self.count();
+        for i in 0..n {
+            let k = (self.next_event + i) % n;
+            if let Some(l) = self.ctrl[k].pop_event_line() {
+                self.next_event = (k + 1) % n;
+                return Some(self.addressed(k, &l));
+            }
+        }
+        None
+    }
+
+    /// Handles one received line: writes zero or more `data:` lines and exactly one final
+    /// reply through `out`, except for `SIM` commands, returned with their link for the
+    /// caller (a simulated build) to carry out and answer. Empty lines get no reply.
+    pub fn handle_line(
+        &mut self,
+        now_ms: u64,
+        line: &str,
+        out: &mut dyn FnMut(&str),
+    ) -> Option<(usize, SimCommand)> {
+        let (address, rest) = match wire::split_address(line) {
+            Ok(a) => a,
+            Err(e) => {
+                out(&protocol::format_error(&e));
+                return None;
+            }
+        };
+        let n = self.count();
+        match address {
+            Some(Address::Link(k)) if k >= n => {
+                let mut l = OutLine::new();
+                wire::address_past(&mut l, k, n);
+                out(&l);
+                None
+            }
+            Some(Address::Link(k)) => self.board_or_link(now_ms, Some(k), rest, out),
+            Some(Address::All) => {
+                if matches!(protocol::parse_line(rest), Ok(Some(Command::Sim(_)))) {
+                    // A simulated link's SIM line is answered by its rig, one link at a time.
+                    out(&protocol::format_error(&wire::ERR_SIM_EACH));
+                    return None;
+                }
+                for k in 0..n {
+                    self.board_or_link(now_ms, Some(k), rest, &mut |l: &str| {
+                        let mut d = OutLine::new();
+                        wire::each_reply(&mut d, k, l);
+                        out(&d);
+                    });
+                }
+                let mut l = OutLine::new();
+                wire::each_end(&mut l, n);
+                out(&l);
+                None
+            }
+            None => self.board_or_link(now_ms, None, rest, out),
+        }
+    }
+
+    /// A line for the board (GAIT, LINKS, the supply's settings, an unaddressed ABORT) or
+    /// for link `k` (link 1 where none is named).
+    fn board_or_link(
+        &mut self,
+        now_ms: u64,
+        k: Option<usize>,
+        line: &str,
+        out: &mut dyn FnMut(&str),
+    ) -> Option<(usize, SimCommand)> {
+        if let Some(cmd) = wire::parse_links_command(line) {
+            match cmd {
+                Ok(c) => self.links_command(now_ms, c, out),
+                Err(e) => out(&protocol::format_error(&e)),
+            }
+            return None;
+        }
+        let parsed = protocol::parse_line(line);
+        match parsed {
+            Ok(Some(Command::Config(ConfigCommand::Set { name, value }))) => {
+                if let Some(s) = wire::supply_setting(name.as_str()) {
+                    self.set_supply(s, value.as_str(), out);
+                    return None;
+                }
+            }
+            Ok(Some(Command::Abort)) if k.is_none() => {
+                for j in 0..self.count() {
+                    self.queued[j] = None;
+                    self.ctrl[j].handle(now_ms, Command::Abort, &mut |_| {});
+                }
+                out(protocol::OK);
+                return None;
+            }
+            Ok(Some(Command::Help)) if self.count() > 1 => {
+                let mut last = OutLine::new();
+                self.ctrl[0].handle(now_ms, Command::Help, &mut |l: &str| {
+                    if protocol::is_final_reply(l) {
+                        last.clear();
+                        let _ = last.push_str(l);
+                    } else {
+                        out(l);
+                    }
+                });
+                for h in wire::HELP_LINKS {
+                    let mut l = OutLine::new();
+                    protocol::reply::data_text(&mut l, h);
+                    out(&l);
+                }
+                out(&last);
+                return None;
+            }
+            _ => {}
+        }
+        let k = k.unwrap_or(0);
+        match parsed {
+            Ok(Some(Command::Morph { radius_mm, mode })) => {
+                self.morph(now_ms, k, radius_mm, mode, out);
+                None
+            }
+            Ok(Some(Command::Abort)) => {
+                self.queued[k] = None;
+                self.ctrl[k].handle(now_ms, Command::Abort, out);
+                None
+            }
+            _ => self.ctrl[k].handle_line(now_ms, line, out).map(|s| (k, s)),
+        }
+    }
+
+    /// Whether link `k` would refuse a MORPH on its own (busy, faulted, no reading, radius):
+    /// it then answers it itself.
+    fn refuses_morph(&self, k: usize, radius_mm: f32) -> bool {
+        let c = &self.ctrl[k];
+        c.busy()
+            || c.fault().is_some()
+            || !c.measurements().t_pla_c.is_finite()
+            || c.soften_reserve_w(radius_mm).is_none()
+    }
+
+    /// Why link `k` cannot take a morph to `radius_mm` under the budget now, written in `l`;
+    /// `None` if it can (started at once or queued).
+    fn morph_checks(&self, k: usize, radius_mm: f32, l: &mut OutLine) -> bool {
+        if self.queued(k) {
+            *l = protocol::format_error(&wire::ERR_QUEUED);
+            return true;
+        }
+        if let Some(r) = self.ctrl[k].soften_reserve_w(radius_mm) {
+            let needs_w = budget::least_budget_w(r, self.count());
+            if self.budget.binding() && needs_w > self.budget.budget_w {
+                wire::morph_over_budget(l, needs_w, self.budget.budget_w);
+                return true;
+            }
+        }
+        false
+    }
+
+    /// A MORPH for link `k`: started at once where the budget has room for its soften (and
+    /// no morph is queued ahead of it), else queued (`ok`, then `event: queued`).
+    fn morph(&mut self, now_ms: u64, k: usize, radius_mm: f32, mode: Mode, out: &mut dyn FnMut(&str)) {
+        let cmd = Command::Morph { radius_mm, mode };
+        let mut l = OutLine::new();
+        if self.morph_checks(k, radius_mm, &mut l) {
+            return out(&l);
+        }
+        if self.refuses_morph(k, radius_mm) {
+            self.ctrl[k].handle(now_ms, cmd, out);
+            return;
+        }
+        let reserve_w = self.ctrl[k].soften_reserve_w(radius_mm).unwrap_or_default();
+        let ahead = (0..self.count()).any(|j| self.queued(j));
+        let ohm = self.ctrl[k].heater_ohm();
+        let fits = budget::admits(&self.budget, self.supply_v(), &self.demands(), reserve_w, ohm);
+        if !self.budget.binding() || (!ahead && fits) {
+            self.ctrl[k].handle(now_ms, cmd, out);
+            return;
+        }
+        self.queued[k] = Some(Queued {
+            radius_mm,
+            mode,
+            reserve_w,
+            at: self.next_order,
+        });
+        self.next_order = self.next_order.wrapping_add(1);
+        out(protocol::OK);
+        let needs_w = reserve_w.pla_w + reserve_w.tca_w;
+        let free_w = (self.budget.budget_w - self.held_w()).max(0.0);
+        let mut e = OutLine::new();
+        wire::queued_event(&mut e, needs_w, free_w);
+        self.push_event(k, &e);
+    }
+
+    /// GAIT and LINKS.
+    fn links_command(&mut self, now_ms: u64, c: LinksCommand, out: &mut dyn FnMut(&str)) {
+        let mut l = OutLine::new();
+        match c {
+            LinksCommand::Links => {
+                let mut total_w = 0.0;
+                for k in 0..self.count() {
+                    let c = &self.ctrl[k];
+                    let p = c.powers();
+                    let r = c.reserve_w();
+                    let s = self.shares[k];
+                    total_w += p.pla_w + p.tca_w;
+                    l.clear();
+                    wire::links_row(
+                        &mut l,
+                        &wire::LinkRow {
+                            link: k,
+                            phase: c.phase(),
+                            queued: self.queued(k),
+                            power_w: p.pla_w + p.tca_w,
+                            allow_w: s[0].allow_w.min(HeaterConfig::PLA.max_power_w)
+                                + s[1].allow_w.min(HeaterConfig::TCA.max_power_w),
+                            reserve_w: r.pla_w + r.tca_w,
+                        },
+                    );
+                    out(&l);
+                }
+                l.clear();
+                wire::links_end(
+                    &mut l,
+                    self.count(),
+                    total_w,
+                    self.budget.budget_w,
+                    self.budget.limit_a,
+                    self.supply_v(),
+                );
+                out(&l);
+            }
+            LinksCommand::Gait {
+                radii_mm,
+                count,
+                mode,
+            } => {
+                if count != self.count() {
+                    wire::gait_count(&mut l, count, self.count());
+                    return out(&l);
+                }
+                // Every link is checked before any starts: a refused GAIT changes nothing.
+                for (k, &r) in radii_mm[..count].iter().enumerate() {
+                    let mut why = OutLine::new();
+                    if !self.morph_checks(k, r, &mut why) && self.refuses_morph(k, r) {
+                        // The link's own refusal, asked of a copy so nothing changes.
+                        why = self.refusal_of(k, r, mode);
+                    }
+                    if !why.is_empty() {
+                        wire::gait_refused(&mut l, k, &why);
+                        return out(&l);
+                    }
+                }
+                for (k, &r) in radii_mm[..count].iter().enumerate() {
+                    let mut first = OutLine::new();
+                    self.morph(now_ms, k, r, mode, &mut |line: &str| {
+                        if first.is_empty() {
+                            let _ = first.push_str(line);
+                        }
+                    });
+                }
+                out(protocol::OK);
+            }
+        }
+    }
+
+    /// What link `k` answers a MORPH it refuses (busy, faulted, no reading, out of range),
+    /// without starting anything: the refusals are the ones its own MORPH gives.
+    fn refusal_of(&self, k: usize, radius_mm: f32, mode: Mode) -> OutLine {
+        let c = &self.ctrl[k];
+        let mut l = OutLine::new();
+        if c.fault().is_some() || c.busy() || !c.measurements().t_pla_c.is_finite() {
+            c.morph_refusal(&mut l);
+        } else if c.soften_reserve_w(radius_mm).is_none() {
+            let (min, max) = crate::table::range_mm();
+            protocol::reply::radius_out_of_range(&mut l, min, max);
+        }
+        let _ = mode;
+        l
+    }
+
+    /// `CONFIG SET supply_budget_w|supply_limit_a <value>`: range-checked against what the
+    /// links need and what the supply gives; a refusal changes nothing.
+    fn set_supply(&mut self, s: SupplySetting, text: &str, out: &mut dyn FnMut(&str)) {
+        let mut l = OutLine::new();
+        let value = crate::fixed::parse_decimal(text).unwrap_or(f32::NAN);
+        match self.check_supply(s, value) {
+            Ok(()) => {
+                match s {
+                    SupplySetting::BudgetW => self.budget.budget_w = value,
+                    SupplySetting::LimitA => self.budget.limit_a = value,
+                }
+                wire::supply_set(&mut l, s, value);
+            }
+            Err(SupplyRefusal::Range(why)) => wire::supply_refused(&mut l, s, value, why),
+            Err(SupplyRefusal::OverSupply(most_w)) => wire::budget_over_supply(&mut l, value, most_w),
+            Err(SupplyRefusal::UnderReserves(held_w)) => {
+                wire::budget_under_reserves(&mut l, value, held_w)
+            }
+        }
+        out(&l);
+    }
+
+    /// The least budget that lets every link soften its cheapest morph, W.
+    pub fn least_budget_w(&self) -> f32 {
+        let (min_mm, max_mm) = crate::table::range_mm();
+        self.ctrl
+            .iter()
+            .map(|c| {
+                [min_mm, max_mm]
+                    .iter()
+                    .filter_map(|&r| c.soften_reserve_w(r))
+                    .map(|r| budget::least_budget_w(r, self.count()))
+                    .fold(f32::INFINITY, f32::min)
+            })
+            .fold(0.0, f32::max)
+    }
+
+    fn check_supply(&self, s: SupplySetting, value: f32) -> Result<(), SupplyRefusal> {
+        let v = self.supply_v();
+        match s {
+            SupplySetting::BudgetW => {
+                let least = self.least_budget_w();
+                if !(value.is_finite() && value > 0.0 && value <= budget::BUDGET_MAX_W) {
+                    return Err(SupplyRefusal::Range(budget::BudgetError::OutOfRange {
+                        min: least,
+                        max: budget::BUDGET_MAX_W,
+                    }));
+                }
+                if value < least {
+                    return Err(SupplyRefusal::Range(budget::BudgetError::TooSmall { least }));
+                }
+                let held = self.held_w();
+                if value < held {
+                    return Err(SupplyRefusal::UnderReserves(held));
+                }
+                let most_w = self.budget.limit_a * v;
+                if self.budget.limit_a < budget::LIMIT_MAX_A && v.is_finite() && value > most_w {
+                    return Err(SupplyRefusal::OverSupply(most_w));
+                }
+            }
+            SupplySetting::LimitA => {
+                if !(value.is_finite()
+                    && (budget::LIMIT_MIN_A..=budget::LIMIT_MAX_A).contains(&value))
+                {
+                    return Err(SupplyRefusal::Range(budget::BudgetError::OutOfRange {
+                        min: budget::LIMIT_MIN_A,
+                        max: budget::LIMIT_MAX_A,
+                    }));
+                }
+                // One heater's pulse alone must fit: the lowest resistance at the supply read.
+                let v = if v.is_finite() { v } else { budget::NOMINAL_SUPPLY_V };
+                let least = self
+                    .ctrl
+                    .iter()
+                    .flat_map(|c| c.heater_ohm())
+                    .map(|ohm| v / ohm)
+                    .fold(0.0, f32::max);
+                if value < least {
+                    return Err(SupplyRefusal::Range(budget::BudgetError::TooSmall { least }));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Why a supply setting was refused.
+enum SupplyRefusal {
+    Range(budget::BudgetError),
+    OverSupply(f32),
+    UnderReserves(f32),
+}

@@ -1,0 +1,333 @@
+//! `cargo xtask gait`: several links on one supply budget (docs/multilink.md). Four links of
+//! the hifi ensemble (their drawn links, in the medium asked for) morph at once with `GAIT`
+//! on one bench supply, for each budget; each link also morphs alone with no budget. Prints,
+//! per budget, the makespan (every link `done`) against its lower bound (the slowest link's
+//! own morph, and the total energy of the links' own morphs over the budget), the highest
+//! summed heater power of any tick (as the controllers reckon it and as the plants took it)
+//! against the budget, the highest instantaneous current of any PWM period against the
+//! supply's limit, the alarms, and each link's final error against its error alone. Fails if
+//! a tick's reckoned power passes the budget, a period's current passes the limit, or a link
+//! alarms or does not finish.
+
+use crate::strategies::parallel;
+use morphlink::budget::MAX_LINKS;
+use morphlink_plant::hifi::Hifi;
+use morphlink_sim::ensemble::{hifi_draw, Mismatch, TICKS_PER_S};
+use morphlink_sim::{MultiRig, SharedSupply};
+use std::fmt::Write as _;
+
+/// Rest after the last `done` before the radii are read, s (spring-back included).
+pub const SETTLE_S: u64 = 60;
+/// Longest a gait may run, s.
+pub const GAIT_MAX_S: u64 = 3_000;
+/// The makespan aim: at most this many times its lower bound.
+pub const MAKESPAN_AIM: f64 = 1.2;
+/// How much worse than alone a link may land under a budget, percentage points.
+pub const ACCURACY_AIM_PP: f64 = 0.5;
+
+/// Options of the task.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Budgets to run, W (0: no budget).
+    #[arg(long, value_delimiter = ',', default_value = "5,8,12,0")]
+    pub budgets_w: Vec<f32>,
+    /// The bench supply's current limit, A (also set as `supply_limit_a`).
+    #[arg(long, default_value_t = 3.0)]
+    pub limit_a: f32,
+    /// The links' medium.
+    #[arg(long, value_enum, default_value_t = Medium::Water)]
+    pub medium: Medium,
+    /// Targets, one per link, mm.
+    #[arg(long, value_delimiter = ',', default_value = "34,38,42,46")]
+    pub targets_mm: Vec<f32>,
+    /// Worker threads.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Write the per-tick record of the tightest budget here (CSV: time, each link's phase
+    /// and power, the total, the budget), for a plot.
+    #[arg(long)]
+    pub trace: Option<std::path::PathBuf>,
+}
+
+/// The links' medium.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Medium {
+    /// Still water (the paper's bath).
+    Water,
+    /// Still air.
+    Air,
+}
+
+/// The first `n` hifi draws of the strategy charts' ensemble in `medium`, with the noise of
+/// the first one (each link of a rig gets its own seed from it).
+pub fn links(n: usize, medium: Medium) -> Result<(Vec<Hifi>, morphlink::bench::Noise), String> {
+    let mut plants = Vec::new();
+    let mut noise = None;
+    let mut d = 0;
+    while plants.len() < n {
+        let air = Mismatch::draw(crate::strategies::DEFAULT_SEED, d).air;
+        if air == (medium == Medium::Air) {
+            let (spec, nz) = hifi_draw(crate::strategies::DEFAULT_SEED, d)
+                .map_err(|e| format!("hifi draw {d}: {e}"))?;
+            plants.push(Hifi::new(spec).map_err(|e| format!("hifi draw {d}: {e}"))?);
+            noise.get_or_insert(nz);
+        }
+        d += 1;
+    }
+    Ok((plants, noise.expect("n > 0")))
+}
+
+/// What one run gave.
+#[derive(Clone, Debug, Default)]
+pub struct Run {
+    /// Seconds from the command to each link's `done` (NaN: not done).
+    pub done_s: Vec<f64>,
+    /// Each link's true radius after the settle, mm.
+    pub radius_mm: Vec<f64>,
+    /// Energy the heaters took from the command to the last `done`, J.
+    pub energy_j: f64,
+    /// Highest summed power of a tick as the controllers reckon it, W.
+    pub max_reckoned_w: f64,
+    /// Highest summed power of a tick as the plants took it, W.
+    pub max_true_w: f64,
+    /// Highest instantaneous current the heaters on at once drew (or, past the supply's
+    /// limit, would have drawn) in a period, A.
+    pub peak_a: f64,
+    /// Lowest terminal voltage of a period, V.
+    pub min_v: f64,
+    /// Alarm and fault lines.
+    pub alarms: Vec<String>,
+    /// Morphs that waited for the budget.
+    pub queued: usize,
+    /// (time, each link's power, total) per tick, for the trace.
+    pub trace: Vec<(f64, Vec<f64>, f64)>,
+}
+
+/// Runs `plants` on one supply with `budget_w` (0: none): the command `cmd`, then until every
+/// link is done (or [`GAIT_MAX_S`]), then [`SETTLE_S`].
+pub fn run(
+    plants: Vec<Hifi>,
+    noise: morphlink::bench::Noise,
+    budget_w: f32,
+    limit_a: f32,
+    cmd: &str,
+    trace: bool,
+) -> Run {
+    let n = plants.len();
+    let supply = SharedSupply {
+        limit_a: limit_a as f64,
+        ..SharedSupply::STIFF
+    };
+    let mut rig = MultiRig::new(plants, noise, supply);
+    rig.boot(1000);
+    let mut lines = Vec::new();
+    let mut say = |rig: &mut MultiRig<Hifi>, l: &str| {
+        rig.handle_line(l, &mut |r: &str| lines.push(r.to_string()));
+    };
+    say(&mut rig, &format!("CONFIG SET supply_limit_a {limit_a}"));
+    if budget_w > 0.0 {
+        say(&mut rig, &format!("CONFIG SET supply_budget_w {budget_w}"));
+    }
+    let start_ms = rig.now_ms();
+    say(&mut rig, cmd);
+    let mut r = Run {
+        done_s: vec![f64::NAN; n],
+        min_v: f64::INFINITY,
+        ..Run::default()
+    };
+    for l in &lines {
+        if l.starts_with("error") {
+            r.alarms.push(l.clone());
+        }
+    }
+    let dt_s = 1.0 / TICKS_PER_S as f64;
+    let mut last_done_ms = None;
+    loop {
+        rig.tick();
+        let t = rig.last;
+        let elapsed_s = (rig.now_ms() - start_ms) as f64 / 1000.0;
+        let mut events = Vec::new();
+        rig.drain_events(&mut |l: &str| events.push(l.to_string()));
+        for e in events {
+            let k = link_of(&e, n);
+            if e.contains("event: done") && r.done_s[k].is_nan() {
+                r.done_s[k] = elapsed_s;
+            }
+            if e.contains("alarm:") || e.contains("dropped") {
+                r.alarms.push(e.clone());
+            }
+            if e.contains("event: queued") {
+                r.queued += 1;
+            }
+        }
+        if last_done_ms.is_none() {
+            r.energy_j += t.power_w * dt_s;
+            r.max_reckoned_w = r.max_reckoned_w.max(t.reckoned_w);
+            r.max_true_w = r.max_true_w.max(t.power_w);
+            r.peak_a = r.peak_a.max(t.demand_a);
+            r.min_v = r.min_v.min(t.min_v);
+            if trace {
+                let each = (0..n)
+                    .map(|k| {
+                        let p = rig.links.link(k).powers();
+                        (p.pla_w + p.tca_w) as f64
+                    })
+                    .collect();
+                r.trace.push((elapsed_s, each, t.reckoned_w));
+            }
+        }
+        let busy = !rig.links.idle();
+        if last_done_ms.is_none() && !busy {
+            last_done_ms = Some(rig.now_ms());
+        }
+        if let Some(at) = last_done_ms {
+            if rig.now_ms() >= at + SETTLE_S * 1000 {
+                break;
+            }
+        }
+        if elapsed_s > GAIT_MAX_S as f64 {
+            r.alarms.push(format!("not done after {GAIT_MAX_S} s"));
+            break;
+        }
+    }
+    r.radius_mm = (0..n).map(|k| rig.radius_mm(k)).collect();
+    r
+}
+
+/// The link an event line names (`@<n> ...`; link 1 without an address).
+fn link_of(line: &str, n: usize) -> usize {
+    line.strip_prefix('@')
+        .and_then(|s| s.split(' ').next())
+        .and_then(|w| w.parse::<usize>().ok())
+        .map_or(0, |k| (k.max(1) - 1).min(n - 1))
+}
+
+/// The task.
+pub fn run_task(a: &Args) -> Result<(), String> {
+    let n = a.targets_mm.len();
+    if !(1..=MAX_LINKS).contains(&n) {
+        return Err(format!("1 to {MAX_LINKS} targets, one per link"));
+    }
+    let (plants, noise) = links(n, a.medium)?;
+    let gait = format!(
+        "GAIT {}",
+        a.targets_mm.iter().map(|t| t.to_string()).collect::<Vec<_>>().join(" ")
+    );
+    // Each link alone, no budget: its own fastest morph, its energy and its error.
+    let alone_jobs: Vec<usize> = (0..n).collect();
+    let alone: Vec<Run> = parallel(&alone_jobs, a.threads, "links alone", |&k| {
+        let cmd = format!("MORPH {}", a.targets_mm[k]);
+        let plant: Vec<Hifi> = vec![plants[k].clone()];
+        run(plant, noise_of(noise, k), 0.0, a.limit_a, &cmd, false)
+    })?;
+    let alone_s: Vec<f64> = alone.iter().map(|r| r.done_s[0]).collect();
+    let alone_err: Vec<f64> = (0..n)
+        .map(|k| error_pct(alone[k].radius_mm[0], a.targets_mm[k]))
+        .collect();
+    let energy_j: f64 = alone.iter().map(|r| r.energy_j).sum();
+    let slowest_s = alone_s.iter().cloned().fold(0.0, f64::max);
+    let tightest = a
+        .budgets_w
+        .iter()
+        .cloned()
+        .filter(|b| *b > 0.0)
+        .fold(f32::INFINITY, f32::min);
+    let runs: Vec<Run> = parallel(&a.budgets_w, a.threads, "budgets", |&b| {
+        run(plants.clone(), noise, b, a.limit_a, &gait, a.trace.is_some() && b == tightest)
+    })?;
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "{n} hifi links in {:?}, targets {:?} mm, bench supply 12 V, {} A limit, 0.1 ohm",
+        a.medium, a.targets_mm, a.limit_a
+    );
+    let _ = writeln!(
+        out,
+        "alone (no budget): done in {} s; |error| {} %; energy {:.0} J",
+        fmt_list(&alone_s, 1),
+        fmt_list(&alone_err.iter().map(|e| e.abs()).collect::<Vec<_>>(), 2),
+        energy_j
+    );
+    let _ = writeln!(
+        out,
+        "| budget W | makespan s | lower bound s | ratio | max power W (reckoned / true) | peak A | min V | queued | worst |error| vs alone pp | alarms |"
+    );
+    let _ = writeln!(out, "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    let mut failures = Vec::new();
+    for (b, r) in a.budgets_w.iter().zip(&runs) {
+        let makespan = r.done_s.iter().cloned().fold(0.0, f64::max);
+        let all_done = r.done_s.iter().all(|d| d.is_finite());
+        let bound = if *b > 0.0 {
+            slowest_s.max(energy_j / *b as f64)
+        } else {
+            slowest_s
+        };
+        let worse_pp = (0..n)
+            .map(|k| error_pct(r.radius_mm[k], a.targets_mm[k]).abs() - alone_err[k].abs())
+            .fold(f64::NEG_INFINITY, f64::max);
+        let name = if *b > 0.0 { format!("{b}") } else { "none".into() };
+        let _ = writeln!(
+            out,
+            "| {name} | {} | {:.1} | {} | {:.2} / {:.2} | {:.2} | {:.2} | {} | {:+.2} | {} |",
+            if all_done { format!("{makespan:.1}") } else { "not done".into() },
+            bound,
+            if all_done { format!("{:.2}", makespan / bound) } else { "-".into() },
+            r.max_reckoned_w,
+            r.max_true_w,
+            r.peak_a,
+            r.min_v,
+            r.queued,
+            worse_pp,
+            r.alarms.len()
+        );
+        if *b > 0.0 && r.max_reckoned_w > *b as f64 + 1e-3 {
+            failures.push(format!("budget {b} W: a tick reckoned {:.3} W", r.max_reckoned_w));
+        }
+        if r.peak_a > a.limit_a as f64 + 1e-3 {
+            failures.push(format!("budget {name}: a period drew {:.3} A", r.peak_a));
+        }
+        if !all_done || !r.alarms.is_empty() {
+            failures.push(format!("budget {name}: {:?}", r.alarms));
+        }
+    }
+    print!("{out}");
+    if let (Some(path), Some(r)) = (&a.trace, runs.iter().zip(&a.budgets_w).find(|(_, b)| **b == tightest).map(|(r, _)| r)) {
+        let mut csv = String::from("time_s");
+        for k in 0..n {
+            let _ = write!(csv, ",link{}_w", k + 1);
+        }
+        let _ = writeln!(csv, ",total_w,budget_w");
+        for (t, each, total) in &r.trace {
+            let _ = write!(csv, "{t:.1}");
+            for p in each {
+                let _ = write!(csv, ",{p:.3}");
+            }
+            let _ = writeln!(csv, ",{total:.3},{tightest}");
+        }
+        std::fs::write(path, csv).map_err(|e| format!("{}: {e}", path.display()))?;
+    }
+    if failures.is_empty() {
+        Ok(())
+    } else {
+        Err(failures.join("; "))
+    }
+}
+
+/// The noise a rig gives its link `k` (so a link alone reads as it does among the others).
+fn noise_of(noise: morphlink::bench::Noise, k: usize) -> morphlink::bench::Noise {
+    morphlink::bench::Noise {
+        seed: noise.seed.wrapping_add(0x9e37_79b9 * k as u64),
+        ..noise
+    }
+}
+
+fn error_pct(radius_mm: f64, target_mm: f32) -> f64 {
+    100.0 * (radius_mm - target_mm as f64) / target_mm as f64
+}
+
+fn fmt_list(v: &[f64], decimals: usize) -> String {
+    v.iter()
+        .map(|x| format!("{x:.decimals$}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
