@@ -619,10 +619,15 @@ mod tests {
             limit_a: 0.5,
         };
         let pla = |w: f32| Powers { pla_w: w, tca_w: 0.0 };
-        let one = [busy(Class::Holding, 0, (3.0, 0.0), (3.0, 0.0))];
-        assert!(!admits(&tight, 12.0, &one, pla(3.0), [30.0, 6.5]));
-        let one = [busy(Class::Holding, 0, (2.0, 0.0), (2.0, 0.0))];
-        assert!(admits(&tight, 12.0, &one, pla(2.0), [30.0, 6.5]));
+        // (Both heaters of 30 ohm here: a 6.5 ohm TCA's probe alone would pass 0.5 A.)
+        let thirty = |d: Demand| Demand {
+            ohm: [30.0, 30.0],
+            ..d
+        };
+        let one = [thirty(busy(Class::Holding, 0, (3.0, 0.0), (3.0, 0.0)))];
+        assert!(!admits(&tight, 12.0, &one, pla(3.0), [30.0, 30.0]));
+        let one = [thirty(busy(Class::Holding, 0, (2.0, 0.0), (2.0, 0.0)))];
+        assert!(admits(&tight, 12.0, &one, pla(2.0), [30.0, 30.0]));
     }
 
     #[test]

@@ -5,6 +5,11 @@
 //! the plant protocol (`--plant-cmd "<shell command>"`, see `morphlink_plant::wire`). A remote
 //! plant that fails (exits, answers `error:` or garbage, is silent for `--plant-timeout-s`)
 //! ends the run: a message naming the plant on stderr and exit code 1.
+//!
+//! `--links N` puts N links on the one simulated board (docs/multilink.md): each its own
+//! plant (`--plant-cmd` given once per link drives links 1, 2, ... from outside; the rest are
+//! in-process), all on one bench supply with an internal resistance and a current limit
+//! (`--supply-limit-a`), lines addressed `@<n>`.
 use clap::Parser;
 use morphlink::controller::TICK_MS;
 use morphlink::protocol::{
@@ -14,7 +19,7 @@ use morphlink_host::flash_file;
 use morphlink_host::plants::{self, PlantKind};
 use morphlink_host::remote_plant::RemotePlant;
 use morphlink_plant::Plant;
-use morphlink_sim::{LinkSetup, Rig};
+use morphlink_sim::{LinkSetup, MultiRig, Rig, SharedSupply};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{self, TryRecvError};
@@ -41,8 +46,19 @@ struct Cli {
     plant: PlantKind,
     /// Run the plant as this shell command (`sh -c`), spoken to over plant protocol 1 on its
     /// stdin/stdout, instead of an in-process plant.
-    #[arg(long, value_name = "SHELL COMMAND", conflicts_with = "plant")]
-    plant_cmd: Option<String>,
+    /// With `--links`, given once per link: links 1, 2, ... in order (the rest in-process).
+    #[arg(long, value_name = "SHELL COMMAND")]
+    plant_cmd: Vec<String>,
+    /// Links on the one simulated board, each its own plant (1 to 4; docs/multilink.md).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=4))]
+    links: u8,
+    /// The shared bench supply's current limit, A (constant-current mode beyond it: the
+    /// supply sags). With one link the plant's own supply is used, as before.
+    #[arg(long, default_value_t = SharedSupply::STIFF.limit_a)]
+    supply_limit_a: f64,
+    /// The shared bench supply's internal resistance, ohm.
+    #[arg(long, default_value_t = SharedSupply::STIFF.internal_ohm)]
+    supply_ohm: f64,
     /// How long to wait for each reply of a `--plant-cmd` plant, s.
     #[arg(long, default_value_t = morphlink_host::remote_plant::REPLY_TIMEOUT.as_secs_f64(),
           value_parser = parse_timeout)]
@@ -68,6 +84,103 @@ fn parse_timeout(s: &str) -> Result<f64, String> {
 }
 
 type SimRig = Rig<Box<dyn Plant>>;
+type SimBoard = MultiRig<Box<dyn Plant>>;
+
+/// What the run loop asks of a simulated board: one link's rig or several links' board.
+trait Board {
+    fn tick(&mut self);
+    fn drain_events(&mut self, out: &mut dyn FnMut(&str));
+    fn handle_line(&mut self, line: &str, out: &mut dyn FnMut(&str));
+    fn failure(&self) -> Option<String>;
+    fn now_ms(&self) -> u64;
+    fn waited_ms(&self) -> u64;
+    fn busy(&self) -> bool;
+    fn saves(&self) -> u32;
+    fn flash(&self) -> Option<&morphlink_sim::rig::SimFlash>;
+    fn summary(&self) -> String;
+}
+
+impl Board for SimRig {
+    fn tick(&mut self) {
+        Rig::tick(self);
+    }
+    fn drain_events(&mut self, out: &mut dyn FnMut(&str)) {
+        Rig::drain_events(self, &mut |l: &str| out(l));
+    }
+    fn handle_line(&mut self, line: &str, out: &mut dyn FnMut(&str)) {
+        Rig::handle_line(self, line, &mut |l: &str| out(l));
+    }
+    fn failure(&self) -> Option<String> {
+        self.plant_failure().map(str::to_string)
+    }
+    fn now_ms(&self) -> u64 {
+        Rig::now_ms(self)
+    }
+    fn waited_ms(&self) -> u64 {
+        Rig::waited_ms(self)
+    }
+    fn busy(&self) -> bool {
+        self.ctrl.busy()
+    }
+    fn saves(&self) -> u32 {
+        Rig::saves(self)
+    }
+    fn flash(&self) -> Option<&morphlink_sim::rig::SimFlash> {
+        Rig::flash(self)
+    }
+    fn summary(&self) -> String {
+        format!(
+            "{} after {:.1} s simulated; link radius {:.2} mm",
+            self.ctrl.phase().as_str(),
+            Rig::now_ms(self) as f64 / 1000.0,
+            self.radius_mm()
+        )
+    }
+}
+
+impl Board for SimBoard {
+    fn tick(&mut self) {
+        MultiRig::tick(self);
+    }
+    fn drain_events(&mut self, out: &mut dyn FnMut(&str)) {
+        MultiRig::drain_events(self, &mut |l: &str| out(l));
+    }
+    fn handle_line(&mut self, line: &str, out: &mut dyn FnMut(&str)) {
+        MultiRig::handle_line(self, line, &mut |l: &str| out(l));
+    }
+    fn failure(&self) -> Option<String> {
+        self.plant_failure().map(|(k, w)| format!("link {}: {w}", k + 1))
+    }
+    fn now_ms(&self) -> u64 {
+        MultiRig::now_ms(self)
+    }
+    fn waited_ms(&self) -> u64 {
+        MultiRig::waited_ms(self)
+    }
+    fn busy(&self) -> bool {
+        !self.links.idle()
+    }
+    fn saves(&self) -> u32 {
+        0
+    }
+    fn flash(&self) -> Option<&morphlink_sim::rig::SimFlash> {
+        None
+    }
+    fn summary(&self) -> String {
+        let radii: Vec<String> = (0..self.count())
+            .map(|k| format!("{:.2}", self.radius_mm(k)))
+            .collect();
+        let phases: Vec<&str> = (0..self.count())
+            .map(|k| self.links.link(k).phase().as_str())
+            .collect();
+        format!(
+            "{} after {:.1} s simulated; link radii {} mm",
+            phases.join(","),
+            MultiRig::now_ms(self) as f64 / 1000.0,
+            radii.join(", ")
+        )
+    }
+}
 
 #[derive(Clone, Copy)]
 enum Speed {
@@ -91,14 +204,14 @@ fn parse_speed(s: &str) -> Result<Speed, String> {
 /// Stops at a failed plant (the caller ends the run). A SAVE's reply goes out only once the
 /// flash file is written (`error: storage` if it could not be).
 fn feed(
-    rig: &mut SimRig,
+    rig: &mut dyn Board,
     asm: &mut LineAssembler,
     bytes: &[u8],
     flash_file: Option<&Path>,
     emit: &mut impl FnMut(&str),
 ) {
     for &b in bytes {
-        if rig.plant_failure().is_some() {
+        if rig.failure().is_some() {
             return;
         }
         match asm.push(b) {
@@ -132,9 +245,9 @@ fn feed(
     }
 }
 
-/// The plant the command line asks for.
-fn plant(cli: &Cli, setup: &LinkSetup) -> Result<Box<dyn Plant>, Stop> {
-    match &cli.plant_cmd {
+/// The plant of link `k` (0-based) the command line asks for.
+fn plant(cli: &Cli, setup: &LinkSetup, k: usize) -> Result<Box<dyn Plant>, Stop> {
+    match cli.plant_cmd.get(k) {
         Some(cmd) => {
             let tick_s = TICK_MS as f64 / 1000.0;
             let timeout = Duration::from_secs_f64(cli.plant_timeout_s);
@@ -148,6 +261,22 @@ fn plant(cli: &Cli, setup: &LinkSetup) -> Result<Box<dyn Plant>, Stop> {
 fn main() {
     let cli = Cli::parse();
     // A flash file the run could not read or keep is refused before anything runs.
+    if cli.plant_cmd.len() > cli.links as usize {
+        eprintln!(
+            "morph-sim: {} --plant-cmd for {} link(s): give it at most once per link",
+            cli.plant_cmd.len(),
+            cli.links
+        );
+        std::process::exit(2);
+    }
+    if cli.links > 1 && cli.flash_file.is_some() {
+        eprintln!("morph-sim: --flash-file keeps one link's settings; it needs --links 1");
+        std::process::exit(2);
+    }
+    if !(cli.supply_limit_a > 0.0 && cli.supply_ohm >= 0.0 && cli.supply_ohm < 10.0) {
+        eprintln!("morph-sim: --supply-limit-a must be above 0 A and --supply-ohm 0..10 ohm");
+        std::process::exit(2);
+    }
     if let Some(path) = &cli.flash_file {
         if let Err(why) = flash_file::check(path) {
             eprintln!("morph-sim: --flash-file {}: {why}", path.display());
@@ -181,11 +310,29 @@ fn run(cli: &Cli) -> Result<(), Stop> {
         seed: cli.seed,
         ..LinkSetup::NOMINAL
     };
-    let mut rig: SimRig = Rig::with_plant(plant(cli, &setup)?, setup.noise());
-    rig.bench.set_current_sense(!cli.thermistors_only);
-    if let Some(path) = &cli.flash_file {
-        rig.boot_storage(flash_file::read(path));
-    }
+    let mut board: Box<dyn Board> = if cli.links == 1 {
+        let mut rig: SimRig = Rig::with_plant(plant(cli, &setup, 0)?, setup.noise());
+        rig.bench.set_current_sense(!cli.thermistors_only);
+        if let Some(path) = &cli.flash_file {
+            rig.boot_storage(flash_file::read(path));
+        }
+        Box::new(rig)
+    } else {
+        let plants = (0..cli.links as usize)
+            .map(|k| plant(cli, &setup, k))
+            .collect::<Result<Vec<_>, _>>()?;
+        let supply = SharedSupply {
+            open_v: setup.supply_v,
+            internal_ohm: cli.supply_ohm,
+            limit_a: cli.supply_limit_a,
+        };
+        let mut rig: SimBoard = MultiRig::new(plants, setup.noise(), supply);
+        for b in &mut rig.benches {
+            b.set_current_sense(!cli.thermistors_only);
+        }
+        Box::new(rig)
+    };
+    let rig = board.as_mut();
 
     let (tx, rx) = mpsc::channel::<Vec<u8>>();
     std::thread::spawn(move || {
@@ -218,7 +365,7 @@ fn run(cli: &Cli) -> Result<(), Stop> {
         while input_open {
             match rx.try_recv() {
                 Ok(bytes) => feed(
-                    &mut rig,
+                    rig,
                     &mut asm,
                     &bytes,
                     cli.flash_file.as_deref(),
@@ -228,16 +375,16 @@ fn run(cli: &Cli) -> Result<(), Stop> {
                 Err(TryRecvError::Disconnected) => input_open = false,
             }
         }
-        if let Some(why) = rig.plant_failure() {
-            return Err(Stop::PlantFailed(why.to_string()));
+        if let Some(why) = rig.failure() {
+            return Err(Stop::PlantFailed(why));
         }
         rig.tick();
         rig.drain_events(&mut emit);
-        if let Some(why) = rig.plant_failure() {
-            return Err(Stop::PlantFailed(why.to_string()));
+        if let Some(why) = rig.failure() {
+            return Err(Stop::PlantFailed(why));
         }
         let sim_s = rig.now_ms() as f64 / 1000.0;
-        if !input_open && !rig.ctrl.busy() {
+        if !input_open && !rig.busy() {
             break;
         }
         if sim_s >= cli.max_time_s {
@@ -249,10 +396,10 @@ fn run(cli: &Cli) -> Result<(), Stop> {
         }
         match cli.speed {
             // Nothing running and input still open: wait for input instead of spinning.
-            Speed::Max if input_open && !rig.ctrl.busy() => {
+            Speed::Max if input_open && !rig.busy() => {
                 if let Ok(bytes) = rx.recv_timeout(Duration::from_millis(50)) {
                     feed(
-                        &mut rig,
+                        rig,
                         &mut asm,
                         &bytes,
                         cli.flash_file.as_deref(),
@@ -271,11 +418,6 @@ fn run(cli: &Cli) -> Result<(), Stop> {
             }
         }
     }
-    eprintln!(
-        "morph-sim: {} after {:.1} s simulated; link radius {:.2} mm",
-        rig.ctrl.phase().as_str(),
-        rig.now_ms() as f64 / 1000.0,
-        rig.radius_mm()
-    );
+    eprintln!("morph-sim: {}", rig.summary());
     Ok(())
 }

@@ -1,0 +1,290 @@
+//! Several links on one board and one supply (`morphlink::links`, docs/multilink.md): one link
+//! behaves exactly as the controller alone; under a budget no tick passes it and no PWM period
+//! passes the supply's current limit; a fault on one link stops that link only; bad input is
+//! refused and changes nothing.
+
+use morphlink::bench::{Bench, Noise};
+use morphlink::controller::{Config, Controller, TICK_MS};
+use morphlink::links::{LinkOutputs, Links};
+use morphlink::vocab::Phase;
+use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
+use morphlink_plant::Lumped;
+use morphlink_sim::{LinkSetup, MultiRig, SharedSupply};
+
+/// Four nominal lumped links on a bench supply of `limit_a`.
+fn four(limit_a: f64) -> MultiRig<Lumped> {
+    let plants = (0..4).map(|_| LinkSetup::NOMINAL.lumped());
+    let mut rig = MultiRig::new(
+        plants,
+        LinkSetup::NOMINAL.noise(),
+        SharedSupply {
+            limit_a,
+            ..SharedSupply::STIFF
+        },
+    );
+    rig.boot(1000);
+    rig
+}
+
+/// The reply lines to `line`.
+fn say<P: morphlink_plant::Plant>(rig: &mut MultiRig<P>, line: &str) -> Vec<String> {
+    let mut v = Vec::new();
+    rig.handle_line(line, &mut |l: &str| v.push(l.to_string()));
+    v
+}
+
+/// Runs until every link is idle (at most `max_s`), collecting event lines; checks `each`
+/// after every tick.
+fn run_until_idle<P: morphlink_plant::Plant>(
+    rig: &mut MultiRig<P>,
+    max_s: u64,
+    mut each: impl FnMut(&MultiRig<P>),
+) -> Vec<String> {
+    let mut events = Vec::new();
+    for _ in 0..max_s * 1000 / TICK_MS {
+        rig.tick();
+        rig.drain_events(&mut |l: &str| events.push(l.to_string()));
+        each(rig);
+        if rig.links.idle() {
+            break;
+        }
+    }
+    events
+}
+
+#[test]
+fn one_link_behaves_exactly_as_the_controller_alone() {
+    let cfg = Config::DEFAULT;
+    let noise = Noise::NOMINAL;
+    let mut alone = Controller::new(cfg);
+    let mut links: Links<1> = Links::new(cfg, 1);
+    let mut a = Bench::new(LinkSetup::NOMINAL.lumped(), cfg, noise);
+    let mut b = Bench::new(LinkSetup::NOMINAL.lumped(), cfg, noise);
+    let script = [
+        (5, "MORPH 38"),
+        (30, "STATUS"),
+        (40, "HELP"),
+        (50, "CONFIG"),
+        (60, "RANGE"),
+        (70, "MORPH 40"),
+        (80, "bogus"),
+        (90, "@1 STATUS"),
+        (400, "ABORT"),
+        (410, "MORPH 45 gated"),
+    ];
+    let mut out = [LinkOutputs::default()];
+    for tick in 0..3000u64 {
+        let now = tick * TICK_MS;
+        for (at, line) in script {
+            if at == tick && line != "@1 STATUS" {
+                let (mut ra, mut rb) = (Vec::new(), Vec::new());
+                alone.handle_line(now, line, &mut |l: &str| ra.push(l.to_string()));
+                links.handle_line(now, line, &mut |l: &str| rb.push(l.to_string()));
+                assert_eq!(ra, rb, "{line}");
+            }
+        }
+        let (ia, ib) = (a.inputs(now), b.inputs(now));
+        assert_eq!(ia, ib);
+        let oa = alone.step(now, &ia);
+        links.step(now, &[ib], &mut out);
+        assert_eq!(oa, out[0].out, "tick {tick}");
+        assert_eq!(out[0].phase, [0.0, 0.0]);
+        a.drive(now, oa);
+        b.drive(now, out[0].out);
+        a.run(now, TICK_MS as f64 / 1000.0);
+        b.run(now, TICK_MS as f64 / 1000.0);
+        loop {
+            let (ea, eb) = (alone.pop_event_line(), links.pop_event_line());
+            assert_eq!(ea, eb);
+            if ea.is_none() {
+                break;
+            }
+        }
+    }
+    // The address of the one link is accepted and means it.
+    let mut r = Vec::new();
+    links.handle_line(300_000, "@1 STATUS", &mut |l: &str| r.push(l.to_string()));
+    let mut s = Vec::new();
+    alone.handle_line(300_000, "STATUS", &mut |l: &str| s.push(l.to_string()));
+    assert_eq!(r, s);
+}
+
+#[test]
+fn under_a_budget_no_tick_passes_it_no_period_passes_the_current_limit_and_every_link_finishes() {
+    for (budget_w, limit_a) in [(5.0, 3.0), (8.0, 3.0), (12.0, 2.5)] {
+        let mut rig = four(limit_a);
+        assert!(say(&mut rig, &format!("CONFIG SET supply_limit_a {limit_a}"))[0].starts_with("ok"));
+        assert!(say(&mut rig, &format!("CONFIG SET supply_budget_w {budget_w}"))[0].starts_with("ok"));
+        assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
+        let (mut max_w, mut max_a) = (0.0f64, 0.0f64);
+        let events = run_until_idle(&mut rig, 1500, |r| {
+            max_w = max_w.max(r.last.reckoned_w);
+            max_a = max_a.max(r.last.demand_a);
+        });
+        assert!(max_w <= budget_w + 1e-3, "{budget_w} W: a tick reckoned {max_w} W");
+        assert!(max_a <= limit_a + 1e-3, "{limit_a} A: a period drew {max_a} A");
+        for k in 1..=4 {
+            let done = events
+                .iter()
+                .any(|e| e.starts_with(&format!("@{k} event: done")));
+            assert!(done, "{budget_w} W: link {k} not done: {events:?}");
+        }
+        assert!(
+            !events.iter().any(|e| e.contains("alarm:")),
+            "{budget_w} W: {events:?}"
+        );
+        // A budget this small cannot soften four links at once: some morph waited.
+        assert!(events.iter().any(|e| e.contains("event: queued")));
+    }
+}
+
+#[test]
+fn a_fault_on_one_link_stops_it_and_the_others_finish() {
+    for fault in [
+        "SIM FAULT heater-open pla",
+        "SIM FAULT heater-stuck tca",
+        "SIM FAULT thermistor-open pla",
+        "SIM FAULT thermistor-short tca",
+        "SIM FAULT thermistor-stuck pla",
+    ] {
+        let mut rig = four(3.0);
+        say(&mut rig, "CONFIG SET supply_limit_a 3");
+        say(&mut rig, "CONFIG SET supply_budget_w 12");
+        assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
+        for _ in 0..20 {
+            rig.tick();
+        }
+        let r = say(&mut rig, &format!("@2 {fault}"));
+        assert!(r[0].starts_with("ok"), "{fault}: {r:?}");
+        let events = run_until_idle(&mut rig, 1500, |_| {});
+        let alarms: Vec<_> = events.iter().filter(|e| e.contains("alarm:")).collect();
+        assert!(!alarms.is_empty(), "{fault}: no alarm");
+        assert!(
+            alarms.iter().all(|a| a.starts_with("@2 ")),
+            "{fault}: another link alarmed: {alarms:?}"
+        );
+        assert_eq!(rig.links.link(1).phase(), Phase::Fault, "{fault}");
+        assert!(!rig.links.link(1).outputs().supply_on, "{fault}: link 2's cut-off closed");
+        for k in [1, 3, 4] {
+            assert!(
+                events.iter().any(|e| e.starts_with(&format!("@{k} event: done"))),
+                "{fault}: link {k} did not finish: {events:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_shared_fault_stops_every_link_and_each_says_why() {
+    let mut rig = four(10.0);
+    assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
+    for _ in 0..20 {
+        rig.tick();
+    }
+    // The shared supply falls below what the heaters are rated for.
+    assert!(say(&mut rig, "@1 SIM SUPPLY 7")[0].starts_with("ok"));
+    let events = run_until_idle(&mut rig, 60, |_| {});
+    for k in 1..=4 {
+        assert!(
+            events
+                .iter()
+                .any(|e| e.starts_with(&format!("@{k} alarm: supply-out-of-range"))),
+            "link {k}: {events:?}"
+        );
+        assert_eq!(rig.links.link(k - 1).phase(), Phase::Fault);
+    }
+}
+
+#[test]
+fn bad_input_is_refused_with_a_clear_error_and_changes_nothing() {
+    let mut rig = four(3.0);
+    let before = say(&mut rig, "LINKS");
+    for (line, starts) in [
+        ("@5 STATUS", "error: out-of-range no link 5; this board has links 1 to 4"),
+        ("@0 STATUS", "error: bad-argument"),
+        ("@x MORPH 38", "error: bad-argument"),
+        ("@2", "error: bad-argument"),
+        ("GAIT 38 40", "error: bad-argument GAIT took 2 radii; this board has 4 links"),
+        ("GAIT 38 40 42 46 50", "error: bad-argument"),
+        ("GAIT 38 40 42 999", "error: out-of-range"),
+        ("CONFIG SET supply_budget_w 0", "error: out-of-range supply_budget_w takes"),
+        ("CONFIG SET supply_budget_w nan", "error: out-of-range supply_budget_w takes"),
+        ("CONFIG SET supply_budget_w 0.5", "error: out-of-range supply_budget_w 0.50 W is too small"),
+        ("CONFIG SET supply_limit_a 1", "error: out-of-range supply_limit_a 1.00 A is too small"),
+        ("CONFIG SET supply_limit_a -1", "error: out-of-range supply_limit_a takes"),
+        ("@* SIM STATE", "error: bad-argument"),
+        ("LINKS 2", "error: bad-argument"),
+    ] {
+        let r = say(&mut rig, line);
+        assert_eq!(r.len(), 1, "{line}: {r:?}");
+        assert!(r[0].starts_with(starts), "{line}: {r:?}");
+    }
+    assert_eq!(say(&mut rig, "LINKS"), before, "a refusal changed something");
+    assert!(rig.links.idle());
+    // A budget raised past what the supply gives at its limit is refused.
+    say(&mut rig, "CONFIG SET supply_limit_a 2");
+    let r = say(&mut rig, "CONFIG SET supply_budget_w 30");
+    assert!(r[0].starts_with("error: out-of-range supply_budget_w 30.00 W is more than the supply gives"), "{r:?}");
+    // Lowered under what running morphs hold: refused; raised while they run: taken.
+    say(&mut rig, "CONFIG SET supply_limit_a 3");
+    say(&mut rig, "CONFIG SET supply_budget_w 12");
+    say(&mut rig, "GAIT 34 38 42 46");
+    for _ in 0..30 {
+        rig.tick();
+    }
+    let r = say(&mut rig, "CONFIG SET supply_budget_w 4");
+    assert!(r[0].starts_with("error: busy supply_budget_w 4.00 W is less than"), "{r:?}");
+    assert_eq!(rig.links.budget().budget_w, 12.0);
+    assert_eq!(say(&mut rig, "CONFIG SET supply_budget_w 20"), ["ok supply_budget_w=20.00 saved=no"]);
+    // A link whose thermistor is missing refuses its morph; the GAIT starts nothing.
+    let mut rig = four(3.0);
+    say(&mut rig, "@3 SIM FAULT thermistor-open pla");
+    for _ in 0..20 {
+        rig.tick();
+    }
+    let r = say(&mut rig, "GAIT 34 38 42 46");
+    assert!(r[0].starts_with("error: fault-latched"), "{r:?}");
+    assert!(r[0].ends_with("(link 3; no link was started)"), "{r:?}");
+    assert!(rig.links.idle());
+}
+
+#[test]
+fn an_unaddressed_abort_stops_every_link_and_empties_the_queue() {
+    let mut rig = four(3.0);
+    say(&mut rig, "CONFIG SET supply_budget_w 5");
+    assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
+    for _ in 0..30 {
+        rig.tick();
+    }
+    assert!((0..4).any(|k| rig.links.queued(k)));
+    assert_eq!(say(&mut rig, "ABORT"), ["ok"]);
+    for k in 0..4 {
+        assert!(!rig.links.queued(k));
+        let o = rig.links.outputs(k).out;
+        assert_eq!((o.pla_duty, o.tca_duty), (0.0, 0.0));
+    }
+    assert!(rig.links.idle());
+}
+
+#[test]
+fn four_hifi_links_under_8_w_finish_within_the_budget() {
+    let spec = HifiSpec::nominal(LinkSetup::NOMINAL.params, Grid::Reduced).unwrap();
+    let plant = Hifi::new(spec).unwrap();
+    let mut rig = MultiRig::new(
+        (0..4).map(|_| plant.clone()),
+        LinkSetup::NOMINAL.noise(),
+        SharedSupply {
+            limit_a: 3.0,
+            ..SharedSupply::STIFF
+        },
+    );
+    rig.boot(1000);
+    say(&mut rig, "CONFIG SET supply_limit_a 3");
+    say(&mut rig, "CONFIG SET supply_budget_w 8");
+    assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
+    let mut max_w = 0.0f64;
+    let events = run_until_idle(&mut rig, 1500, |r| max_w = max_w.max(r.last.reckoned_w));
+    assert!(max_w <= 8.0 + 1e-3, "{max_w}");
+    assert!(!events.iter().any(|e| e.contains("alarm:")), "{events:?}");
+    assert_eq!(events.iter().filter(|e| e.contains("event: done")).count(), 4, "{events:?}");
+}
