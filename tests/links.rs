@@ -288,3 +288,4 @@ fn four_hifi_links_under_8_w_finish_within_the_budget() {
     assert!(!events.iter().any(|e| e.contains("alarm:")), "{events:?}");
     assert_eq!(events.iter().filter(|e| e.contains("event: done")).count(), 4, "{events:?}");
 }
+

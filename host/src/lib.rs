@@ -8,6 +8,7 @@
 pub mod charts;
 pub mod emulator;
 pub mod flash_file;
+pub mod gait_chart;
 pub mod plants;
 pub mod plot;
 pub mod remote_plant;

@@ -51,8 +51,26 @@ fn word_ends(rest: &str) -> bool {
     rest.is_empty() || rest.starts_with(' ')
 }
 
-/// Classifies one received line (without its line ending).
+/// The link an unsolicited line of a board with several links names (`@2 event: ...` is link
+/// 1, 0-based) and the line without its address; `None` and the whole line for a line without
+/// one (a board with one link, and every command's reply).
+pub fn link_of(line: &str) -> (Option<usize>, &str) {
+    let Some(rest) = line.strip_prefix('@') else {
+        return (None, line);
+    };
+    let Some((word, rest)) = rest.split_once(' ') else {
+        return (None, line);
+    };
+    match word.parse::<usize>() {
+        Ok(n) if n >= 1 => (Some(n - 1), rest),
+        _ => (None, line),
+    }
+}
+
+/// Classifies one received line (without its line ending); a line addressed to a link
+/// (`@2 event: done ...`) is classified by what follows its address.
 pub fn classify(line: &str) -> LineKind {
+    let line = link_of(line).1;
     if let Some(rest) = line.strip_prefix(OK) {
         if word_ends(rest) {
             return LineKind::Ok;

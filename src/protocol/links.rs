@@ -143,6 +143,17 @@ pub fn parse_links_command(line: &str) -> Option<Result<LinksCommand, ProtoError
     }))
 }
 
+/// Whether a board of several links would parse `line` (an address, then a command: GAIT,
+/// LINKS or any one link's command); the error it would answer. What a client checks a script
+/// against before sending anything. Whether the link exists is the board's to say.
+pub fn check_line(line: &str) -> Result<(), ProtoError> {
+    let (_, rest) = split_address(line)?;
+    match parse_links_command(rest) {
+        Some(r) => r.map(|_| ()),
+        None => super::parse_line(rest).map(|_| ()),
+    }
+}
+
 /// Which supply setting `CONFIG SET <name> ...` names, if any.
 pub fn supply_setting(name: &str) -> Option<SupplySetting> {
     SupplySetting::ALL

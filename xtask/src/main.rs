@@ -73,7 +73,7 @@ fn main() -> ExitCode {
         Task::Limits(a) => limits::run(&a),
         Task::Warm(a) => warm::run(&a),
         Task::SelfSense(a) => self_sense::run(&a),
-        Task::Gait(a) => gait::run_task(&a),
+        Task::Gait(a) => gait::run_task(&a, &ws.root),
         Task::Flash(a) => flash::run(flash::Action::Flash, &a, &ws),
         Task::Run(a) => flash::run(flash::Action::Run, &a, &ws),
     });

@@ -79,7 +79,7 @@ enum Cmd {
     },
     /// The four-bar with the locked link as its coupler (docs/fourbar.md): the foot path for a
     /// radius, a chart of the paths over the reachable radii, or the radius for a wanted path.
-    #[command(group(ArgGroup::new("what").required(true).args(["radius_mm", "straight", "chart", "want"])))]
+    #[command(group(ArgGroup::new("what").required(true).args(["radius_mm", "straight", "chart", "want", "gait"])))]
     Fourbar {
         /// The locked link's radius, mm (within the reachable range, `RANGE`).
         #[arg(long)]
@@ -96,6 +96,10 @@ enum Cmd {
         /// Find the radius that gives a foot path property: lowest_mm=, stride_mm= or height_mm=.
         #[arg(long, value_name = "PROPERTY=VALUE")]
         want: Option<String>,
+        /// A gait of several legs, one morphing link each: the radius per leg for a property
+        /// wanted per leg, and the `GAIT` line that morphs them all (docs/multilink.md).
+        #[arg(long, value_name = "PROPERTY=V1,V2,...")]
+        gait: Option<String>,
     },
 }
 
@@ -154,9 +158,10 @@ fn run(cli: Cli) -> Result<(), String> {
             json,
             chart,
             want,
+            gait,
         } => {
             let g = file::load_with_fourbar(&link)?.1;
-            if json && (chart.is_some() || want.is_some()) {
+            if json && (chart.is_some() || want.is_some() || gait.is_some()) {
                 return Err("--json goes with --radius-mm or --straight".into());
             }
             if let Some(path) = chart {
@@ -164,6 +169,8 @@ fn run(cli: Cli) -> Result<(), String> {
                 println!("wrote {}", path.display());
             } else if let Some(w) = want {
                 print!("{}", fourbar_inverse(&p, &g, &w)?);
+            } else if let Some(w) = gait {
+                print!("{}", fourbar_gait(&p, &g, &w)?);
             } else {
                 let radius = if straight { None } else { radius_mm };
                 let (lo, hi) = fourbar::reachable_radii_mm(&p);
@@ -438,6 +445,64 @@ fn morph_line(radius_mm: f64, (lo, hi): (f64, f64)) -> String {
         .clamp((lo * 100.0).ceil(), (hi * 100.0).floor())
         / 100.0;
     format!("MORPH {r:.2}")
+}
+
+/// `--gait property=v1,v2,...`: for each leg the radius that gives its value (the one nearest
+/// the middle of the reachable range where several do), then the `GAIT` line of them all.
+fn fourbar_gait(p: &LinkParams, g: &FourBarGeometry, spec: &str) -> Result<String, String> {
+    let (name, values) = spec.split_once('=').ok_or(
+        "--gait takes PROPERTY=V1,V2,..., one value per leg, e.g. stride_mm=26,25.5,26.5,25",
+    )?;
+    let prop = Property::parse(name.trim())
+        .ok_or(format!("--gait: unknown property {name:?}"))?;
+    let range = fourbar::reachable_radii_mm(p);
+    let mid = 0.5 * (range.0 + range.1);
+    let mut out = String::new();
+    let mut radii = Vec::new();
+    for (leg, v) in values.split(',').enumerate() {
+        let want_mm: f64 = v
+            .trim()
+            .parse()
+            .ok()
+            .filter(|v: &f64| v.is_finite())
+            .ok_or(format!("--gait: leg {}: {v:?} is not a number of mm", leg + 1))?;
+        let sols = match fourbar::inverse(*g, p.geometry.length_m, range, prop, want_mm)
+            .map_err(|e| e.to_string())?
+        {
+            Inverse::Found(sols) => sols,
+            Inverse::Unreachable { span_mm, .. } => {
+                return Err(format!(
+                    "--gait: leg {}: no reachable radius gives {} = {want_mm} mm (it spans \
+                     {:.3}..{:.3} mm)",
+                    leg + 1,
+                    prop.name(),
+                    span_mm.0,
+                    span_mm.1
+                ))
+            }
+        };
+        let (r, got) = sols
+            .iter()
+            .copied()
+            .min_by(|a, b| (a.0 - mid).abs().total_cmp(&(b.0 - mid).abs()))
+            .expect("found at least one");
+        out += &format!(
+            "leg {}: {} = {want_mm} mm at radius {r:.3} mm ({} = {got:.4} mm)\n",
+            leg + 1,
+            prop.name(),
+            prop.name()
+        );
+        radii.push(morph_line(r, range).trim_start_matches("MORPH ").to_string());
+    }
+    if radii.len() > morphlink::budget::MAX_LINKS {
+        return Err(format!(
+            "--gait: {} legs; a board drives at most {}",
+            radii.len(),
+            morphlink::budget::MAX_LINKS
+        ));
+    }
+    out += &format!("send: GAIT {}\n", radii.join(" "));
+    Ok(out)
 }
 
 /// `--want property=value`: the radii that give it, each with its `MORPH` line, or how close

@@ -91,7 +91,7 @@ pub fn parse(text: &str) -> Result<Vec<Line>, String> {
                 let line = words.join(" ");
                 // The core's own parser: a line the device would refuse as unknown or
                 // malformed (`slep 3`, `MORPH`) is refused here, before anything is sent.
-                if let Err(e) = morphlink::protocol::parse_line(&line) {
+                if let Err(e) = morphlink::protocol::links::check_line(&line) {
                     return Err(err(format!(
                         "`{line}` is neither a script step (`wait done|alarm [<s>]`, `sleep <s>`) nor a protocol line the device accepts: {}",
                         e.text.trim_end_matches('.')
