@@ -318,7 +318,9 @@ pub fn admits(
     ohm: [f32; 2],
 ) -> bool {
     let running = || demands.iter().filter(|d| d.class != Class::Idle);
-    let held: f32 = running().map(|d| d.reserve_w.pla_w + d.reserve_w.tca_w).sum();
+    let held: f32 = running()
+        .map(|d| d.reserve_w.pla_w + d.reserve_w.tca_w)
+        .sum();
     if held + least_budget_w(reserve_w, demands.len()) > budget.budget_w {
         return false;
     }
@@ -366,7 +368,10 @@ pub fn admits(
 /// The heaters of the links in `order` (scheduler order), the largest current (lowest
 /// resistance in `ohm`) first and in scheduler order among equals: tall windows laid out
 /// first pack a current limit best.
-fn tallest_first(order: &[usize], ohm: &[[f32; 2]; MAX_LINKS]) -> heapless::Vec<(usize, Heater), WINDOWS> {
+fn tallest_first(
+    order: &[usize],
+    ohm: &[[f32; 2]; MAX_LINKS],
+) -> heapless::Vec<(usize, Heater), WINDOWS> {
     let mut v: heapless::Vec<(usize, Heater), WINDOWS> = heapless::Vec::new();
     for &k in order {
         for h in [Heater::Pla, Heater::Tca] {
@@ -396,9 +401,8 @@ fn usable_v(supply_v: f32) -> f32 {
 /// The window a heater taking `w` (W) at `v` (V) is laid out with: its duty and the guard,
 /// at least the current-sense probe's, at most the period.
 fn window_for(cfg: &HeaterConfig, w: f32, v: f32) -> f32 {
-    (cfg.duty(w, v) * (1.0 + WINDOW_GUARD_SHARE))
-        .max(PROBE_DUTY)
-        .min(1.0)
+    // `duty` is never NaN (0 for anything it cannot reckon).
+    (cfg.duty(w, v) * (1.0 + WINDOW_GUARD_SHARE)).clamp(PROBE_DUTY, 1.0)
 }
 
 /// Shares `budget` among the links of `demands` for one tick at the measured supply
@@ -499,7 +503,11 @@ pub fn allocate(budget: &SupplyBudget, supply_v: f32, demands: &[Demand], out: &
                 profile.windows[j].1 = 0.0;
                 let here = profile.room(start, amps, want, budget.limit_a);
                 let (s2, l2) = profile.place(amps, want, budget.limit_a);
-                let best = if l2 > here + 1e-6 { (s2, l2) } else { (start, here) };
+                let best = if l2 > here + 1e-6 {
+                    (s2, l2)
+                } else {
+                    (start, here)
+                };
                 let best = if best.1 >= len { best } else { (start, len) };
                 profile.windows[j] = (best.0, best.1, amps);
                 best
@@ -618,7 +626,10 @@ mod tests {
             budget_w: 50.0,
             limit_a: 0.5,
         };
-        let pla = |w: f32| Powers { pla_w: w, tca_w: 0.0 };
+        let pla = |w: f32| Powers {
+            pla_w: w,
+            tca_w: 0.0,
+        };
         // (Both heaters of 30 ohm here: a 6.5 ohm TCA's probe alone would pass 0.5 A.)
         let thirty = |d: Demand| Demand {
             ohm: [30.0, 30.0],
@@ -643,7 +654,10 @@ mod tests {
         let mut out = [[Share::default(); 2]; 2];
         allocate(&budget, 12.0, &d, &mut out);
         let cfg = HeaterConfig::TCA;
-        let duty = [cfg.duty(out[0][1].allow_w, 12.0), cfg.duty(out[1][1].allow_w, 12.0)];
+        let duty = [
+            cfg.duty(out[0][1].allow_w, 12.0),
+            cfg.duty(out[1][1].allow_w, 12.0),
+        ];
         let amps = [12.0 / 6.5; 2];
         let peak = peak_amps(&[out[0][1].phase, out[1][1].phase], &duty, &amps);
         assert!(peak <= 2.5, "{peak}");

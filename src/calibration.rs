@@ -157,7 +157,7 @@ pub const WATER_RESISTANCES: ResistanceMatrix = ResistanceMatrix {
 };
 
 /// Decimals a calibration range is kept to: `CONFIG` prints them with three, and a printed end
-/// must be a value the range accepts, so each end is rounded inwards ([`inward`]).
+/// must be a value the range accepts, so each end is rounded inwards.
 pub const RANGE_DECIMALS_SCALE: f32 = 1000.0;
 
 /// `(min, max)` rounded inwards to [`RANGE_DECIMALS_SCALE`]: `min` up, `max` down.

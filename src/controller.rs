@@ -420,8 +420,7 @@ impl Controller {
     /// budget); `None` for a radius outside the table.
     pub fn soften_reserve_w(&self, radius_mm: f32) -> Option<Powers> {
         let table_w = table::power_for_radius_w(radius_mm).ok()?;
-        let tca_w =
-            (table_w * self.settings.cal.power_scale()).min(HeaterConfig::TCA.max_power_w);
+        let tca_w = (table_w * self.settings.cal.power_scale()).min(HeaterConfig::TCA.max_power_w);
         Some(self.morph_reserve_w(Phase::Soften, tca_w))
     }
 
@@ -435,7 +434,10 @@ impl Controller {
         let hold_w = (rise_k.max(0.0) / r_pp).min(HeaterConfig::PLA.max_power_w);
         // A resting morph keeps its soften's reserve: it was admitted with it.
         let pla_on = matches!(phase, Phase::Rest | Phase::Soften | Phase::Bend);
-        let tca_on = matches!(phase, Phase::Rest | Phase::Soften | Phase::Bend | Phase::Lock);
+        let tca_on = matches!(
+            phase,
+            Phase::Rest | Phase::Soften | Phase::Bend | Phase::Lock
+        );
         Powers {
             pla_w: if pla_on {
                 (hold_w * RESERVE_MARGIN).min(HeaterConfig::PLA.max_power_w)

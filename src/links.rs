@@ -209,7 +209,13 @@ impl<const N: usize> Links<N> {
         {
             let q = self.queued[k].expect("filtered");
             let ohm = self.ctrl[k].heater_ohm();
-            if !budget::admits(&self.budget, self.supply_v(), &self.demands(), q.reserve_w, ohm) {
+            if !budget::admits(
+                &self.budget,
+                self.supply_v(),
+                &self.demands(),
+                q.reserve_w,
+                ohm,
+            ) {
                 return;
             }
             self.queued[k] = None;
@@ -412,7 +418,14 @@ impl<const N: usize> Links<N> {
 
     /// A MORPH for link `k`: started at once where the budget has room for its soften (and
     /// no morph is queued ahead of it), else queued (`ok`, then `event: queued`).
-    fn morph(&mut self, now_ms: u64, k: usize, radius_mm: f32, mode: Mode, out: &mut dyn FnMut(&str)) {
+    fn morph(
+        &mut self,
+        now_ms: u64,
+        k: usize,
+        radius_mm: f32,
+        mode: Mode,
+        out: &mut dyn FnMut(&str),
+    ) {
         let cmd = Command::Morph { radius_mm, mode };
         let mut l = OutLine::new();
         if self.morph_checks(k, radius_mm, &mut l) {
@@ -425,7 +438,13 @@ impl<const N: usize> Links<N> {
         let reserve_w = self.ctrl[k].soften_reserve_w(radius_mm).unwrap_or_default();
         let ahead = (0..self.count()).any(|j| self.queued(j));
         let ohm = self.ctrl[k].heater_ohm();
-        let fits = budget::admits(&self.budget, self.supply_v(), &self.demands(), reserve_w, ohm);
+        let fits = budget::admits(
+            &self.budget,
+            self.supply_v(),
+            &self.demands(),
+            reserve_w,
+            ohm,
+        );
         if !self.budget.binding() || (!ahead && fits) {
             self.ctrl[k].handle(now_ms, cmd, out);
             return;
@@ -546,7 +565,9 @@ impl<const N: usize> Links<N> {
                 wire::supply_set(&mut l, s, value);
             }
             Err(SupplyRefusal::Range(why)) => wire::supply_refused(&mut l, s, value, why),
-            Err(SupplyRefusal::OverSupply(most_w)) => wire::budget_over_supply(&mut l, value, most_w),
+            Err(SupplyRefusal::OverSupply(most_w)) => {
+                wire::budget_over_supply(&mut l, value, most_w)
+            }
             Err(SupplyRefusal::UnderReserves(held_w)) => {
                 wire::budget_under_reserves(&mut l, value, held_w)
             }
@@ -581,7 +602,9 @@ impl<const N: usize> Links<N> {
                     }));
                 }
                 if value < least {
-                    return Err(SupplyRefusal::Range(budget::BudgetError::TooSmall { least }));
+                    return Err(SupplyRefusal::Range(budget::BudgetError::TooSmall {
+                        least,
+                    }));
                 }
                 let held = self.held_w();
                 if value < held {
@@ -602,7 +625,11 @@ impl<const N: usize> Links<N> {
                     }));
                 }
                 // One heater's pulse alone must fit: the lowest resistance at the supply read.
-                let v = if v.is_finite() { v } else { budget::NOMINAL_SUPPLY_V };
+                let v = if v.is_finite() {
+                    v
+                } else {
+                    budget::NOMINAL_SUPPLY_V
+                };
                 let least = self
                     .ctrl
                     .iter()
@@ -610,7 +637,9 @@ impl<const N: usize> Links<N> {
                     .map(|ohm| v / ohm)
                     .fold(0.0, f32::max);
                 if value < least {
-                    return Err(SupplyRefusal::Range(budget::BudgetError::TooSmall { least }));
+                    return Err(SupplyRefusal::Range(budget::BudgetError::TooSmall {
+                        least,
+                    }));
                 }
             }
         }

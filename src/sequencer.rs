@@ -261,6 +261,8 @@ impl Sequencer {
     /// (`auto` runs [`crate::strategy::AUTO_STRATEGY`]) from the measured temperatures `m`
     /// (they start the model strategies' observer and set the spring-back compensation's
     /// ambient).
+    // The morph's whole start in one call, so no half-started morph is ever observable.
+    #[allow(clippy::too_many_arguments)]
     pub fn start_from(
         &mut self,
         now_ms: u64,

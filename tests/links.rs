@@ -113,16 +113,26 @@ fn one_link_behaves_exactly_as_the_controller_alone() {
 fn under_a_budget_no_tick_passes_it_no_period_passes_the_current_limit_and_every_link_finishes() {
     for (budget_w, limit_a) in [(5.0, 3.0), (8.0, 3.0), (12.0, 2.5)] {
         let mut rig = four(limit_a);
-        assert!(say(&mut rig, &format!("CONFIG SET supply_limit_a {limit_a}"))[0].starts_with("ok"));
-        assert!(say(&mut rig, &format!("CONFIG SET supply_budget_w {budget_w}"))[0].starts_with("ok"));
+        assert!(
+            say(&mut rig, &format!("CONFIG SET supply_limit_a {limit_a}"))[0].starts_with("ok")
+        );
+        assert!(
+            say(&mut rig, &format!("CONFIG SET supply_budget_w {budget_w}"))[0].starts_with("ok")
+        );
         assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
         let (mut max_w, mut max_a) = (0.0f64, 0.0f64);
         let events = run_until_idle(&mut rig, 1500, |r| {
             max_w = max_w.max(r.last.reckoned_w);
             max_a = max_a.max(r.last.demand_a);
         });
-        assert!(max_w <= budget_w + 1e-3, "{budget_w} W: a tick reckoned {max_w} W");
-        assert!(max_a <= limit_a + 1e-3, "{limit_a} A: a period drew {max_a} A");
+        assert!(
+            max_w <= budget_w + 1e-3,
+            "{budget_w} W: a tick reckoned {max_w} W"
+        );
+        assert!(
+            max_a <= limit_a + 1e-3,
+            "{limit_a} A: a period drew {max_a} A"
+        );
         for k in 1..=4 {
             let done = events
                 .iter()
@@ -164,10 +174,15 @@ fn a_fault_on_one_link_stops_it_and_the_others_finish() {
             "{fault}: another link alarmed: {alarms:?}"
         );
         assert_eq!(rig.links.link(1).phase(), Phase::Fault, "{fault}");
-        assert!(!rig.links.link(1).outputs().supply_on, "{fault}: link 2's cut-off closed");
+        assert!(
+            !rig.links.link(1).outputs().supply_on,
+            "{fault}: link 2's cut-off closed"
+        );
         for k in [1, 3, 4] {
             assert!(
-                events.iter().any(|e| e.starts_with(&format!("@{k} event: done"))),
+                events
+                    .iter()
+                    .any(|e| e.starts_with(&format!("@{k} event: done"))),
                 "{fault}: link {k} did not finish: {events:?}"
             );
         }
@@ -200,18 +215,39 @@ fn bad_input_is_refused_with_a_clear_error_and_changes_nothing() {
     let mut rig = four(3.0);
     let before = say(&mut rig, "LINKS");
     for (line, starts) in [
-        ("@5 STATUS", "error: out-of-range no link 5; this board has links 1 to 4"),
+        (
+            "@5 STATUS",
+            "error: out-of-range no link 5; this board has links 1 to 4",
+        ),
         ("@0 STATUS", "error: bad-argument"),
         ("@x MORPH 38", "error: bad-argument"),
         ("@2", "error: bad-argument"),
-        ("GAIT 38 40", "error: bad-argument GAIT took 2 radii; this board has 4 links"),
+        (
+            "GAIT 38 40",
+            "error: bad-argument GAIT took 2 radii; this board has 4 links",
+        ),
         ("GAIT 38 40 42 46 50", "error: bad-argument"),
         ("GAIT 38 40 42 999", "error: out-of-range"),
-        ("CONFIG SET supply_budget_w 0", "error: out-of-range supply_budget_w takes"),
-        ("CONFIG SET supply_budget_w nan", "error: out-of-range supply_budget_w takes"),
-        ("CONFIG SET supply_budget_w 0.5", "error: out-of-range supply_budget_w 0.50 W is too small"),
-        ("CONFIG SET supply_limit_a 1", "error: out-of-range supply_limit_a 1.00 A is too small"),
-        ("CONFIG SET supply_limit_a -1", "error: out-of-range supply_limit_a takes"),
+        (
+            "CONFIG SET supply_budget_w 0",
+            "error: out-of-range supply_budget_w takes",
+        ),
+        (
+            "CONFIG SET supply_budget_w nan",
+            "error: out-of-range supply_budget_w takes",
+        ),
+        (
+            "CONFIG SET supply_budget_w 0.5",
+            "error: out-of-range supply_budget_w 0.50 W is too small",
+        ),
+        (
+            "CONFIG SET supply_limit_a 1",
+            "error: out-of-range supply_limit_a 1.00 A is too small",
+        ),
+        (
+            "CONFIG SET supply_limit_a -1",
+            "error: out-of-range supply_limit_a takes",
+        ),
         ("@* SIM STATE", "error: bad-argument"),
         ("LINKS 2", "error: bad-argument"),
     ] {
@@ -219,12 +255,21 @@ fn bad_input_is_refused_with_a_clear_error_and_changes_nothing() {
         assert_eq!(r.len(), 1, "{line}: {r:?}");
         assert!(r[0].starts_with(starts), "{line}: {r:?}");
     }
-    assert_eq!(say(&mut rig, "LINKS"), before, "a refusal changed something");
+    assert_eq!(
+        say(&mut rig, "LINKS"),
+        before,
+        "a refusal changed something"
+    );
     assert!(rig.links.idle());
     // A budget raised past what the supply gives at its limit is refused.
     say(&mut rig, "CONFIG SET supply_limit_a 2");
     let r = say(&mut rig, "CONFIG SET supply_budget_w 30");
-    assert!(r[0].starts_with("error: out-of-range supply_budget_w 30.00 W is more than the supply gives"), "{r:?}");
+    assert!(
+        r[0].starts_with(
+            "error: out-of-range supply_budget_w 30.00 W is more than the supply gives"
+        ),
+        "{r:?}"
+    );
     // Lowered under what running morphs hold: refused; raised while they run: taken.
     say(&mut rig, "CONFIG SET supply_limit_a 3");
     say(&mut rig, "CONFIG SET supply_budget_w 12");
@@ -233,9 +278,15 @@ fn bad_input_is_refused_with_a_clear_error_and_changes_nothing() {
         rig.tick();
     }
     let r = say(&mut rig, "CONFIG SET supply_budget_w 4");
-    assert!(r[0].starts_with("error: busy supply_budget_w 4.00 W is less than"), "{r:?}");
+    assert!(
+        r[0].starts_with("error: busy supply_budget_w 4.00 W is less than"),
+        "{r:?}"
+    );
     assert_eq!(rig.links.budget().budget_w, 12.0);
-    assert_eq!(say(&mut rig, "CONFIG SET supply_budget_w 20"), ["ok supply_budget_w=20.00 saved=no"]);
+    assert_eq!(
+        say(&mut rig, "CONFIG SET supply_budget_w 20"),
+        ["ok supply_budget_w=20.00 saved=no"]
+    );
     // A link whose thermistor is missing refuses its morph; the GAIT starts nothing.
     let mut rig = four(3.0);
     say(&mut rig, "@3 SIM FAULT thermistor-open pla");
@@ -286,6 +337,9 @@ fn four_hifi_links_under_8_w_finish_within_the_budget() {
     let events = run_until_idle(&mut rig, 1500, |r| max_w = max_w.max(r.last.reckoned_w));
     assert!(max_w <= 8.0 + 1e-3, "{max_w}");
     assert!(!events.iter().any(|e| e.contains("alarm:")), "{events:?}");
-    assert_eq!(events.iter().filter(|e| e.contains("event: done")).count(), 4, "{events:?}");
+    assert_eq!(
+        events.iter().filter(|e| e.contains("event: done")).count(),
+        4,
+        "{events:?}"
+    );
 }
-

@@ -5,7 +5,7 @@
 //!
 //! | feature | module | board |
 //! | --- | --- | --- |
-//! | `nucleo-f401re` | [`nucleo_f401re`] | NUCLEO-F401RE (the default) |
+//! | `nucleo-f401re` | `nucleo_f401re` | NUCLEO-F401RE (the default) |
 //! | `nucleo-g431rb` | `nucleo_g431rb` | NUCLEO-G431RB (hardware ADC oversampling) |
 //! | `b-l475e-iot01a` | `b_l475e_iot01a` | B-L475E-IOT01A |
 //! | `b-l475e-iot01a-emulated` | `emulated` | the same board under QEMU |
@@ -219,7 +219,7 @@ pub struct Parts<S, H, W, Tx, Rx, F = ()> {
     /// the record is cleared at boot).
     pub last_fatal: Option<LastFatal>,
     /// The flash the settings area is in (`()` where the firmware brings its own: the
-    /// emulated board), with the area from [`settings_area`].
+    /// emulated board), with the area from `settings_area()`.
     pub settings_flash: F,
 }
 

@@ -15,8 +15,22 @@ use morphlink::protocol::{classify, parse_line, Command, LineKind, OutLine};
 
 /// Lines the fuzzer can pick by number, so it reaches morphs and faults quickly.
 const KNOWN: &[&str] = &[
-    "STATUS", "ABORT", "RESET", "VERSION", "RANGE", "TABLE", "HELP", "STATS", "MORPH", "TUNE",
-    "SAVE", "CONFIG", "CONFIG RESET", "HEAT pla 1 60", "HEAT tca 0.4 30", "MEASURED",
+    "STATUS",
+    "ABORT",
+    "RESET",
+    "VERSION",
+    "RANGE",
+    "TABLE",
+    "HELP",
+    "STATS",
+    "MORPH",
+    "TUNE",
+    "SAVE",
+    "CONFIG",
+    "CONFIG RESET",
+    "HEAT pla 1 60",
+    "HEAT tca 0.4 30",
+    "MEASURED",
 ];
 const MODES: &[&str] = &["", " auto", " paper", " gated", " boost", " closed", " x"];
 
@@ -38,7 +52,12 @@ enum Op {
         current: Option<([u32; 2], [u32; 2])>,
     },
     /// A tick after `dt_ms` with counts for these temperatures (°C) and supply (dV).
-    Plausible { dt_ms: u16, temps_c: [i8; 3], supply_dv: u8, ticks: u8 },
+    Plausible {
+        dt_ms: u16,
+        temps_c: [i8; 3],
+        supply_dv: u8,
+        ticks: u8,
+    },
     /// `CONFIG SET <setting> <value>`, the setting by number, the value in thousandths.
     ConfigSet { setting: u8, value_milli: i32 },
     /// `MEASURED <radius>`, the radius in 0.01 mm.
@@ -60,12 +79,19 @@ fn check_calibration(c: &Controller) {
     let cal = c.calibration();
     assert!(cal.share_rule().is_ok(), "{:?}", cal.share_rule());
     let (lo, hi) = morphlink::calibration::POWER_SCALE_RANGE;
-    assert!((lo..=hi).contains(&cal.power_scale()), "{}", cal.power_scale());
+    assert!(
+        (lo..=hi).contains(&cal.power_scale()),
+        "{}",
+        cal.power_scale()
+    );
 }
 
 fn check_outputs(c: &Controller, o: Outputs) {
     for d in [o.pla_duty, o.tca_duty] {
-        assert!(d.is_finite() && (0.0..=1.0).contains(&d), "duty {d} in {o:?}");
+        assert!(
+            d.is_finite() && (0.0..=1.0).contains(&d),
+            "duty {d} in {o:?}"
+        );
     }
     if c.fault().is_some() {
         assert_eq!((o.pla_duty, o.tca_duty), (0.0, 0.0), "faulted with {o:?}");
@@ -112,7 +138,13 @@ fuzz_target!(|ops: Vec<Op>| {
                 let radius_mm = radius_cmm as f32 / 100.0;
                 line(&mut c, now_ms, &format!("MORPH {radius_mm}{m}"));
             }
-            Op::Step { dt_ms, thermistor_counts, supply_counts, sample_lag_ms, current } => {
+            Op::Step {
+                dt_ms,
+                thermistor_counts,
+                supply_counts,
+                sample_lag_ms,
+                current,
+            } => {
                 now_ms = now_ms.wrapping_add(dt_ms as u64);
                 let inputs = Inputs {
                     thermistor_counts,
@@ -123,7 +155,12 @@ fuzz_target!(|ops: Vec<Op>| {
                 let o = c.step(now_ms, &inputs);
                 check_outputs(&c, o);
             }
-            Op::Plausible { dt_ms, temps_c, supply_dv, ticks } => {
+            Op::Plausible {
+                dt_ms,
+                temps_c,
+                supply_dv,
+                ticks,
+            } => {
                 let inputs = |now_ms| Inputs {
                     thermistor_counts: temps_c.map(|t| cfg.thermistor.counts_for_temp(t as f32)),
                     supply_counts: cfg.supply.counts(supply_dv as f32 / 10.0),
@@ -136,20 +173,30 @@ fuzz_target!(|ops: Vec<Op>| {
                     check_outputs(&c, o);
                 }
             }
-            Op::ConfigSet { setting, value_milli } => {
+            Op::ConfigSet {
+                setting,
+                value_milli,
+            } => {
                 let name = names[setting as usize % names.len()];
                 let v = value_milli as f64 / 1000.0;
                 line(&mut c, now_ms, &format!("CONFIG SET {name} {v}"));
             }
             Op::Measured { radius_cmm } => {
-                line(&mut c, now_ms, &format!("MEASURED {}", radius_cmm as f32 / 100.0));
+                line(
+                    &mut c,
+                    now_ms,
+                    &format!("MEASURED {}", radius_cmm as f32 / 100.0),
+                );
             }
             Op::Jump(t) => now_ms = t,
         }
         check_calibration(&c);
         while let Some(l) = c.pop_event_line() {
             assert!(
-                matches!(classify(&l), LineKind::Event | LineKind::Done | LineKind::Alarm),
+                matches!(
+                    classify(&l),
+                    LineKind::Event | LineKind::Done | LineKind::Alarm
+                ),
                 "{l}"
             );
         }

@@ -447,60 +447,6 @@ impl Drop for Emulator {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use std::sync::atomic::{AtomicUsize, Ordering};
-
-    #[cfg(target_os = "linux")]
-    #[test]
-    fn a_child_dies_with_the_thread_that_started_it() {
-        // The parent here is a thread that ends at once without waiting, as xtask does when a
-        // signal or a kill ends it: its child must not run on.
-        let child = thread::spawn(|| {
-            let mut c = Command::new("sleep");
-            c.arg("30");
-            ends_with_its_parent(&mut c);
-            c.spawn().unwrap()
-        })
-        .join()
-        .unwrap();
-        let mut child = child;
-        let t0 = Instant::now();
-        let status = child.wait().unwrap();
-        use std::os::unix::process::ExitStatusExt;
-        assert_eq!(status.signal(), Some(libc::SIGKILL), "{status:?}");
-        assert!(t0.elapsed() < Duration::from_secs(5));
-    }
-
-    #[test]
-    fn a_signal_kills_and_reaps_the_child_instead_of_leaving_it_running() {
-        let mut child = Command::new("sleep").arg("30").spawn().unwrap();
-        let pid = child.id() as i32;
-        let flag = AtomicUsize::new(0);
-        let t0 = Instant::now();
-        thread::scope(|s| {
-            s.spawn(|| {
-                thread::sleep(Duration::from_millis(200));
-                flag.store(libc::SIGTERM as usize, Ordering::SeqCst);
-            });
-            match wait_or_kill(&mut child, &flag).unwrap() {
-                Ended::Signalled(sig) => assert_eq!(sig, libc::SIGTERM),
-                other => panic!("{other:?}"),
-            }
-        });
-        assert!(t0.elapsed() < Duration::from_secs(5));
-        // Reaped: no such process any more.
-        assert_eq!(unsafe { libc::kill(pid, 0) }, -1);
-        // A child that ends on its own is waited for.
-        let mut quick = Command::new("true").spawn().unwrap();
-        assert!(matches!(
-            wait_or_kill(&mut quick, &AtomicUsize::new(0)).unwrap(),
-            Ended::Exited(s) if s.success()
-        ));
-    }
-}
-
 /// Longest wall time the demo morph may take.
 pub const DEMO_TIMEOUT: Duration = Duration::from_secs(120);
 
@@ -557,4 +503,58 @@ pub fn demo_morph(
         morph,
         total: started.elapsed(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_child_dies_with_the_thread_that_started_it() {
+        // The parent here is a thread that ends at once without waiting, as xtask does when a
+        // signal or a kill ends it: its child must not run on.
+        let child = thread::spawn(|| {
+            let mut c = Command::new("sleep");
+            c.arg("30");
+            ends_with_its_parent(&mut c);
+            c.spawn().unwrap()
+        })
+        .join()
+        .unwrap();
+        let mut child = child;
+        let t0 = Instant::now();
+        let status = child.wait().unwrap();
+        use std::os::unix::process::ExitStatusExt;
+        assert_eq!(status.signal(), Some(libc::SIGKILL), "{status:?}");
+        assert!(t0.elapsed() < Duration::from_secs(5));
+    }
+
+    #[test]
+    fn a_signal_kills_and_reaps_the_child_instead_of_leaving_it_running() {
+        let mut child = Command::new("sleep").arg("30").spawn().unwrap();
+        let pid = child.id() as i32;
+        let flag = AtomicUsize::new(0);
+        let t0 = Instant::now();
+        thread::scope(|s| {
+            s.spawn(|| {
+                thread::sleep(Duration::from_millis(200));
+                flag.store(libc::SIGTERM as usize, Ordering::SeqCst);
+            });
+            match wait_or_kill(&mut child, &flag).unwrap() {
+                Ended::Signalled(sig) => assert_eq!(sig, libc::SIGTERM),
+                other => panic!("{other:?}"),
+            }
+        });
+        assert!(t0.elapsed() < Duration::from_secs(5));
+        // Reaped: no such process any more.
+        assert_eq!(unsafe { libc::kill(pid, 0) }, -1);
+        // A child that ends on its own is waited for.
+        let mut quick = Command::new("true").spawn().unwrap();
+        assert!(matches!(
+            wait_or_kill(&mut quick, &AtomicUsize::new(0)).unwrap(),
+            Ended::Exited(s) if s.success()
+        ));
+    }
 }

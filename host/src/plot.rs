@@ -1,13 +1,13 @@
 //! The charts' shared plotting: one place for what morphctl's run plots, `morph-model charts`
 //! and `cargo xtask strategies` have in common.
 //!
-//! - [`write`] draws a [`Figure`] into `.svg` or `.png` chosen by the file's extension (both
+//! - [`write()`] draws a [`Figure`] into `.svg` or `.png` chosen by the file's extension (both
 //!   with text: the PNG's is drawn with [`FONT_TTF`], DejaVu Sans embedded in the tools);
 //!   [`write_svg`] takes a closure for SVG-only charts. Both fill the page white, draw, and
 //!   present. [`Format::of`] checks a path before anything runs.
 //! - [`Frame`] is a panel's caption, margin and label areas; [`mesh`] its axis descriptions;
 //!   [`sci`] and [`whole`] label log axes.
-//! - [`line`] draws a line series with its legend entry, [`marks`] thin vertical marks (phase
+//! - [`line()`] draws a line series with its legend entry, [`marks`] thin vertical marks (phase
 //!   changes), [`labelled_point`] a dot with a text beside it, [`legend`] the series box.
 //! - [`PALETTE`] and the `TAB_*` colours, [`FONT`]; [`PlotError`] converts from every backend's
 //!   error and into `String`, so `?` works across the charts and their callers.

@@ -287,7 +287,7 @@ fn last_status_heaters_off(dir: &Path) -> String {
     let t0 = std::time::Instant::now();
     loop {
         let from = read(&dir.join("from_device.log"));
-        let last = from.lines().filter(|l| l.starts_with("ok phase=")).last();
+        let last = from.lines().rfind(|l| l.starts_with("ok phase="));
         match last {
             Some(l) if heaters_off(l) => return l.to_string(),
             _ if t0.elapsed().as_secs() >= 5 => panic!("no heaters-off STATUS last:\n{from}"),

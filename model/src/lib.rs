@@ -3,9 +3,9 @@
 //! The core (`no_std`, f64 through `libm`) is shared by the build-time table generator, the
 //! simulated link and host tools: [`thermal`] (steady resistance matrix and transient network),
 //! [`mechanics`] (TCA force law and constant-curvature balance) and [`table`]. With the `std`
-//! feature, [`file`] reads and writes `link.toml`; with `fit`, [`calibrate`] fits the unknown
+//! feature, [`file`](mod@file) reads and writes `link.toml`; with `fit`, [`calibrate`] fits the unknown
 //! mechanical constants to measured radii; [`fourbar`] is the paper's application, a four-bar
-//! linkage with the locked link as its coupler, and the foot path it draws. With `reference`, [`reference`] holds the paper's full
+//! linkage with the locked link as its coupler, and the foot path it draws. With `reference`, [`reference`](mod@reference) holds the paper's full
 //! model (2-D finite-volume thermal, Cosserat rod, physics-based TCA law) and the study of what
 //! each level of model costs and buys.
 #![cfg_attr(not(any(feature = "std", test)), no_std)]

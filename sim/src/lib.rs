@@ -9,8 +9,8 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod ensemble;
-pub mod oracle;
 pub mod multi;
+pub mod oracle;
 pub mod rig;
 
 pub use multi::{MultiRig, SharedSupply};

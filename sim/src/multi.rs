@@ -99,7 +99,10 @@ impl<P: Plant> MultiRig<P> {
         for (k, mut p) in plants.into_iter().enumerate() {
             let _ = p.set(Setting::SupplyV(supply.open_v));
             let seed = noise.seed.wrapping_add(0x9e37_79b9 * k as u64);
-            if benches.push(Bench::new(p, board, Noise { seed, ..noise })).is_err() {
+            if benches
+                .push(Bench::new(p, board, Noise { seed, ..noise }))
+                .is_err()
+            {
                 panic!("at most {MAX_LINKS} links");
             }
         }
@@ -173,7 +176,8 @@ impl<P: Plant> MultiRig<P> {
         let n = self.count();
         let dt_s = TICK_MS as f64 / 1000.0;
         // (link, heater, start, length, conductance)
-        let mut windows: heapless::Vec<(usize, usize, f64, f64, f64), WINDOWS> = heapless::Vec::new();
+        let mut windows: heapless::Vec<(usize, usize, f64, f64, f64), WINDOWS> =
+            heapless::Vec::new();
         let board = Config::DEFAULT;
         for k in 0..n {
             let d = self.benches[k].reaching(self.now_ms);

@@ -84,7 +84,8 @@ pub fn split_address(line: &str) -> Result<(Option<Address>, &str), ProtoError> 
         return Ok((None, line));
     };
     let (word, rest) = rest.split_once([' ', '\t']).unwrap_or((rest, ""));
-    const BAD: ProtoError = bad("A link address is @<n> (from @1) or @* before a command, e.g. @2 MORPH 38.");
+    const BAD: ProtoError =
+        bad("A link address is @<n> (from @1) or @* before a command, e.g. @2 MORPH 38.");
     let address = if word == "*" {
         Address::All
     } else {
@@ -95,7 +96,9 @@ pub fn split_address(line: &str) -> Result<(Option<Address>, &str), ProtoError> 
         Address::Link(n - 1)
     };
     if rest.trim().is_empty() {
-        return Err(bad("A link address needs a command after it, e.g. @2 STATUS."));
+        return Err(bad(
+            "A link address needs a command after it, e.g. @2 STATUS.",
+        ));
     }
     Ok((Some(address), rest))
 }
@@ -134,7 +137,9 @@ pub fn parse_links_command(line: &str) -> Option<Result<LinksCommand, ProtoError
         count += 1;
     }
     if count == 0 {
-        return Some(Err(bad("GAIT needs one radius in mm per link, e.g. GAIT 38 40.")));
+        return Some(Err(bad(
+            "GAIT needs one radius in mm per link, e.g. GAIT 38 40.",
+        )));
     }
     Some(Ok(LinksCommand::Gait {
         radii_mm,
@@ -176,8 +181,7 @@ pub const ERR_QUEUED: ProtoError = ProtoError {
 };
 
 /// `@* SIM ...`: a simulated link's SIM line names one link.
-pub const ERR_SIM_EACH: ProtoError =
-    bad("SIM lines name one link (@<n> SIM ...), not @*.");
+pub const ERR_SIM_EACH: ProtoError = bad("SIM lines name one link (@<n> SIM ...), not @*.");
 
 /// `<prefix><line>`: a link's line as a board of several links sends it, `@<n> ` first.
 pub fn addressed(l: &mut OutLine, link: usize, line: &str) {
@@ -340,7 +344,14 @@ pub fn links_row(l: &mut OutLine, r: &LinkRow) {
 }
 
 /// `ok links=<n> power_w=<w> budget_w=<w> limit_a=<a> supply_v=<v>`.
-pub fn links_end(l: &mut OutLine, links: usize, power_w: f32, budget_w: f32, limit_a: f32, supply_v: f32) {
+pub fn links_end(
+    l: &mut OutLine,
+    links: usize,
+    power_w: f32,
+    budget_w: f32,
+    limit_a: f32,
+    supply_v: f32,
+) {
     let _ = write!(
         l,
         "ok links={links} power_w={} budget_w={} limit_a={} supply_v={}",
@@ -362,7 +373,10 @@ mod tests {
             split_address("@2 MORPH 38").unwrap(),
             (Some(Address::Link(1)), "MORPH 38")
         );
-        assert_eq!(split_address("@* STATUS").unwrap(), (Some(Address::All), "STATUS"));
+        assert_eq!(
+            split_address("@* STATUS").unwrap(),
+            (Some(Address::All), "STATUS")
+        );
         for bad in ["@0 STATUS", "@x STATUS", "@2", "@ STATUS", "@-1 STATUS"] {
             assert!(split_address(bad).is_err(), "{bad}");
         }

@@ -352,7 +352,7 @@ pub enum Assembled<'a> {
 /// What [`LineAssembler::push_checked`] reports for a line that lost bytes: the receiver
 /// dropped input ([`LineAssembler::overrun`]) while it was in progress, so its content (which
 /// may be pieces of two lines) was dropped. Answered with
-/// [`reply::ERR_OVERRUN`](crate::protocol::reply::ERR_OVERRUN), never run.
+/// [`reply::ERR_OVERRUN`], never run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Overrun;
 

@@ -514,6 +514,9 @@ impl Settings {
     /// Sets `name` from its wire text `value` (a decimal number, or for a choice one of its
     /// words); refuses an unknown name, a malformed value or one out of range and then changes
     /// nothing. Returns the setting's spec and the value now set.
+    // The error carries the spec so the reply can name the setting's range and doc: copied,
+    // not boxed (no allocator).
+    #[allow(clippy::result_large_err)]
     pub fn set_text(&mut self, name: &str, value: &str) -> Result<(Spec, f32), SetError> {
         let (id, spec) = self.find(name).ok_or(SetError::UnknownName)?;
         let v = if spec.choices.is_empty() {
@@ -573,12 +576,8 @@ fn whole(x: f32) -> f32 {
         x as i32 as f32
     } else if x.is_nan() {
         0.0
-    } else if x > I64_MAX {
-        I64_MAX
-    } else if x < -I64_MAX {
-        -I64_MAX
     } else {
-        x
+        x.clamp(-I64_MAX, I64_MAX)
     }
 }
 

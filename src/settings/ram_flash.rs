@@ -60,7 +60,7 @@ impl<const BYTES: usize, const PAGE: usize, const WORD: usize> Default
 }
 
 impl<const BYTES: usize, const PAGE: usize, const WORD: usize> RamFlash<BYTES, PAGE, WORD> {
-    const _GEOMETRY: () = assert!(BYTES % PAGE == 0 && PAGE % WORD == 0);
+    const _GEOMETRY: () = assert!(BYTES.is_multiple_of(PAGE) && PAGE.is_multiple_of(WORD));
 
     /// An erased flash.
     pub const fn new() -> Self {
@@ -113,7 +113,7 @@ impl<const BYTES: usize, const PAGE: usize, const WORD: usize> RamFlash<BYTES, P
 
     fn check(&self, offset: u32, len: usize, align: usize) -> Result<usize, RamFlashError> {
         let start = offset as usize;
-        if start % align != 0 || len % align != 0 {
+        if !start.is_multiple_of(align) || !len.is_multiple_of(align) {
             return Err(RamFlashError::NotAligned);
         }
         if start + len > BYTES {

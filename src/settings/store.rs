@@ -1,4 +1,4 @@
-//! The settings in flash: one [`codec`](super::codec) blob under one key of a
+//! The settings in flash: one [`codec`] blob under one key of a
 //! sequential-storage map, over any NOR flash (`embedded-storage-async`'s [`NorFlash`]): the
 //! boards' internal flash, the host's file-backed [`RamFlash`](super::ram_flash::RamFlash),
 //! the tests' RAM flash.
@@ -6,7 +6,7 @@
 //! The map appends each SAVE as a new item after the old one and erases a page only when the
 //! area is full, so a SAVE costs no erase most of the time; an item is valid only once wholly
 //! written (its header's CRC), so a SAVE cut by a power loss leaves the previous blob in force.
-//! The blob's own CRC ([`codec`](super::codec)) checks it again after load.
+//! The blob's own CRC ([`codec`]) checks it again after load.
 //!
 //! The map skips a damaged item silently, falling back to the one before it; after each blob a
 //! SAVE writes a [`SaveRecord`] under its own key, so a load can tell a damaged newest blob

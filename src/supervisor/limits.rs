@@ -135,8 +135,9 @@ pub fn fresh(now_ms: u64, frame: &Frame) -> Result<(), Fault> {
 /// Whether a supply reading, V, lies within [`SUPPLY_MIN_V`]..[`SUPPLY_MAX_V`] to
 /// [`SUPPLY_READ_TOLERANCE_V`] (the supervisor's check; bring-up tools use the same).
 pub fn supply_in_range(supply_v: f32) -> bool {
-    supply_v >= SUPPLY_MIN_V - SUPPLY_READ_TOLERANCE_V
-        && supply_v < SUPPLY_MAX_V + SUPPLY_READ_TOLERANCE_V
+    // A NaN reading is in no range.
+    (SUPPLY_MIN_V - SUPPLY_READ_TOLERANCE_V..SUPPLY_MAX_V + SUPPLY_READ_TOLERANCE_V)
+        .contains(&supply_v)
 }
 
 /// A supply outside [`supply_in_range`] is a fault.

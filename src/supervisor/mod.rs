@@ -1,6 +1,6 @@
 //! Safety supervisor, run every control tick before the sequencer and independently of it.
 //!
-//! By concern: the limits every reading is held to whatever the model says ([`limits`]: the
+//! By concern: the limits every reading is held to whatever the model says ([`limits`](mod@limits): the
 //! sensors' ranges, the parts' estimates, the supply, a frame's age, a reading that does not
 //! move by its noise), the ambient thermistor's ramp ([`ramp`]), the one expectation of the
 //! heated sensors ([`expect`]: a family of the link's lumped model fed the powers delivered)

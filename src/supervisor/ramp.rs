@@ -40,7 +40,7 @@ const _: () = assert!((AMB_RAMP_SEGMENTS as f32) * AMB_RAMP_SEGMENT_S + AMB_RAMP
 
 /// The ambient sensor's steady-ramp watch: the mean reading of the segment in progress and of
 /// the last [`AMB_RAMP_SEGMENTS`] + 1 whole segments.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub struct RampWatch {
     /// When the segment in progress started (sample time, ms), its sum of readings (°C) and
     /// their count.

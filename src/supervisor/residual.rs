@@ -100,9 +100,7 @@ impl Change {
             self.last_k = None;
             return None;
         }
-        let Some(last) = self.last_k.replace(y_k) else {
-            return None;
-        };
+        let last = self.last_k.replace(y_k)?;
         let d_k = y_k - last;
         // The excess is averaged, not the reading alone: a change every member and the reading
         // share (the ambient reading's) then cancels whatever its pace.
@@ -190,7 +188,7 @@ mod tests {
         assert_eq!(trip_s(|_| RESIDUAL_SLACK_K - 0.01), None);
         // Noise of 20 × the slack's reach, alternating, never adds up.
         assert_eq!(
-            trip_s(|t| if (t * 10.0) as u32 % 2 == 0 {
+            trip_s(|t| if ((t * 10.0) as u32).is_multiple_of(2) {
                 8.0
             } else {
                 -8.0

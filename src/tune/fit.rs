@@ -111,7 +111,7 @@ pub fn least_squares(y: &[f32], dt_s: f32, tau_range_s: (f32, f32)) -> Option<St
             let e = v - rise_k * f;
             sse += e * e;
         }
-        if sse.is_finite() && best.map_or(true, |(b, _)| sse < b) {
+        if sse.is_finite() && best.is_none_or(|(b, _)| sse < b) {
             best = Some((
                 sse,
                 StepFit {

@@ -102,6 +102,8 @@ impl Args {
 
 /// A drawn link, cloned for every morph.
 #[derive(Clone)]
+// Cloned once a morph and matched at once: boxing the lumped link too would buy nothing.
+#[allow(clippy::large_enum_variant)]
 enum Link {
     Lumped(Lumped),
     Hifi(Box<Hifi>),
@@ -371,10 +373,13 @@ fn stage_name(m: Option<usize>) -> String {
 
 const STAGES: [Option<usize>; 5] = [None, Some(0), Some(1), Some(2), Some(3)];
 
+/// One plant's line on the chart: (stage index, p50, p95) per stage.
+type StageSeries = Vec<(f64, f64, f64)>;
+
 /// The chart: p50 and p95 |error| against the measured morphs, per plant (water links).
 struct Chart {
-    /// (plant, [(stage index, p50, p95)])
-    series: Vec<(&'static str, Vec<(f64, f64, f64)>)>,
+    /// (plant, its stages)
+    series: Vec<(&'static str, StageSeries)>,
 }
 
 impl Figure for Chart {

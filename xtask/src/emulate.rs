@@ -10,7 +10,7 @@ use std::path::Path;
 /// Options of `cargo xtask emulate`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Serve USART1 on 127.0.0.1:<PORT>; QEMU waits for a client (nc, socat, a test) to connect.
+    /// Serve USART1 on `127.0.0.1:PORT`; QEMU waits for a client (nc, socat, a test) to connect.
     #[arg(long)]
     port: Option<u16>,
     /// Instead: boot, morph the simulated link to this radius (mm), print the phases and stop.

@@ -34,7 +34,12 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = Medium::Water)]
     pub medium: Medium,
     /// Targets, one per link, mm.
-    #[arg(long, value_delimiter = ',', default_value = "34,38,42,46", conflicts_with = "stride_mm")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "34,38,42,46",
+        conflicts_with = "stride_mm"
+    )]
     pub targets_mm: Vec<f32>,
     /// The foot's stride wanted of each leg's four-bar, mm (docs/fourbar.md): the targets are
     /// the radii that give them (`morph-model fourbar --gait stride_mm=...`).
@@ -246,12 +251,18 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         println!(
             "strides {:?} mm: radii {} mm",
             a.stride_mm,
-            t.iter().map(|r| format!("{r:.2}")).collect::<Vec<_>>().join(", ")
+            t.iter()
+                .map(|r| format!("{r:.2}"))
+                .collect::<Vec<_>>()
+                .join(", ")
         );
         t
     };
     let a = &Args {
-        targets_mm: targets.iter().map(|r| (r * 100.0).round() / 100.0).collect(),
+        targets_mm: targets
+            .iter()
+            .map(|r| (r * 100.0).round() / 100.0)
+            .collect(),
         budgets_w: a.budgets_w.clone(),
         stride_mm: a.stride_mm.clone(),
         trace: a.trace.clone(),
@@ -265,7 +276,11 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
     let (plants, noise) = links(n, a.medium)?;
     let gait = format!(
         "GAIT {}",
-        a.targets_mm.iter().map(|t| t.to_string()).collect::<Vec<_>>().join(" ")
+        a.targets_mm
+            .iter()
+            .map(|t| t.to_string())
+            .collect::<Vec<_>>()
+            .join(" ")
     );
     // Each link alone, no budget: its own fastest morph, its energy and its error.
     let alone_jobs: Vec<usize> = (0..n).collect();
@@ -307,7 +322,10 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         out,
         "| budget W | makespan s | lower bound s | ratio | max power W (reckoned / true) | peak A | min V | queued | worst |error| vs alone pp | alarms |"
     );
-    let _ = writeln!(out, "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    let _ = writeln!(
+        out,
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+    );
     let mut failures = Vec::new();
     for (b, r) in a.budgets_w.iter().zip(&runs) {
         let makespan = r.done_s.iter().cloned().fold(0.0, f64::max);
@@ -320,13 +338,25 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         let worse_pp = (0..n)
             .map(|k| error_pct(r.radius_mm[k], a.targets_mm[k]).abs() - alone_err[k].abs())
             .fold(f64::NEG_INFINITY, f64::max);
-        let name = if *b > 0.0 { format!("{b}") } else { "none".into() };
+        let name = if *b > 0.0 {
+            format!("{b}")
+        } else {
+            "none".into()
+        };
         let _ = writeln!(
             out,
             "| {name} | {} | {:.1} | {} | {:.2} / {:.2} | {:.2} | {:.2} | {} | {:+.2} | {} |",
-            if all_done { format!("{makespan:.1}") } else { "not done".into() },
+            if all_done {
+                format!("{makespan:.1}")
+            } else {
+                "not done".into()
+            },
             bound,
-            if all_done { format!("{:.2}", makespan / bound) } else { "-".into() },
+            if all_done {
+                format!("{:.2}", makespan / bound)
+            } else {
+                "-".into()
+            },
             r.max_reckoned_w,
             r.max_true_w,
             r.peak_a,
@@ -336,7 +366,10 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
             r.alarms.len()
         );
         if *b > 0.0 && r.max_reckoned_w > *b as f64 + 1e-3 {
-            failures.push(format!("budget {b} W: a tick reckoned {:.3} W", r.max_reckoned_w));
+            failures.push(format!(
+                "budget {b} W: a tick reckoned {:.3} W",
+                r.max_reckoned_w
+            ));
         }
         if r.peak_a > a.limit_a as f64 + 1e-3 {
             failures.push(format!("budget {name}: a period drew {:.3} A", r.peak_a));
@@ -363,10 +396,14 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         let chart = morphlink_host::gait_chart::GaitChart {
             title: format!("{gait} on {n} hifi links, {tightest} W, {} A", a.limit_a),
             time_s: r.trace.iter().map(|t| t.0).collect(),
-            power_w: (0..n).map(|k| r.trace.iter().map(|t| t.1[k]).collect()).collect(),
+            power_w: (0..n)
+                .map(|k| r.trace.iter().map(|t| t.1[k]).collect())
+                .collect(),
             total_w: r.trace.iter().map(|t| t.2).collect(),
             budget_w: Some(tightest as f64),
-            radius_mm: (0..n).map(|k| r.trace.iter().map(|t| t.3[k]).collect()).collect(),
+            radius_mm: (0..n)
+                .map(|k| r.trace.iter().map(|t| t.3[k]).collect())
+                .collect(),
             target_mm: a.targets_mm.iter().map(|&t| t as f64).collect(),
         };
         morphlink_host::plot::write(path, (900, 700), &chart).map_err(|e| e.0)?;

@@ -316,7 +316,7 @@ pub fn run(args: &Args) -> Result<(), String> {
     println!("| --- | --- | --- | --- | --- | --- | --- |");
     let mut failures = Vec::new();
     for (c, corner) in corners.iter().enumerate() {
-        let rows: Vec<(&(usize, usize, &str, f32), &Peaks)> = jobs
+        let rows: Vec<_> = jobs
             .iter()
             .zip(&results)
             .filter(|(j, _)| j.0 == c)

@@ -98,6 +98,8 @@ const HIFI: &str = "hifi";
 
 /// One drawn link, ready to morph (cloned for every run).
 #[derive(Clone)]
+// Cloned once a run and matched at once: boxing the lumped link too would buy nothing.
+#[allow(clippy::large_enum_variant)]
 enum Link {
     Lumped(Lumped),
     Hifi(Box<Hifi>),

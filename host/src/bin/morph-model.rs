@@ -453,8 +453,7 @@ fn fourbar_gait(p: &LinkParams, g: &FourBarGeometry, spec: &str) -> Result<Strin
     let (name, values) = spec.split_once('=').ok_or(
         "--gait takes PROPERTY=V1,V2,..., one value per leg, e.g. stride_mm=26,25.5,26.5,25",
     )?;
-    let prop = Property::parse(name.trim())
-        .ok_or(format!("--gait: unknown property {name:?}"))?;
+    let prop = Property::parse(name.trim()).ok_or(format!("--gait: unknown property {name:?}"))?;
     let range = fourbar::reachable_radii_mm(p);
     let mid = 0.5 * (range.0 + range.1);
     let mut out = String::new();
@@ -465,7 +464,10 @@ fn fourbar_gait(p: &LinkParams, g: &FourBarGeometry, spec: &str) -> Result<Strin
             .parse()
             .ok()
             .filter(|v: &f64| v.is_finite())
-            .ok_or(format!("--gait: leg {}: {v:?} is not a number of mm", leg + 1))?;
+            .ok_or(format!(
+                "--gait: leg {}: {v:?} is not a number of mm",
+                leg + 1
+            ))?;
         let sols = match fourbar::inverse(*g, p.geometry.length_m, range, prop, want_mm)
             .map_err(|e| e.to_string())?
         {
@@ -492,7 +494,11 @@ fn fourbar_gait(p: &LinkParams, g: &FourBarGeometry, spec: &str) -> Result<Strin
             prop.name(),
             prop.name()
         );
-        radii.push(morph_line(r, range).trim_start_matches("MORPH ").to_string());
+        radii.push(
+            morph_line(r, range)
+                .trim_start_matches("MORPH ")
+                .to_string(),
+        );
     }
     if radii.len() > morphlink::budget::MAX_LINKS {
         return Err(format!(

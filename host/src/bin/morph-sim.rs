@@ -46,8 +46,9 @@ struct Cli {
     plant: PlantKind,
     /// Run the plant as this shell command (`sh -c`), spoken to over plant protocol 1 on its
     /// stdin/stdout, instead of an in-process plant.
-    /// With `--links`, given once per link: links 1, 2, ... in order (the rest in-process).
-    #[arg(long, value_name = "SHELL COMMAND")]
+    /// With `--links`, given once per link: links 1, 2, ... in order (the links it is not
+    /// given for run the lumped plant in-process).
+    #[arg(long, value_name = "SHELL COMMAND", conflicts_with = "plant")]
     plant_cmd: Vec<String>,
     /// Links on the one simulated board, each its own plant (1 to 4; docs/multilink.md).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=4))]
@@ -149,7 +150,8 @@ impl Board for SimBoard {
         MultiRig::handle_line(self, line, &mut |l: &str| out(l));
     }
     fn failure(&self) -> Option<String> {
-        self.plant_failure().map(|(k, w)| format!("link {}: {w}", k + 1))
+        self.plant_failure()
+            .map(|(k, w)| format!("link {}: {w}", k + 1))
     }
     fn now_ms(&self) -> u64 {
         MultiRig::now_ms(self)
@@ -364,13 +366,7 @@ fn run(cli: &Cli) -> Result<(), Stop> {
         // Take everything that has arrived; at end of input, run on until idle or faulted.
         while input_open {
             match rx.try_recv() {
-                Ok(bytes) => feed(
-                    rig,
-                    &mut asm,
-                    &bytes,
-                    cli.flash_file.as_deref(),
-                    &mut emit,
-                ),
+                Ok(bytes) => feed(rig, &mut asm, &bytes, cli.flash_file.as_deref(), &mut emit),
                 Err(TryRecvError::Empty) => break,
                 Err(TryRecvError::Disconnected) => input_open = false,
             }
@@ -398,13 +394,7 @@ fn run(cli: &Cli) -> Result<(), Stop> {
             // Nothing running and input still open: wait for input instead of spinning.
             Speed::Max if input_open && !rig.busy() => {
                 if let Ok(bytes) = rx.recv_timeout(Duration::from_millis(50)) {
-                    feed(
-                        rig,
-                        &mut asm,
-                        &bytes,
-                        cli.flash_file.as_deref(),
-                        &mut emit,
-                    );
+                    feed(rig, &mut asm, &bytes, cli.flash_file.as_deref(), &mut emit);
                 }
             }
             Speed::Max => {}

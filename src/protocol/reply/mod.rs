@@ -1,6 +1,6 @@
 //! Every reply, event and alarm line the firmware and the simulated builds send, by concern:
-//! the shared line builders and protocol-wide errors here; [`status`] (STATUS, the morph's
-//! events, the command replies), [`alarm`] (alarm lines and fault sentences), [`sim`] (the
+//! the shared line builders and protocol-wide errors here; [`status`](mod@status) (STATUS, the morph's
+//! events, the command replies), [`alarm`](mod@alarm) (alarm lines and fault sentences), [`sim`] (the
 //! simulated builds' `SIM` replies) and [`config`] (CONFIG, SAVE and the boot's config events).
 //! `TUNE` and `MEASURED` are in [`super::tune_reply`].
 //!
