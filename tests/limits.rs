@@ -9,6 +9,7 @@ use common::{Bench, Link};
 use morphlink::protocol::{classify, LineKind};
 use morphlink::settings::Settings;
 use morphlink::supervisor::{PLA_LIMITS, TCA_LIMITS};
+use morphlink::tune::TuneStep;
 
 /// The top of a setting's range as `CONFIG` prints it.
 fn top(name: &str) -> String {
@@ -158,11 +159,7 @@ fn a_tune_with_a_stuck_heater_changes_nothing_and_cannot_be_saved(link: Link) {
     b.rig.boot_storage(None);
     let before = b.rig.ctrl.calibration();
     assert!(b.send("TUNE")[0].starts_with("ok"));
-    assert!(b.run_until(200.0, |b| b
-        .rig
-        .ctrl
-        .tune_step()
-        .is_some_and(|s| s.as_str() == "pla")));
+    assert!(b.run_to_tune_step(TuneStep::Pla));
     assert!(b.send("SIM FAULT heater-stuck pla")[0].starts_with("ok"));
     assert!(b.run_until(200.0, |b| !b.rig.ctrl.tuning()));
     b.run_for(30.0);

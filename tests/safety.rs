@@ -903,6 +903,10 @@ fn a_drifting_ambient_thermistor_trips_within_20_s_in_every_phase(link: Link) {
             assert!(a.starts_with("alarm: sensor-implausible amb drifts"), "{a}");
             assert_names(&a, "AMB_RAMP_MAX_K_PER_S");
             assert_latched(&mut b, "sensor-implausible");
+            // RESET while it still drifts is refused, naming the rate it drifts at.
+            let r = b.send("RESET");
+            assert!(r[0].contains("amb drifts"), "{r:?}");
+            assert!(!r[0].contains("nan"), "{r:?}");
             cases += 1;
         }
     }

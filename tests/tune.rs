@@ -221,7 +221,7 @@ fn abort_in_every_step_ends_the_tune_with_heaters_off(link: Link) {
         let mut b = Bench::on(link);
         b.run_for(2.0);
         assert_eq!(b.send("TUNE"), [format!("ok total_s={TUNE_TOTAL_S:.0}")]);
-        assert!(b.run_until(180.0, |b| b.rig.ctrl.tune_step() == Some(step)));
+        assert!(b.run_to_tune_step(step));
         // Into the step, so a heated one is heating.
         b.run_for(3.0);
         assert_eq!(b.rig.ctrl.tune_step(), Some(step));
@@ -252,7 +252,7 @@ fn fault_during_tune(link: Link, fault: &str, step: TuneStep, alarm: &str) {
     }
     b.run_for(2.0);
     assert_eq!(b.send("TUNE"), [format!("ok total_s={TUNE_TOTAL_S:.0}")]);
-    assert!(b.run_until(180.0, |b| b.rig.ctrl.tune_step() == Some(step)));
+    assert!(b.run_to_tune_step(step));
     let r = b.send(fault);
     assert!(r[0].starts_with("ok"), "{r:?}");
     let from = b.lines.len();
@@ -449,11 +449,7 @@ fn a_heater_stuck_in_a_second_tune_keeps_reset_refused_while_it_heats(link: Link
     assert!(end.starts_with("event: tune done"), "{end}");
     b.run_for(600.0);
     assert_eq!(b.send("TUNE"), [format!("ok total_s={TUNE_TOTAL_S:.0}")]);
-    assert!(b.run_until(200.0, |b| b
-        .rig
-        .ctrl
-        .tune_step()
-        .is_some_and(|s| s.as_str() == "pla")));
+    assert!(b.run_to_tune_step(TuneStep::Pla));
     assert!(b.send("SIM FAULT cutoff-stuck")[0].starts_with("ok"));
     assert!(b.send("SIM FAULT heater-stuck pla")[0].starts_with("ok"));
     let from = b.lines.len();

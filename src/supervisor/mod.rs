@@ -364,8 +364,8 @@ impl Supervisor {
                 });
             }
         }
-        if self.ramp.ramping {
-            return Err(ramp_fault(f32::NAN));
+        if let Some(rate_k_per_s) = self.ramp.ramping_k_per_s {
+            return Err(ramp_fault(rate_k_per_s));
         }
         supply_ok(frame)
     }

@@ -48,8 +48,9 @@ pub struct RampWatch {
     /// The last whole segments' means, oldest first, °C; `count` of them are filled.
     means_c: [f32; AMB_RAMP_SEGMENTS + 1],
     count: usize,
-    /// The last judgement found a steady ramp (RESET waits until one does not).
-    pub ramping: bool,
+    /// The rate of the steady ramp the last judgement found, K/s, or `None` when it found none
+    /// (RESET waits until it finds none, and its refusal names this rate).
+    pub ramping_k_per_s: Option<f32>,
 }
 
 impl RampWatch {
@@ -59,7 +60,7 @@ impl RampWatch {
             segment: None,
             means_c: [0.0; AMB_RAMP_SEGMENTS + 1],
             count: 0,
-            ramping: false,
+            ramping_k_per_s: None,
         }
     }
 
@@ -99,14 +100,11 @@ impl RampWatch {
         if self.count < self.means_c.len() {
             return Ok(());
         }
-        self.ramping = steady_ramp(&self.means_c);
-        if self.ramping {
-            let span_s = AMB_RAMP_SEGMENTS as f32 * AMB_RAMP_SEGMENT_S;
-            return Err(ramp_fault(
-                (self.means_c[AMB_RAMP_SEGMENTS] - self.means_c[0]) / span_s,
-            ));
-        }
-        Ok(())
+        let span_s = AMB_RAMP_SEGMENTS as f32 * AMB_RAMP_SEGMENT_S;
+        self.ramping_k_per_s = steady_ramp(&self.means_c)
+            .then(|| (self.means_c[AMB_RAMP_SEGMENTS] - self.means_c[0]) / span_s);
+        self.ramping_k_per_s
+            .map_or(Ok(()), |rate| Err(ramp_fault(rate)))
     }
 }
 

@@ -30,6 +30,7 @@ use morphlink::protocol::{classify, LineKind};
 use morphlink::sequencer::{
     BEND_TIMEOUT_S, LOCK_TIMEOUT_S, RELEASE_TIMEOUT_S, REST_TIMEOUT_S, SOFTEN_TIMEOUT_S,
 };
+use morphlink::tune::TuneStep;
 use morphlink::vocab::Phase;
 use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
 use morphlink_plant::Plant;
@@ -156,6 +157,12 @@ impl Bench {
             self.tick();
         }
         pred(self)
+    }
+
+    /// Ticks until the TUNE in progress is in `step` (at most 200 s of simulated time); true if
+    /// it got there. The one wait the TUNE tests share before they act inside a step.
+    pub fn run_to_tune_step(&mut self, step: TuneStep) -> bool {
+        self.run_until(200.0, |b| b.rig.ctrl.tune_step() == Some(step))
     }
 
     /// Ticks for `s` seconds of simulated time.
