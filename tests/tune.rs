@@ -473,3 +473,39 @@ fn a_heater_stuck_in_a_second_tune_keeps_reset_refused_while_it_heats(link: Link
     });
     assert!(taken, "RESET never taken after the repair");
 }
+
+/// A still-air link whose PLA step does not reach its cap early (the hifi ensemble's draw 1:
+/// 1.43 times the water model's rise, 42 s time constants) is not tuned as water: kept, that
+/// share would hide a soft rod from the observer and every soften would time out. TUNE says why
+/// and changes nothing, and the link then morphs as it did before TUNE.
+#[test]
+fn a_tune_that_would_hide_a_soft_rod_fails_and_the_link_still_morphs() {
+    let mut b = Bench::hifi_draw(20261122, 1);
+    b.run_for(2.0);
+    let before = b.rig.ctrl.calibration();
+    let end = tune(&mut b);
+    println!("{end}");
+    assert!(end.starts_with("event: tune failed pla reads "), "{end}");
+    assert!(end.contains("calibration kept"), "{end}");
+    assert_eq!(b.rig.ctrl.calibration(), before);
+    // MORPH rests the link to ambient first, then morphs.
+    assert!(b.send("MORPH 40")[0].starts_with("ok"));
+    let from = b.lines.len();
+    assert!(b.run_until(1500.0, |b| b.lines[from..]
+        .iter()
+        .any(|l| l.starts_with("event: done") || classify(l) == LineKind::Alarm)));
+    assert!(
+        b.lines[from..].iter().any(|l| l.starts_with("event: done")),
+        "{:?}",
+        &b.lines[from..]
+    );
+}
+
+/// The share of the water model's rise at which a rod can still be seen soft falls as the
+/// surroundings warm toward the soft threshold's distance from the guard's ceiling.
+#[test]
+fn the_softening_share_is_the_guards_ceiling_over_the_threshold() {
+    use morphlink::tune::pla_share_softens;
+    assert!((pla_share_softens(20.0) - 1.3).abs() < 1e-4);
+    assert!(pla_share_softens(30.0) > pla_share_softens(20.0));
+}

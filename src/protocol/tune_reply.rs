@@ -318,6 +318,15 @@ pub fn tune_event(l: &mut OutLine, e: &TuneEvent) {
                         Fixed(*t_s, 1)
                     );
                 }
+                TuneFailure::PlaReadsOver(share, most) => {
+                    let _ = write!(
+                        l,
+                        "pla reads {} of the water model's rise, over the {} at which a rod can \
+                         be seen soft: weaker convection than water's (still air?)",
+                        Fixed(*share, 2),
+                        Fixed(*most, 2)
+                    );
+                }
                 TuneFailure::AmbientMoved(k) => {
                     let _ = write!(
                         l,
@@ -373,6 +382,7 @@ mod tests {
             TuneFailure::PlaTooFast(big),
             TuneFailure::AmbientMoved(big),
             TuneFailure::TcaTooFast(big),
+            TuneFailure::PlaReadsOver(big, big),
         ]);
         let mut lines = Vec::new();
         for f in failures {

@@ -244,6 +244,23 @@ pub enum TuneFailure {
     /// The ambient thermistor moved this far from its baseline during the tune, K (more than
     /// [`TUNE_AMB_MAX_MOVE_K`]): a bath that warmed or cooled reads as heater rise.
     AmbientMoved(f32),
+    /// The PLA's thermistor read this share of the water model's rise, over the most (the
+    /// second value) at which the model strategies can still call the rod soft at this
+    /// ambient ([`pla_share_softens`]): convection weaker than water's that the step could not
+    /// tell from still air. Kept, the share would hide a soft rod and every soften would time
+    /// out, so the calibration stays as it was.
+    PlaReadsOver(f32, f32),
+}
+
+/// The most of the water model's rise per watt a PLA thermistor may read for the model
+/// strategies to call the rod soft at `ambient_c` (°C): their observer takes the rod's rise as
+/// the reading's over that share, and their guard holds the reading at most
+/// `PLA_SOFT_TARGET_C + MODEL_GUARD_K`, so over this share the estimate never reaches
+/// `SOFT_THRESHOLD_C` and soften cannot end (docs/calibration.md, "Draw 1").
+pub fn pla_share_softens(ambient_c: f32) -> f32 {
+    use crate::strategy::model::{MODEL_GUARD_K, PLA_SOFT_TARGET_C};
+    use crate::strategy::SOFT_THRESHOLD_C;
+    (PLA_SOFT_TARGET_C + MODEL_GUARD_K - ambient_c) / (SOFT_THRESHOLD_C - ambient_c)
 }
 
 /// Progress of a tune, for `event: tune ...` lines.
@@ -689,6 +706,10 @@ impl Tune {
         let y = &self.rec[0][..self.n];
         match fit_checked(y, TUNE_PLA_W, Fitted::Own(Heater::Pla), &water()) {
             Ok((r, tau, method, residual_k)) => {
+                let (share, most) = (r / water().r_pp, pla_share_softens(self.base_amb_c));
+                if !(share <= most) {
+                    return self.fail(TuneFailure::PlaReadsOver(share, most), emit);
+                }
                 self.cal.pla_rise_k_per_w = r;
                 self.cal.pla_tau_s = tau;
                 emit(TuneEvent::Fit {

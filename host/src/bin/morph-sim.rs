@@ -32,7 +32,8 @@ use std::time::{Duration, Instant};
     about = "Simulated morphing link on the serial protocol (stdin/stdout)"
 )]
 struct Cli {
-    /// Simulation speed: a factor of real time (1 = real time) or `max` (as fast as possible).
+    /// Simulation speed: a factor of real time (1 = real time) or `max` (as fast as possible;
+    /// simulated time then stands still while the link is idle and waits for input).
     #[arg(long, default_value = "1", value_parser = parse_speed)]
     speed: Speed,
     /// Seed of the simulated sensor noise.
@@ -371,6 +372,16 @@ fn run(cli: &Cli) -> Result<(), Stop> {
                 Err(TryRecvError::Disconnected) => input_open = false,
             }
         }
+        // As fast as possible, simulated time runs only while something does: an idle link
+        // waits for input without ticking, so a run depends on its input alone, never on when
+        // the input arrived.
+        if matches!(cli.speed, Speed::Max) && input_open && !rig.busy() {
+            match rx.recv() {
+                Ok(bytes) => feed(rig, &mut asm, &bytes, cli.flash_file.as_deref(), &mut emit),
+                Err(_) => input_open = false,
+            }
+            continue;
+        }
         if let Some(why) = rig.failure() {
             return Err(Stop::PlantFailed(why));
         }
@@ -391,12 +402,6 @@ fn run(cli: &Cli) -> Result<(), Stop> {
             break;
         }
         match cli.speed {
-            // Nothing running and input still open: wait for input instead of spinning.
-            Speed::Max if input_open && !rig.busy() => {
-                if let Ok(bytes) = rx.recv_timeout(Duration::from_millis(50)) {
-                    feed(rig, &mut asm, &bytes, cli.flash_file.as_deref(), &mut emit);
-                }
-            }
             Speed::Max => {}
             Speed::Factor(f) => {
                 // Time run by SIM WAIT was asked to pass at once: pace only the rest.
