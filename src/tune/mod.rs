@@ -252,15 +252,20 @@ pub enum TuneFailure {
     PlaReadsOver(f32, f32),
 }
 
+/// The highest PLA reading the model strategies let soften reach, °C: their PLA target plus
+/// their thermistor guard (`strategy::model::PLA_SOFT_TARGET_C + MODEL_GUARD_K`, held equal
+/// there at compile time; named here so the tune needs nothing of the strategies).
+pub const TUNE_SOFTEN_READING_MAX_C: f32 = 85.0;
+/// The estimate at which soften ends, °C (`strategy::SOFT_THRESHOLD_C`, held equal there).
+pub const TUNE_SOFT_THRESHOLD_C: f32 = 70.0;
+
 /// The most of the water model's rise per watt a PLA thermistor may read for the model
 /// strategies to call the rod soft at `ambient_c` (°C): their observer takes the rod's rise as
 /// the reading's over that share, and their guard holds the reading at most
-/// `PLA_SOFT_TARGET_C + MODEL_GUARD_K`, so over this share the estimate never reaches
-/// `SOFT_THRESHOLD_C` and soften cannot end (docs/calibration.md, "Draw 1").
+/// [`TUNE_SOFTEN_READING_MAX_C`], so over this share the estimate never reaches
+/// [`TUNE_SOFT_THRESHOLD_C`] and soften cannot end (docs/calibration.md, "Draw 1").
 pub fn pla_share_softens(ambient_c: f32) -> f32 {
-    use crate::strategy::model::{MODEL_GUARD_K, PLA_SOFT_TARGET_C};
-    use crate::strategy::SOFT_THRESHOLD_C;
-    (PLA_SOFT_TARGET_C + MODEL_GUARD_K - ambient_c) / (SOFT_THRESHOLD_C - ambient_c)
+    (TUNE_SOFTEN_READING_MAX_C - ambient_c) / (TUNE_SOFT_THRESHOLD_C - ambient_c)
 }
 
 /// Progress of a tune, for `event: tune ...` lines.

@@ -54,6 +54,11 @@ pub const MODEL_GUARD_K: f32 = 10.0;
 // The guard trips before the supervisor does, with the margin the comment above claims.
 const _: () = assert!(target::TARGET_MAX_C + MODEL_GUARD_K + 10.0 <= TCA_LIMITS.max_c);
 const _: () = assert!(PLA_SOFT_TARGET_C + MODEL_GUARD_K + 10.0 <= PLA_LIMITS.max_c);
+// TUNE's soft-rod check takes the same ceiling and threshold.
+const _: () = assert!(
+    PLA_SOFT_TARGET_C + MODEL_GUARD_K == crate::tune::TUNE_SOFTEN_READING_MAX_C
+        && SOFT_THRESHOLD_C == crate::tune::TUNE_SOFT_THRESHOLD_C
+);
 
 /// Least power the model strategies ask of a heater in a phase that has it on, W. The
 /// supervisor's heater watch starts afresh whenever a heater's command drops to 0 W; restarted
