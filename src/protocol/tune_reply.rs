@@ -321,8 +321,7 @@ pub fn tune_event(l: &mut OutLine, e: &TuneEvent) {
                 TuneFailure::PlaReadsOver(share, most) => {
                     let _ = write!(
                         l,
-                        "pla reads {} of the water model's rise, over the {} at which a rod can \
-                         be seen soft: weaker convection than water's (still air?)",
+                        "pla reads {}x water's rise, over the {}x a soft rod shows at (air?)",
                         Fixed(*share, 2),
                         Fixed(*most, 2)
                     );

@@ -570,14 +570,22 @@ fn round_to(v: f32, decimals: u8) -> f32 {
 /// `x as i64 as f32` in 32-bit arithmetic, so the firmware carries no 64-bit float
 /// conversions: the same value for every `x` (an `f32` beyond `i32`'s range is already whole;
 /// NaN is 0 and the rest saturates as `as i64` does).
+#[allow(
+    clippy::manual_clamp,
+    reason = "f32::clamp checks its bounds and carries a panic path into the image"
+)]
 fn whole(x: f32) -> f32 {
     const I64_MAX: f32 = i64::MAX as f32;
     if x.abs() < 2_147_483_520.0 {
         x as i32 as f32
     } else if x.is_nan() {
         0.0
+    } else if x > I64_MAX {
+        I64_MAX
+    } else if x < -I64_MAX {
+        -I64_MAX
     } else {
-        x.clamp(-I64_MAX, I64_MAX)
+        x
     }
 }
 
