@@ -5,7 +5,7 @@
 use morphlink_host::emulator::{build_image, find_qemu, Emulator};
 use morphlink_host::workspace::Workspace;
 use std::path::{Path, PathBuf};
-use std::sync::{Mutex, MutexGuard, OnceLock};
+use std::sync::{Condvar, Mutex, OnceLock};
 use std::time::Duration;
 
 /// Longest wall time for one emulated morph (about 80 s of firmware time at 20×: 4 s).
@@ -40,17 +40,53 @@ fn setup() -> Option<(PathBuf, PathBuf)> {
         .clone()
 }
 
-/// One emulator at a time: the tests share two cores with everything else, and each QEMU
-/// should get a whole one.
-static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+/// As many emulators at once as the machine has cores (at most [`MOST_AT_ONCE`]): each QEMU
+/// gets a whole core, and under `-icount` the firmware's clock follows its own instructions, so
+/// one QEMU beside another runs the same firmware timing, only its wall time shared.
+const MOST_AT_ONCE: usize = 2;
 
-/// Boots the image and waits for the first control tick; the guard keeps other tests waiting.
-fn boot() -> Option<(MutexGuard<'static, ()>, Emulator)> {
+/// The emulator slots in use, and the wait for one to free.
+static SLOTS: (Mutex<usize>, Condvar) = (Mutex::new(0), Condvar::new());
+
+/// Held emulator slots (how many), given back when dropped.
+struct Slot(usize);
+
+impl Slot {
+    /// Waits for `want` slots (all of them for a test that times the firmware against the
+    /// host's serial line, the floods, which then run alone as they always did).
+    fn take(want: usize) -> Slot {
+        let most = std::thread::available_parallelism().map_or(1, |n| n.get().min(MOST_AT_ONCE));
+        let want = want.min(most);
+        let (count, freed) = &SLOTS;
+        let mut n = count.lock().unwrap_or_else(|p| p.into_inner());
+        while *n + want > most {
+            n = freed.wait(n).unwrap_or_else(|p| p.into_inner());
+        }
+        *n += want;
+        Slot(want)
+    }
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        let (count, freed) = &SLOTS;
+        *count.lock().unwrap_or_else(|p| p.into_inner()) -= self.0;
+        freed.notify_all();
+    }
+}
+
+/// Boots the image and waits for the first control tick; the slot keeps further tests waiting.
+fn boot() -> Option<(Slot, Emulator)> {
+    boot_taking(1)
+}
+
+/// [`boot`] holding `slots` emulator slots.
+fn boot_taking(slots: usize) -> Option<(Slot, Emulator)> {
     let (qemu, image) = setup()?;
-    let guard = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
+    let slot = Slot::take(slots);
     let mut emu = Emulator::boot(&qemu, &image).unwrap_or_else(|e| panic!("{e}"));
     emu.wait_ready(REPLY).unwrap_or_else(|e| panic!("{e}"));
-    Some((guard, emu))
+    Some((slot, emu))
 }
 
 fn field(line: &str, key: &str) -> Option<String> {
@@ -71,7 +107,7 @@ macro_rules! check {
 
 #[test]
 fn boots_and_answers_version_status_and_range() {
-    let Some((_one, mut emu)) = boot() else {
+    let Some((_slot, mut emu)) = boot() else {
         return;
     };
     let boot_line = emu.transcript[0].clone();
@@ -102,7 +138,7 @@ fn boots_and_answers_version_status_and_range() {
 
 #[test]
 fn full_morphs_reach_their_targets_with_phases_in_order() {
-    let Some((_one, mut emu)) = boot() else {
+    let Some((_slot, mut emu)) = boot() else {
         return;
     };
     for target in [34.0, 38.0, 44.0] {
@@ -157,7 +193,7 @@ fn full_morphs_reach_their_targets_with_phases_in_order() {
 
 #[test]
 fn abort_mid_phase_turns_heaters_off() {
-    let Some((_one, mut emu)) = boot() else {
+    let Some((_slot, mut emu)) = boot() else {
         return;
     };
     for phase in ["soften", "bend", "lock"] {
@@ -180,7 +216,7 @@ fn abort_mid_phase_turns_heaters_off() {
 
 #[test]
 fn injected_faults_raise_their_alarm_with_heaters_off() {
-    let Some((_one, mut emu)) = boot() else {
+    let Some((_slot, mut emu)) = boot() else {
         return;
     };
     for (inject, alarm, clear) in [
@@ -253,7 +289,7 @@ fn injected_faults_raise_their_alarm_with_heaters_off() {
 /// would go on with: the TCA cools although its MOSFET still conducts.
 #[test]
 fn a_stuck_heater_is_named_by_its_current_and_the_cut_off_ends_its_heating() {
-    let Some((_one, mut emu)) = boot() else {
+    let Some((_slot, mut emu)) = boot() else {
         return;
     };
     emu.command("MORPH 38", REPLY).unwrap();
@@ -323,7 +359,7 @@ fn a_stuck_heater_is_named_by_its_current_and_the_cut_off_ends_its_heating() {
 
 #[test]
 fn overlong_and_garbage_lines_get_errors() {
-    let Some((_one, mut emu)) = boot() else {
+    let Some((_slot, mut emu)) = boot() else {
         return;
     };
     let mut long = vec![b'X'; 300];
@@ -367,7 +403,7 @@ fn next_boot_line(emu: &mut Emulator) -> String {
 
 #[test]
 fn a_panic_turns_heaters_off_resets_and_the_next_boot_names_it() {
-    let Some((_one, mut emu)) = boot() else {
+    let Some((_slot, mut emu)) = boot() else {
         return;
     };
     emu.command("MORPH 38", REPLY).unwrap();
@@ -402,7 +438,7 @@ fn a_panic_turns_heaters_off_resets_and_the_next_boot_names_it() {
 
 #[test]
 fn a_stalled_control_task_is_reset_by_the_watchdog_with_heaters_off() {
-    let Some((_one, mut emu)) = boot() else {
+    let Some((_slot, mut emu)) = boot() else {
         return;
     };
     emu.command("MORPH 38", REPLY).unwrap();
@@ -436,7 +472,7 @@ fn a_stalled_control_task_is_reset_by_the_watchdog_with_heaters_off() {
 /// ambient for a minute of firmware time (checked after power-on and after a reset).
 #[test]
 fn a_boot_never_heats() {
-    let Some((_one, mut emu)) = boot() else {
+    let Some((_slot, mut emu)) = boot() else {
         return;
     };
     let watch = |emu: &mut Emulator, when: &str| {
@@ -472,7 +508,7 @@ fn a_boot_never_heats() {
 
 #[test]
 fn cr_only_and_crlf_line_endings_run_abort_and_status() {
-    let Some((_one, mut emu)) = boot() else {
+    let Some((_slot, mut emu)) = boot() else {
         return;
     };
     for ending in ["\r", "\r\n"] {
@@ -563,7 +599,7 @@ fn flood_lines() -> usize {
 /// keeps its timing: no tick late (`STATS late=0`).
 #[test]
 fn a_status_flood_loses_no_abort_and_merges_no_lines() {
-    let Some((_one, mut emu)) = boot() else {
+    let Some((_slot, mut emu)) = boot_taking(MOST_AT_ONCE) else {
         return;
     };
     let n = flood_lines();
@@ -698,7 +734,7 @@ fn a_status_flood_loses_no_abort_and_merges_no_lines() {
 /// is not built), and the replies that did not fit are counted in `error: busy` notices.
 #[test]
 fn a_help_flood_does_not_starve_the_control_task() {
-    let Some((_one, mut emu)) = boot() else {
+    let Some((_slot, mut emu)) = boot_taking(MOST_AT_ONCE) else {
         return;
     };
     let n = 300;
@@ -764,7 +800,7 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
     let Some((qemu, image)) = setup() else {
         return;
     };
-    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
+    let _slot = Slot::take(1);
     let mut emu = Emulator::boot(&qemu, &image).unwrap_or_else(|e| panic!("{e}"));
     // QEMU starts with zeroed RAM: no settings kept yet.
     let first = emu.wait_for("event: config ", REPLY).unwrap();
