@@ -10,7 +10,6 @@
 //! began), the chart of the error reached against the number of measured
 //! morphs (`docs/calibration.svg`, `.png`) and prints the tables of `docs/calibration.md`.
 
-use morphlink::bench::Noise;
 use morphlink::calibration::Calibration;
 use morphlink::controller::{Event, TICK_MS};
 use morphlink::protocol::{Command, Mode};
@@ -19,23 +18,17 @@ use morphlink::table;
 use morphlink::vocab::Phase;
 use morphlink_host::plot::{self, prelude::*};
 use morphlink_model::draw::{splitmix, uniform};
-use morphlink_plant::hifi::Hifi;
-use morphlink_plant::{Lumped, Plant};
-use morphlink_sim::ensemble::{Mismatch, MAX_MORPH_S, SETTLE_AFTER_DONE_S};
+use morphlink_plant::Plant;
+use morphlink_sim::ensemble::{MAX_MORPH_S, SETTLE_AFTER_DONE_S};
 use morphlink_sim::Rig;
 use std::fmt::Write as _;
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 
+use crate::ensemble::{parallel, Common, Link, DEFAULT_HIFI_DRAWS};
 use crate::strategies::targets;
 
 /// Lumped links drawn by default (each: TUNE, 3 measured morphs, 25 evaluated morphs).
 pub const DEFAULT_DRAWS: u64 = 100;
-/// High-fidelity links drawn by default (the headline; about 3 s of CPU each).
-pub const DEFAULT_HIFI_DRAWS: u64 = 40;
-/// Seed of the ensemble: the strategy chart's, so the links are the same ones.
-pub const DEFAULT_SEED: u64 = 20_261_122;
 /// Target radii evaluated per link, spread over the range 0.2 mm inside its ends (as the
 /// strategy chart's).
 pub const DEFAULT_TARGETS: usize = 5;
@@ -61,12 +54,9 @@ pub struct Args {
     /// Target radii evaluated per link.
     #[arg(long, default_value_t = DEFAULT_TARGETS)]
     pub targets: usize,
-    /// Seed of the mismatch draws and of the measuring error.
-    #[arg(long, default_value_t = DEFAULT_SEED)]
-    pub seed: u64,
-    /// Worker threads.
-    #[arg(long, default_value_t = 2)]
-    pub threads: usize,
+    // The seed also draws the measuring error.
+    #[command(flatten)]
+    pub common: Common,
     /// Output directory, relative to the workspace root.
     #[arg(long, default_value = "docs")]
     pub out: String,
@@ -100,28 +90,14 @@ impl Args {
     }
 }
 
-/// A drawn link, cloned for every morph.
-#[derive(Clone)]
-// Cloned once a morph and matched at once: boxing the lumped link too would buy nothing.
-#[allow(clippy::large_enum_variant)]
-enum Link {
-    Lumped(Lumped),
-    Hifi(Box<Hifi>),
-}
-
-impl Link {
-    fn rig(&self, noise: Noise, cal: &Calibration) -> Rig<Box<dyn Plant>> {
-        let plant: Box<dyn Plant> = match self {
-            Link::Lumped(p) => Box::new(p.clone()),
-            Link::Hifi(p) => Box::new((**p).clone()),
-        };
-        let mut rig = Rig::with_plant(plant, noise);
-        rig.ctrl
-            .set_calibration(*cal)
-            .expect("a calibration the controller made is within its bounds");
-        rig.boot();
-        rig
-    }
+/// A fresh rig on a copy of `link` with calibration `cal`, booted.
+fn rig(link: &Link, cal: &Calibration) -> Rig<Box<dyn Plant>> {
+    let mut rig = link.rig();
+    rig.ctrl
+        .set_calibration(*cal)
+        .expect("a calibration the controller made is within its bounds");
+    rig.boot();
+    rig
 }
 
 /// One evaluated morph.
@@ -243,17 +219,11 @@ fn rest_after(rig: &mut Rig<Box<dyn Plant>>) {
     }
 }
 
-fn evaluate(
-    link: &Link,
-    noise: Noise,
-    cal: &Calibration,
-    measured: Option<usize>,
-    targets: &[f32],
-) -> Vec<Eval> {
+fn evaluate(link: &Link, cal: &Calibration, measured: Option<usize>, targets: &[f32]) -> Vec<Eval> {
     targets
         .iter()
         .map(|&t| {
-            let m = morph(&mut link.rig(noise, cal), t);
+            let m = morph(&mut rig(link, cal), t);
             Eval {
                 measured,
                 target_mm: t,
@@ -268,8 +238,8 @@ fn evaluate(
 
 /// TUNE on a copy of the link at rest from `start`: the calibration it ends with and its end
 /// line.
-fn tune(link: &Link, noise: Noise, start: &Calibration) -> (Calibration, String) {
-    let mut rig = link.rig(noise, start);
+fn tune(link: &Link, start: &Calibration) -> (Calibration, String) {
+    let mut rig = rig(link, start);
     rig.tick();
     rig.handle_line("TUNE", &mut |_| {});
     let mut end = String::from("(no end line)");
@@ -288,30 +258,24 @@ fn tune(link: &Link, noise: Noise, start: &Calibration) -> (Calibration, String)
     (rig.ctrl.calibration(), end)
 }
 
-fn run_link(
-    link: &Link,
-    noise: Noise,
-    plant: &'static str,
-    draw: u64,
-    air: bool,
-    targets: &[f32],
-    args: &Args,
-) -> LinkResult {
+fn run_link(link: &Link, targets: &[f32], args: &Args) -> LinkResult {
+    let plant = if link.is_hifi() { "hifi" } else { "lumped" };
+    let (draw, air) = (link.draw, link.air);
     let start = args.start();
-    let seed = args.seed;
-    let mut evals = evaluate(link, noise, &start, None, targets);
+    let seed = args.common.seed;
+    let mut evals = evaluate(link, &start, None, targets);
     let (mut cal, tune_line) = if args.no_tune {
         (start, "(TUNE skipped)".to_string())
     } else {
-        tune(link, noise, &start)
+        tune(link, &start)
     };
-    evals.extend(evaluate(link, noise, &cal, Some(0), targets));
+    evals.extend(evaluate(link, &cal, Some(0), targets));
     let (min, max) = table::range_mm();
     let mut s = seed ^ draw.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (plant.len() as u64);
     splitmix(&mut s);
     for (k, f) in CALIBRATION_FRACTIONS.iter().enumerate() {
         let target = min + (max - min) * f;
-        let mut rig = link.rig(noise, &cal);
+        let mut rig = rig(link, &cal);
         let final_mm = morph(&mut rig, target).final_mm;
         if final_mm.is_finite() {
             let reported = final_mm + uniform(&mut s, (-MEASURE_ERROR_MM, MEASURE_ERROR_MM));
@@ -326,7 +290,7 @@ fn run_link(
             rest_after(&mut rig);
             cal = rig.ctrl.calibration();
         }
-        evals.extend(evaluate(link, noise, &cal, Some(k + 1), targets));
+        evals.extend(evaluate(link, &cal, Some(k + 1), targets));
     }
     LinkResult {
         plant,
@@ -443,65 +407,19 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
     let out = root.join(&args.out);
     std::fs::create_dir_all(&out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
     let targets = targets(args.targets);
-    let mut jobs: Vec<(&'static str, u64)> = Vec::new();
-    jobs.extend((0..args.hifi_draws).map(|d| ("hifi", d)));
-    jobs.extend((0..args.draws).map(|d| ("lumped", d)));
-    let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<(usize, Result<LinkResult, String>)>> = Mutex::new(Vec::new());
-    std::thread::scope(|scope| {
-        for _ in 0..args.threads.max(1) {
-            scope.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some(&(plant, draw)) = jobs.get(i) else {
-                    break;
-                };
-                let noise = Mismatch::draw(args.seed, draw).plant().noise();
-                let r = if plant == "hifi" {
-                    morphlink_sim::ensemble::hifi_draw(args.seed, draw)
-                        .and_then(|(spec, _)| {
-                            let air = spec.medium == morphlink_plant::Medium::Air;
-                            Hifi::new(spec).map(|p| (p, air))
-                        })
-                        .map_err(|e| format!("hifi draw {draw}: {e}"))
-                        .map(|(p, air)| {
-                            run_link(
-                                &Link::Hifi(Box::new(p)),
-                                noise,
-                                plant,
-                                draw,
-                                air,
-                                &targets,
-                                args,
-                            )
-                        })
-                } else {
-                    let m = Mismatch::draw(args.seed, draw);
-                    Ok(run_link(
-                        &Link::Lumped(m.plant().lumped()),
-                        noise,
-                        plant,
-                        draw,
-                        m.air,
-                        &targets,
-                        args,
-                    ))
-                };
-                let done = {
-                    let mut g = results.lock().unwrap();
-                    g.push((i, r));
-                    g.len()
-                };
-                eprint!("\r{done}/{} links", jobs.len());
-            });
-        }
-    });
-    eprintln!();
-    let mut results = results.into_inner().unwrap();
-    results.sort_by_key(|(i, _)| *i);
-    let results: Vec<LinkResult> = results
-        .into_iter()
-        .map(|(_, r)| r)
-        .collect::<Result<_, _>>()?;
+    let mut jobs: Vec<(bool, u64)> = Vec::new();
+    jobs.extend((0..args.hifi_draws).map(|d| (true, d)));
+    jobs.extend((0..args.draws).map(|d| (false, d)));
+    let results: Vec<LinkResult> = parallel(&jobs, args.common.threads, "links", |&(hifi, d)| {
+        let link = if hifi {
+            Link::hifi_draw(args.common.seed, d)?
+        } else {
+            Link::lumped_draw(args.common.seed, d)
+        };
+        Ok::<_, String>(run_link(&link, &targets, args))
+    })?
+    .into_iter()
+    .collect::<Result<_, _>>()?;
     // CSV: one row per evaluated morph.
     let mut csv = String::from(
         "plant,draw,air,stage,measured,target_mm,time_s,error_pct,bend_s,lock_s,release_s,end,tune\n",

@@ -9,10 +9,10 @@
 //! a tick's reckoned power passes the budget, a period's current passes the limit, or a link
 //! that finishes alone alarms or does not finish.
 
-use crate::strategies::parallel;
+use crate::ensemble::{parallel, Body, Link, DEFAULT_SEED};
 use morphlink::budget::MAX_LINKS;
 use morphlink_plant::hifi::Hifi;
-use morphlink_sim::ensemble::{hifi_draw, Mismatch, TICKS_PER_S};
+use morphlink_sim::ensemble::{Mismatch, TICKS_PER_S};
 use morphlink_sim::{MultiRig, SharedSupply};
 use std::fmt::Write as _;
 
@@ -74,12 +74,13 @@ pub fn links(n: usize, medium: Medium) -> Result<(Vec<Hifi>, morphlink::bench::N
     let mut noise = None;
     let mut d = 0;
     while plants.len() < n {
-        let air = Mismatch::draw(crate::strategies::DEFAULT_SEED, d).air;
+        let air = Mismatch::draw(DEFAULT_SEED, d).air;
         if air == (medium == Medium::Air) {
-            let (spec, nz) = hifi_draw(crate::strategies::DEFAULT_SEED, d)
-                .map_err(|e| format!("hifi draw {d}: {e}"))?;
-            plants.push(Hifi::new(spec).map_err(|e| format!("hifi draw {d}: {e}"))?);
-            noise.get_or_insert(nz);
+            let link = Link::hifi_draw(DEFAULT_SEED, d)?;
+            noise.get_or_insert(link.noise);
+            if let Body::Hifi(p) = link.body {
+                plants.push(*p);
+            }
         }
         d += 1;
     }

@@ -10,14 +10,12 @@
 //! already in the parts when the supervisor cuts them) or any healthy run at the default
 //! settings alarms. `--trace FILE` writes every run's readings and truths, one row each 0.5 s.
 
-use crate::strategies::parallel;
-use morphlink::bench::Noise;
+use crate::ensemble::{parallel, Common, Link};
 use morphlink::protocol::{classify, client::Status, LineKind};
 use morphlink::settings::Settings;
 use morphlink::supervisor::{PLA_LIMITS, TCA_LIMITS};
 use morphlink::table;
-use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
-use morphlink_plant::{Medium, Plant};
+use morphlink_plant::Plant;
 use morphlink_sim::ensemble::{Mismatch, TICKS_PER_S};
 use morphlink_sim::Rig;
 use std::fmt::Write as _;
@@ -39,9 +37,8 @@ pub struct Args {
     /// High-fidelity ensemble links to draw (the strategy charts' draws).
     #[arg(long, default_value_t = 12)]
     pub hifi_draws: u64,
-    /// Worker threads.
-    #[arg(long, default_value_t = 2)]
-    pub threads: usize,
+    #[command(flatten)]
+    pub common: Common,
     /// Only the default settings (no corners).
     #[arg(long)]
     pub defaults_only: bool,
@@ -112,62 +109,19 @@ pub fn corners(defaults_only: bool) -> Vec<Corner> {
     v
 }
 
-/// One link: its name and a rig factory.
-struct Link {
-    name: String,
-    rig: Box<dyn Fn() -> Rig<Box<dyn Plant>> + Send + Sync>,
-}
-
-fn links(hifi_draws: u64) -> Result<Vec<Link>, String> {
+/// The links: the nominal lumped and hifi ones in water and still air, and the first hifi
+/// draws in their drawn medium and again in still air.
+fn links(a: &Args) -> Result<Vec<Link>, String> {
     let mut v: Vec<Link> = Vec::new();
     for air in [false, true] {
-        let medium = if air { "air" } else { "water" };
-        let setup = Mismatch {
-            air,
-            ..Mismatch::NONE
-        }
-        .plant();
-        v.push(Link {
-            name: format!("lumped nominal {medium}"),
-            rig: Box::new(move || Rig::with_plant(Box::new(setup.lumped()), setup.noise())),
-        });
+        v.push(Link::lumped_nominal(air, Mismatch::NONE.sensor_tau_s));
     }
     for air in [false, true] {
-        let mut spec = HifiSpec::nominal(morphlink::link::LINK, Grid::Reduced)
-            .map_err(|e| format!("hifi nominal: {e}"))?;
-        if air {
-            spec.medium = Medium::Air;
-        }
-        let plant = Hifi::new(spec).map_err(|e| format!("hifi nominal: {e}"))?;
-        let medium = if air { "air" } else { "water" };
-        v.push(Link {
-            name: format!("hifi nominal {medium}"),
-            rig: Box::new(move || Rig::with_plant(Box::new(plant.clone()), Noise::NOMINAL)),
-        });
+        v.push(Link::hifi_nominal(air)?);
     }
-    for d in 0..hifi_draws {
-        for force_air in [false, true] {
-            let (mut spec, noise) =
-                morphlink_sim::ensemble::hifi_draw(crate::strategies::DEFAULT_SEED, d)
-                    .map_err(|e| format!("hifi draw {d}: {e}"))?;
-            let drawn_air = spec.medium == Medium::Air;
-            if force_air && drawn_air {
-                continue;
-            }
-            if force_air {
-                spec.medium = Medium::Air;
-            }
-            let plant = Hifi::new(spec).map_err(|e| format!("hifi draw {d}: {e}"))?;
-            let medium = if force_air || drawn_air {
-                "air"
-            } else {
-                "water"
-            };
-            v.push(Link {
-                name: format!("hifi draw {d} {medium}"),
-                rig: Box::new(move || Rig::with_plant(Box::new(plant.clone()), noise)),
-            });
-        }
+    for d in 0..a.hifi_draws {
+        v.push(Link::hifi_draw(a.common.seed, d)?);
+        v.extend(Link::hifi_draw_in_air(a.common.seed, d)?);
     }
     Ok(v)
 }
@@ -264,7 +218,7 @@ fn run_one(
 
 /// Runs the task.
 pub fn run(args: &Args) -> Result<(), String> {
-    let links = links(args.hifi_draws)?;
+    let links = links(args)?;
     let corners = corners(args.defaults_only);
     let (min, max) = table::range_mm();
     let radii = [min + 0.2, 0.5 * (min + max)];
@@ -279,12 +233,12 @@ pub fn run(args: &Args) -> Result<(), String> {
         }
     }
     let trace = args.trace.is_some();
-    let results = parallel(&jobs, args.threads, "morphs", |&(c, l, m, r)| {
+    let results = parallel(&jobs, args.common.threads, "morphs", |&(c, l, m, r)| {
         let id = jobs
             .iter()
             .position(|j| j.0 == c && j.1 == l && j.2 == m && j.3 == r)
             .unwrap_or(0);
-        run_one((links[l].rig)(), &corners[c], m, r, id, trace)
+        run_one(links[l].rig(), &corners[c], m, r, id, trace)
     })?;
     if let Some(path) = &args.trace {
         let mut s =

@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 mod boards;
 mod calibration;
 mod emulate;
+mod ensemble;
 mod faults;
 mod flash;
 mod gait;

@@ -30,7 +30,7 @@ pub struct Args {
     #[arg(long, default_value_t = DEFAULT_DRAWS)]
     pub draws: u64,
     /// Seed of the draws.
-    #[arg(long, default_value_t = crate::calibration::DEFAULT_SEED)]
+    #[arg(long, default_value_t = crate::ensemble::DEFAULT_SEED)]
     pub seed: u64,
 }
 

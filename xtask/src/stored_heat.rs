@@ -13,12 +13,9 @@
 //! second-pass run raises an alarm of the residual tests (a phase timeout or an over-temperature trip is the
 //! strategy's; `cargo xtask strategies` counts those) or does not end.
 
-use crate::strategies::parallel;
-use morphlink::bench::Noise;
+use crate::ensemble::{parallel, Common, Family, Link};
 use morphlink::protocol::{classify, client::Status, LineKind, MODES};
-use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
-use morphlink_plant::{Lumped, Medium, Plant};
-use morphlink_sim::ensemble::Mismatch;
+use morphlink_plant::Plant;
 use morphlink_sim::ensemble::TICKS_PER_S;
 use morphlink_sim::Rig;
 
@@ -47,18 +44,10 @@ pub const LUMPED_BEAD_TAUS_S: [f64; 3] = [2.0, 3.0, 6.0];
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// High-fidelity ensemble links to draw (the strategy charts' draws).
-    #[arg(long, default_value_t = crate::strategies::DEFAULT_HIFI_DRAWS)]
+    #[arg(long, default_value_t = crate::ensemble::DEFAULT_HIFI_DRAWS)]
     pub hifi_draws: u64,
-    /// Worker threads.
-    #[arg(long, default_value_t = 2)]
-    pub threads: usize,
-}
-
-/// One link to ABORT morphs on: its family name (the printed rows), its name, the plant.
-struct Link {
-    family: &'static str,
-    name: String,
-    plant: Box<dyn Fn() -> Box<dyn RunOn + Send> + Send + Sync>,
+    #[command(flatten)]
+    pub common: Common,
 }
 
 /// What one ABORTed morph showed after the cut, K: each the largest over both heated sensors.
@@ -175,53 +164,22 @@ fn run_for<P: Plant>(rig: &mut Rig<P>, ticks: u64, seen: &mut impl FnMut(&str)) 
     }
 }
 
-/// The links: the lumped nominal ones, the hifi nominal ones, the hifi draws.
-fn links(hifi_draws: u64) -> Result<Vec<Link>, String> {
+/// The links: the lumped nominal ones with each bead, the hifi nominal ones, the hifi draws.
+fn links(a: &Args) -> Result<Vec<Link>, String> {
     let mut v = Vec::new();
     for air in [false, true] {
-        let medium = if air { "air" } else { "water" };
-        for tau in LUMPED_BEAD_TAUS_S {
-            let setup = Mismatch {
-                air,
-                sensor_tau_s: tau,
-                ..Mismatch::NONE
-            }
-            .plant();
-            let (plant, noise): (Lumped, Noise) = (setup.lumped(), setup.noise());
-            v.push(Link {
-                family: "lumped nominal",
-                name: format!("lumped {medium} bead {tau} s"),
-                plant: Box::new(move || Box::new(Rig::with_plant(plant.clone(), noise))),
-            });
-        }
-        let mut spec = HifiSpec::nominal(morphlink::link::LINK, Grid::Reduced)
-            .map_err(|e| format!("hifi nominal: {e}"))?;
-        if air {
-            spec.medium = Medium::Air;
-        }
-        let plant = Hifi::new(spec).map_err(|e| format!("hifi nominal: {e}"))?;
-        v.push(Link {
-            family: "hifi nominal",
-            name: format!("hifi nominal {medium}"),
-            plant: Box::new(move || Box::new(Rig::with_plant(plant.clone(), Noise::NOMINAL))),
-        });
+        v.extend(LUMPED_BEAD_TAUS_S.map(|tau| Link::lumped_nominal(air, tau)));
+        v.push(Link::hifi_nominal(air)?);
     }
-    for d in 0..hifi_draws {
-        let (spec, noise) = morphlink_sim::ensemble::hifi_draw(crate::strategies::DEFAULT_SEED, d)
-            .map_err(|e| format!("hifi draw {d}: {e}"))?;
-        let plant = Hifi::new(spec).map_err(|e| format!("hifi draw {d}: {e}"))?;
-        v.push(Link {
-            family: "hifi draws",
-            name: format!("hifi draw {d}"),
-            plant: Box::new(move || Box::new(Rig::with_plant(plant.clone(), noise))),
-        });
+    for d in 0..a.hifi_draws {
+        v.push(Link::hifi_draw(a.common.seed, d)?);
     }
     Ok(v)
 }
 
 /// Runs the task: prints the worst stored-heat rise per link family and overall.
 pub fn run(args: &Args) -> Result<(), String> {
-    let links = links(args.hifi_draws)?;
+    let links = links(args)?;
     let aborts: Vec<u64> = (ABORT_FIRST_S..=ABORT_LAST_S)
         .step_by(ABORT_STEP_S as usize)
         .collect();
@@ -233,14 +191,21 @@ pub fn run(args: &Args) -> Result<(), String> {
                 .flat_map(move |m| aborts.iter().map(move |&a| (l, m.as_str(), a)))
         })
         .collect();
-    let results = parallel(&jobs, args.threads, "ABORTed morphs", |&(l, mode, a)| {
-        (links[l].plant)().run(mode, a)
-    })?;
+    let results = parallel(
+        &jobs,
+        args.common.threads,
+        "ABORTed morphs",
+        |&(l, mode, a)| links[l].rig().run(mode, a),
+    )?;
     println!(
         "| links | runs | largest rise after the cut | fullest residual test (share of its limit) | alarms |"
     );
     println!("| --- | --- | --- | --- | --- |");
-    for family in ["lumped nominal", "hifi nominal", "hifi draws"] {
+    for family in [
+        Family::LumpedNominal,
+        Family::HifiNominal,
+        Family::HifiDraws,
+    ] {
         let rows: Vec<_> = jobs
             .iter()
             .zip(&results)
@@ -259,7 +224,8 @@ pub fn run(args: &Args) -> Result<(), String> {
                 .unwrap_or_default()
         };
         println!(
-            "| {family} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} |",
+            family.as_str(),
             rows.len(),
             worst(|r| r.raw_k, " K"),
             worst(|r| r.share, ""),
@@ -277,14 +243,18 @@ pub fn run(args: &Args) -> Result<(), String> {
         .collect();
     let realarms = parallel(
         &rejobs,
-        args.threads,
+        args.common.threads,
         "MORPHs after an ABORT",
-        |&(l, mode, a, d)| (links[l].plant)().rerun(mode, a, d),
+        |&(l, mode, a, d)| links[l].rig().rerun(mode, a, d),
     )?;
     println!("\nMORPH again 0, 3, 10 or 30 s after an ABORT 4, 10 or 20 s into a morph:\n");
     println!("| links | runs | alarms of the residual tests | not run (the first morph latched a fault) |");
     println!("| --- | --- | --- | --- |");
-    for family in ["lumped nominal", "hifi nominal", "hifi draws"] {
+    for family in [
+        Family::LumpedNominal,
+        Family::HifiNominal,
+        Family::HifiDraws,
+    ] {
         let rows: Vec<_> = rejobs
             .iter()
             .zip(&realarms)
@@ -292,7 +262,8 @@ pub fn run(args: &Args) -> Result<(), String> {
             .collect();
         let count = |f: fn(&Rerun) -> bool| rows.iter().filter(|(_, r)| f(r)).count();
         println!(
-            "| {family} | {} | {} | {} |",
+            "| {} | {} | {} | {} |",
+            family.as_str(),
             rows.len(),
             count(|r| matches!(r, Rerun::Alarm(_) | Rerun::Unfinished)),
             count(|r| matches!(r, Rerun::NotRun(_)))

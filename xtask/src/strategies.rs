@@ -8,20 +8,16 @@
 //! time plot of one nominal morph per strategy on each plant (`docs/strategies_timeline.svg`,
 //! `strategies_timeline_lumped.svg`), and prints the summary tables of `docs/strategies.md`.
 
-use indicatif::{ProgressBar, ProgressStyle};
-use morphlink::bench::Noise;
+use crate::ensemble::{parallel, Body, Common, Link, DEFAULT_HIFI_DRAWS};
 use morphlink::protocol::Mode;
 use morphlink::strategy::AUTO_STRATEGY;
 use morphlink::table;
 use morphlink_host::plot::{self, prelude::*};
-use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
-use morphlink_plant::{Lumped, Medium};
+use morphlink_plant::hifi::{Grid, HifiSpec};
 use morphlink_sim::ensemble::{run_morph_on, Mismatch, Outcome, RunResult, TracePoint};
 use morphlink_sim::{oracle, Rig};
 use std::fmt::Write as _;
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 
 /// Strategies compared (`auto` is one of them, chosen from this comparison).
 pub const STRATEGIES: [Mode; 4] = [Mode::Paper, Mode::Gated, Mode::Boost, Mode::Closed];
@@ -29,15 +25,10 @@ pub const STRATEGIES: [Mode; 4] = [Mode::Paper, Mode::Gated, Mode::Boost, Mode::
 /// half a minute on two cores (each morph is simulated in milliseconds); `--draws 2000` for
 /// a tighter 95th percentile.
 pub const DEFAULT_DRAWS: u64 = 250;
-/// High-fidelity links drawn by default: 40 links × 5 radii × 4 strategies = 800 morphs on the
-/// reduced-order grid (about 0.1 s a morph, 0.5 s to build a link), a few minutes on two cores.
-pub const DEFAULT_HIFI_DRAWS: u64 = 40;
 /// Links of each plant the oracle runs on (its bisection runs the policy 16 times a radius).
 pub const DEFAULT_ORACLE_DRAWS: u64 = 10;
 /// Target radii per link, spread over the reachable range 0.2 mm inside its ends.
 pub const DEFAULT_TARGETS: usize = 5;
-/// Seed of the ensemble (the CSV records every drawn mismatch, so any run can be replayed).
-pub const DEFAULT_SEED: u64 = 20_261_122;
 /// The morph time aimed at (four times faster than the paper), s.
 pub const AIM_TIME_S: f64 = 30.0;
 /// The 95th-percentile radius error aimed at, %.
@@ -74,12 +65,8 @@ pub struct Args {
     /// Target radii per link.
     #[arg(long, default_value_t = DEFAULT_TARGETS)]
     pub targets: usize,
-    /// Seed of the mismatch draws.
-    #[arg(long, default_value_t = DEFAULT_SEED)]
-    pub seed: u64,
-    /// Worker threads.
-    #[arg(long, default_value_t = 2)]
-    pub threads: usize,
+    #[command(flatten)]
+    pub common: Common,
     /// Output directory, relative to the workspace root.
     #[arg(long, default_value = "docs")]
     pub out: String,
@@ -95,15 +82,6 @@ pub struct Args {
 const LUMPED: &str = "lumped";
 /// See [`LUMPED`].
 const HIFI: &str = "hifi";
-
-/// One drawn link, ready to morph (cloned for every run).
-#[derive(Clone)]
-// Cloned once a run and matched at once: boxing the lumped link too would buy nothing.
-#[allow(clippy::large_enum_variant)]
-enum Link {
-    Lumped(Lumped),
-    Hifi(Box<Hifi>),
-}
 
 /// What the CSV records of a drawn link.
 #[derive(Clone, Copy, Debug)]
@@ -158,63 +136,58 @@ pub(crate) fn targets(n: usize) -> Vec<f32> {
         .collect()
 }
 
-/// Lumped link number `draw`.
-fn lumped_link(seed: u64, draw: u64) -> (Link, Noise, LinkInfo) {
-    let m = Mismatch::draw(seed, draw);
-    let setup = m.plant();
-    let info = LinkInfo {
-        plant: LUMPED,
-        draw,
-        air: m.air,
-        h_scale: m.h_scale,
-        ambient_c: m.ambient_c,
-        supply_v: m.supply_v,
-        heater_scale: m.heater_scale,
-        sensor_noise_c: m.sensor_noise_c,
-        sensor_tau_s: m.sensor_tau_s,
-        stiffness_scale: m.stiffness_scale,
-        force_scale: m.force_scale,
-        tg_c: f64::NAN,
-        silicone_kpa: f64::NAN,
-        miss: (f64::NAN, f64::NAN),
-    };
-    (Link::Lumped(setup.lumped()), setup.noise(), info)
-}
-
-/// High-fidelity link number `draw` on the reduced-order grid; its board's thermistor noise
-/// is the lumped draw's of the same number.
-fn hifi_link(seed: u64, draw: u64) -> Result<(Link, Noise, LinkInfo), String> {
-    let (spec, noise) = morphlink_sim::ensemble::hifi_draw(seed, draw)
-        .map_err(|e| format!("hifi draw {draw}: {e}"))?;
-    let nominal = HifiSpec::nominal(morphlink::link::LINK, Grid::Reduced)
-        .map_err(|e| format!("hifi nominal: {e}"))?;
-    let info = LinkInfo {
-        plant: HIFI,
-        draw,
-        air: spec.medium == Medium::Air,
-        h_scale: spec.h_scale,
-        ambient_c: spec.ambient_c,
-        supply_v: spec.supply_v,
-        heater_scale: [
-            spec.pla_heater_ohm / nominal.pla_heater_ohm,
-            spec.tca.r_ref_ohm / nominal.tca.r_ref_ohm,
-        ],
-        sensor_noise_c: noise.sensor_noise_c,
-        sensor_tau_s: f64::NAN,
-        stiffness_scale: f64::NAN,
-        force_scale: f64::NAN,
-        tg_c: spec.pla.tg_c,
-        silicone_kpa: spec.silicone_e_pa / 1e3,
-        miss: spec.calibration_miss,
-    };
-    let plant = Hifi::new(spec).map_err(|e| format!("hifi draw {draw}: {e}"))?;
-    Ok((Link::Hifi(Box::new(plant)), noise, info))
+/// What the CSV records of `link`.
+fn info(link: &Link) -> Result<LinkInfo, String> {
+    Ok(match (&link.body, link.mismatch) {
+        (Body::Lumped(_), Some(m)) => LinkInfo {
+            plant: LUMPED,
+            draw: link.draw,
+            air: m.air,
+            h_scale: m.h_scale,
+            ambient_c: m.ambient_c,
+            supply_v: m.supply_v,
+            heater_scale: m.heater_scale,
+            sensor_noise_c: m.sensor_noise_c,
+            sensor_tau_s: m.sensor_tau_s,
+            stiffness_scale: m.stiffness_scale,
+            force_scale: m.force_scale,
+            tg_c: f64::NAN,
+            silicone_kpa: f64::NAN,
+            miss: (f64::NAN, f64::NAN),
+        },
+        (Body::Hifi(p), _) => {
+            let spec = p.spec();
+            let nominal = HifiSpec::nominal(morphlink::link::LINK, Grid::Reduced)
+                .map_err(|e| format!("hifi nominal: {e}"))?;
+            LinkInfo {
+                plant: HIFI,
+                draw: link.draw,
+                air: link.air,
+                h_scale: spec.h_scale,
+                ambient_c: spec.ambient_c,
+                supply_v: spec.supply_v,
+                heater_scale: [
+                    spec.pla_heater_ohm / nominal.pla_heater_ohm,
+                    spec.tca.r_ref_ohm / nominal.tca.r_ref_ohm,
+                ],
+                sensor_noise_c: link.noise.sensor_noise_c,
+                sensor_tau_s: f64::NAN,
+                stiffness_scale: f64::NAN,
+                force_scale: f64::NAN,
+                tg_c: spec.pla.tg_c,
+                silicone_kpa: spec.silicone_e_pa / 1e3,
+                miss: spec.calibration_miss,
+            }
+        }
+        (Body::Lumped(_), None) => {
+            return Err(format!("{}: a lumped link without its mismatch", link.name))
+        }
+    })
 }
 
 /// One morph on a copy of `link`, bending on the TCA's own temperature where `self_bend`.
 fn morph(
     link: &Link,
-    noise: Noise,
     target_mm: f32,
     mode: Mode,
     self_bend: bool,
@@ -230,14 +203,15 @@ fn morph(
         }
         rig
     }
-    match link {
-        Link::Lumped(p) => run_morph_on(
+    let noise = link.noise;
+    match &link.body {
+        Body::Lumped(p) => run_morph_on(
             on(Rig::with_plant(p.clone(), noise), self_bend),
             target_mm,
             mode,
             trace,
         ),
-        Link::Hifi(p) => run_morph_on(
+        Body::Hifi(p) => run_morph_on(
             on(Rig::with_plant((**p).clone(), noise), self_bend),
             target_mm,
             mode,
@@ -248,48 +222,10 @@ fn morph(
 
 /// The ideal-knowledge morph on a copy of `link`.
 fn oracle_on(link: &Link, target_mm: f32) -> Option<oracle::OracleRun> {
-    match link {
-        Link::Lumped(p) => oracle::best(p, target_mm as f64),
-        Link::Hifi(p) => oracle::best(&**p, target_mm as f64),
+    match &link.body {
+        Body::Lumped(p) => oracle::best(p, target_mm as f64),
+        Body::Hifi(p) => oracle::best(&**p, target_mm as f64),
     }
-}
-
-/// Runs `f` on every item of `items` on `threads` workers, with a progress bar named `what`.
-pub(crate) fn parallel<T: Sync, R: Send>(
-    items: &[T],
-    threads: usize,
-    what: &str,
-    f: impl Fn(&T) -> R + Sync,
-) -> Result<Vec<R>, String> {
-    let bar = ProgressBar::new(items.len() as u64);
-    bar.set_style(
-        ProgressStyle::with_template(&format!(
-            "{{bar:40}} {{pos}}/{{len}} {what}, {{elapsed}} elapsed, ~{{eta}} left"
-        ))
-        .map_err(|e| e.to_string())?,
-    );
-    // Drawn from the start, not only once the first item is done (a hifi link takes seconds);
-    // on stderr, and only on a terminal (indicatif hides a bar whose stderr is not one).
-    bar.enable_steady_tick(std::time::Duration::from_millis(250));
-    let next = AtomicUsize::new(0);
-    let out = Mutex::new(Vec::with_capacity(items.len()));
-    std::thread::scope(|scope| {
-        for _ in 0..threads.max(1) {
-            scope.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some(item) = items.get(i) else {
-                    break;
-                };
-                let r = f(item);
-                out.lock().unwrap().push((i, r));
-                bar.inc(1);
-            });
-        }
-    });
-    bar.finish();
-    let mut out = out.into_inner().unwrap();
-    out.sort_by_key(|(i, _)| *i);
-    Ok(out.into_iter().map(|(_, r)| r).collect())
 }
 
 /// Runs the task.
@@ -302,16 +238,23 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
         PlantChoice::Hifi => (false, true),
         PlantChoice::Both => (true, true),
     };
-    let mut links: Vec<(Link, Noise, LinkInfo)> = Vec::new();
+    let seed = args.common.seed;
+    let mut links: Vec<(Link, LinkInfo)> = Vec::new();
     if lumped {
-        links.extend((0..args.draws).map(|d| lumped_link(args.seed, d)));
+        for d in 0..args.draws {
+            let l = Link::lumped_draw(seed, d);
+            let i = info(&l)?;
+            links.push((l, i));
+        }
     }
     if hifi {
         let draws: Vec<u64> = (0..args.hifi_draws).collect();
-        for l in parallel(&draws, args.threads, "hifi links built", |&d| {
-            hifi_link(args.seed, d)
+        for l in parallel(&draws, args.common.threads, "hifi links built", |&d| {
+            Link::hifi_draw(seed, d)
         })? {
-            links.push(l?);
+            let l = l?;
+            let i = info(&l)?;
+            links.push((l, i));
         }
     }
     let (stem, strategies): (&str, &[Mode]) = if args.self_bend {
@@ -329,42 +272,40 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
     }
     let rows = parallel(
         &jobs,
-        args.threads,
+        args.common.threads,
         "morphs",
         |&(i, target_mm, strategy)| {
-            let (link, noise, info) = &links[i];
+            let (link, info) = &links[i];
             Row {
                 strategy,
                 target_mm,
                 link: *info,
-                result: morph(
-                    link,
-                    *noise,
-                    target_mm,
-                    strategy,
-                    args.self_bend,
-                    &mut |_| {},
-                ),
+                result: morph(link, target_mm, strategy, args.self_bend, &mut |_| {}),
             }
         },
     )?;
     let mut oracle_jobs = Vec::new();
-    for (i, (_, _, info)) in links.iter().enumerate() {
+    for (i, (_, info)) in links.iter().enumerate() {
         if info.draw < args.oracle_draws {
             for &t in &targets {
                 oracle_jobs.push((i, t));
             }
         }
     }
-    let oracle_rows = parallel(&oracle_jobs, args.threads, "oracle morphs", |&(i, t)| {
-        let (link, _, info) = &links[i];
-        OracleRow {
-            plant: info.plant,
-            draw: info.draw,
-            target_mm: t,
-            run: oracle_on(link, t),
-        }
-    })?;
+    let oracle_rows = parallel(
+        &oracle_jobs,
+        args.common.threads,
+        "oracle morphs",
+        |&(i, t)| {
+            let (link, info) = &links[i];
+            OracleRow {
+                plant: info.plant,
+                draw: info.draw,
+                target_mm: t,
+                run: oracle_on(link, t),
+            }
+        },
+    )?;
     write_csv(&out.join(format!("{stem}.csv")), &rows)?;
     write_oracle_csv(&out.join(format!("{stem}_oracle.csv")), &oracle_rows)?;
     let plants: Vec<&'static str> = [(lumped, LUMPED), (hifi, HIFI)]
@@ -397,11 +338,9 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
             continue;
         }
         let nominal = if plant == HIFI {
-            let spec = HifiSpec::nominal(morphlink::link::LINK, Grid::Reduced)
-                .map_err(|e| format!("hifi nominal: {e}"))?;
-            Link::Hifi(Box::new(Hifi::new(spec).map_err(|e| e.to_string())?))
+            Link::hifi_nominal(false)?
         } else {
-            Link::Lumped(Mismatch::NONE.plant().lumped())
+            Link::lumped_nominal(false, Mismatch::NONE.sensor_tau_s)
         };
         timeline_chart(
             &out.join(format!("strategies_timeline{suffix}.svg")),
@@ -902,8 +841,13 @@ fn timeline_chart(path: &Path, plant: &str, link: &Link) -> Result<(), String> {
         let frame = Frame::new(16, 8, 30, 50).right_y(50);
         for (s, area) in STRATEGIES.iter().zip(panels.iter()) {
             let mut trace: Vec<TracePoint> = Vec::new();
-            let noise = Mismatch::NONE.plant().noise();
-            let r = morph(link, noise, TIMELINE_TARGET_MM, *s, false, &mut |p| {
+            // The nominal board's noise on both plants, so the two time plots differ only in
+            // the plant.
+            let link = Link {
+                noise: Mismatch::NONE.plant().noise(),
+                ..link.clone()
+            };
+            let r = morph(&link, TIMELINE_TARGET_MM, *s, false, &mut |p| {
                 trace.push(*p)
             });
             let t_end = trace.last().map(|p| p.t_s).unwrap_or(1.0);

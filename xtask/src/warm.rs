@@ -6,10 +6,9 @@
 //! much worse a warm start lands (|error| warm − |error| from rest, percentage points) and fails
 //! if any pair is worse by more than [`WARM_AIM_PP`]. `auto` runs (`closed`).
 
-use crate::strategies::parallel;
+use crate::ensemble::{parallel, Common, Link};
 use morphlink::protocol::{classify, LineKind};
 use morphlink::table;
-use morphlink_plant::hifi::Hifi;
 use morphlink_plant::Plant;
 use morphlink_sim::ensemble::{Mismatch, TICKS_PER_S};
 use morphlink_sim::Rig;
@@ -25,37 +24,18 @@ pub const MORPH_MAX_S: u64 = 1_700;
 /// Options of the task.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// High-fidelity ensemble links to draw (the strategy charts' draws).
+    /// High-fidelity ensemble links to draw (the strategy charts' first draws).
     #[arg(long, default_value_t = 12)]
     pub hifi_draws: u64,
-    /// Worker threads.
-    #[arg(long, default_value_t = 2)]
-    pub threads: usize,
+    #[command(flatten)]
+    pub common: Common,
 }
 
-/// One link: its name, its plant and a rig factory.
-struct Link {
-    name: String,
-    hifi: bool,
-    rig: Box<dyn Fn() -> Rig<Box<dyn Plant>> + Send + Sync>,
-}
-
-fn links(hifi_draws: u64) -> Result<Vec<Link>, String> {
-    let setup = Mismatch::NONE.plant();
-    let mut v = vec![Link {
-        name: "lumped nominal".into(),
-        hifi: false,
-        rig: Box::new(move || Rig::with_plant(Box::new(setup.lumped()), setup.noise())),
-    }];
-    for d in 0..hifi_draws {
-        let (spec, noise) = morphlink_sim::ensemble::hifi_draw(crate::strategies::DEFAULT_SEED, d)
-            .map_err(|e| format!("hifi draw {d}: {e}"))?;
-        let plant = Hifi::new(spec).map_err(|e| format!("hifi draw {d}: {e}"))?;
-        v.push(Link {
-            name: format!("hifi draw {d}"),
-            hifi: true,
-            rig: Box::new(move || Rig::with_plant(Box::new(plant.clone()), noise)),
-        });
+/// The links: the nominal lumped one and the first hifi draws, each in its drawn medium.
+fn links(a: &Args) -> Result<Vec<Link>, String> {
+    let mut v = vec![Link::lumped_nominal(false, Mismatch::NONE.sensor_tau_s)];
+    for d in 0..a.hifi_draws {
+        v.push(Link::hifi_draw(a.common.seed, d)?);
     }
     Ok(v)
 }
@@ -85,7 +65,7 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, r_mm: f32) -> Option<()> {
 /// The final radius error of a morph to `to_mm` (after [`SETTLE_S`]), %: from rest, or right
 /// after a morph to `from_mm`. `None` if a morph did not end `done`.
 fn error_pct(link: &Link, from_mm: Option<f32>, to_mm: f32) -> Option<f64> {
-    let mut rig = (link.rig)();
+    let mut rig = link.rig();
     for _ in 0..2 * TICKS_PER_S {
         rig.tick();
         rig.drain_events(&mut |_| {});
@@ -103,7 +83,7 @@ fn error_pct(link: &Link, from_mm: Option<f32>, to_mm: f32) -> Option<f64> {
 
 /// Runs the task.
 pub fn run(args: &Args) -> Result<(), String> {
-    let links = links(args.hifi_draws)?;
+    let links = links(args)?;
     let (min, max) = table::range_mm();
     let targets: Vec<f32> = (0..5)
         .map(|i| (min + 0.2) + (max - min - 0.4) * i as f32 / 4.0)
@@ -119,7 +99,7 @@ pub fn run(args: &Args) -> Result<(), String> {
             }
         }
     }
-    let results = parallel(&jobs, args.threads, "morphs", |&(l, a, b)| {
+    let results = parallel(&jobs, args.common.threads, "morphs", |&(l, a, b)| {
         error_pct(&links[l], a, b)
     })?;
     let rest = |l: usize, b: f32| {
@@ -136,7 +116,7 @@ pub fn run(args: &Args) -> Result<(), String> {
         let mut failed = 0;
         for (j, e) in jobs.iter().zip(&results) {
             let (l, Some(a), b) = *j else { continue };
-            if links[l].hifi != hifi {
+            if links[l].is_hifi() != hifi {
                 continue;
             }
             match (e, rest(l, b)) {
