@@ -69,11 +69,11 @@ enum Observable {
 }
 
 /// One injectable fault: its `SIM` line and the aim it is held to.
-struct FaultCase {
+pub(crate) struct FaultCase {
     /// The name in the table.
-    name: String,
+    pub(crate) name: String,
     /// The `SIM` line that injects it.
-    line: String,
+    pub(crate) line: String,
     /// Its detection-time aim, s (`None`: none stated).
     aim_s: Option<f64>,
     /// When it becomes observable.
@@ -81,7 +81,7 @@ struct FaultCase {
 }
 
 /// Every injectable fault.
-fn cases(tuned: bool) -> Vec<FaultCase> {
+pub(crate) fn cases(tuned: bool) -> Vec<FaultCase> {
     let mut v = Vec::new();
     for sensor in ["pla", "tca", "amb"] {
         for kind in ["thermistor-open", "thermistor-short", "thermistor-stuck"] {
@@ -139,10 +139,10 @@ fn cases(tuned: bool) -> Vec<FaultCase> {
 }
 
 /// What one injection gave.
-struct Outcome {
+pub(crate) struct Outcome {
     /// Seconds from injection to the first alarm, and the alarm's code (`None`: none within
     /// [`MAX_WAIT_S`]).
-    alarm: Option<(f64, String)>,
+    pub(crate) alarm: Option<(f64, String)>,
     /// A `done` came between injection and the alarm (the radius it reports is in doubt).
     done_first: bool,
     /// Peak true PLA and TCA temperatures from injection to the alarm, °C.
@@ -176,7 +176,7 @@ fn observable_now<P: Plant>(o: Observable, rig: &Rig<P>) -> bool {
 pub const STUCK_OBSERVABLE_MARGIN_W: f64 = 0.04;
 
 /// Runs `case` injected in `phase` of a morph in `mode` on `rig`.
-fn run_case<P: Plant>(
+pub(crate) fn run_case<P: Plant>(
     mut rig: Rig<P>,
     case: &FaultCase,
     phase: Phase,

@@ -14,6 +14,7 @@ mod faults;
 mod flash;
 mod gait;
 mod limits;
+mod link_faults;
 mod self_sense;
 mod stored_heat;
 mod strategies;
@@ -52,6 +53,8 @@ enum Task {
     SelfSense(self_sense::Args),
     /// Several links on one supply budget: the makespan, the budget and the current limit held.
     Gait(gait::Args),
+    /// A fault on one link of a gait: it stops that link as fast as alone; the others finish.
+    LinkFaults(link_faults::Args),
     /// Build a board's firmware (its feature) and flash it with probe-rs (its chip).
     Flash(flash::Args),
     /// Build a board's firmware, flash and run it, printing the defmt log (probe-rs run).
@@ -75,6 +78,7 @@ fn main() -> ExitCode {
         Task::Warm(a) => warm::run(&a),
         Task::SelfSense(a) => self_sense::run(&a),
         Task::Gait(a) => gait::run_task(&a, &ws.root),
+        Task::LinkFaults(a) => link_faults::run(&a),
         Task::Flash(a) => flash::run(flash::Action::Flash, &a, &ws),
         Task::Run(a) => flash::run(flash::Action::Run, &a, &ws),
     });
