@@ -123,6 +123,18 @@ pub struct Demand {
     pub reserve_w: Powers,
     /// The resistances its controller reckons with, Ω (PLA, TCA).
     pub ohm: [f32; 2],
+    /// Current each heater draws while its gate is off, A (PLA, TCA): a MOSFET failed short
+    /// behind a cut-off that did not open, 0 where none flows or current is not sensed. No
+    /// allowance governs it, so the budget counts it first and the current limit is what it
+    /// leaves.
+    pub stray_a: [f32; 2],
+}
+
+/// The stray currents of `demands` (their [`Demand::stray_a`]), A, and what they take at
+/// `supply_v`, W.
+fn stray(demands: &[Demand], supply_v: f32) -> (f32, f32) {
+    let a: f32 = demands.iter().map(|d| d.stray_a[0] + d.stray_a[1]).sum();
+    (a, a * supply_v)
 }
 
 /// One heater's share of a tick.
@@ -321,13 +333,15 @@ pub fn admits(
     let held: f32 = running()
         .map(|d| d.reserve_w.pla_w + d.reserve_w.tca_w)
         .sum();
-    if held + least_budget_w(reserve_w, demands.len()) > budget.budget_w {
+    let (stray_a, stray_w) = stray(demands, supply_v);
+    if held + stray_w + least_budget_w(reserve_w, demands.len()) > budget.budget_w {
         return false;
     }
     let v = usable_v(supply_v);
     if v == 0.0 || budget.limit_a >= LIMIT_MAX_A {
         return true;
     }
+    let limit_a = budget.limit_a - stray_a;
     // The layout the scheduler will make: every link's reserve (an idle one's probes) and
     // the newcomer's, tallest first. The newcomer is whichever idle link asks.
     let mut all: heapless::Vec<Demand, { MAX_LINKS + 1 }> = heapless::Vec::new();
@@ -344,6 +358,7 @@ pub fn admits(
         wanted_w: reserve_w,
         reserve_w,
         ohm,
+        stray_a: [0.0; 2],
     });
     let mut heaters: heapless::Vec<(f32, f32), { 2 * MAX_LINKS + 2 }> = heapless::Vec::new();
     for d in &all {
@@ -356,7 +371,7 @@ pub fn admits(
     let mut profile = Profile::EMPTY;
     for (ohm, want) in heaters {
         let amps = v / ohm;
-        let (start, len) = profile.place(amps, want, budget.limit_a);
+        let (start, len) = profile.place(amps, want, limit_a);
         if len + 1e-6 < want {
             return false;
         }
@@ -423,7 +438,9 @@ pub fn allocate(budget: &SupplyBudget, supply_v: f32, demands: &[Demand], out: &
         }
     }
     let order = &order[..n];
-    let mut left_w = budget.budget_w - PROBE_RESERVE_W * 2.0 * n as f32;
+    let (stray_a, stray_w) = stray(&demands[..n], supply_v);
+    let limit_a = budget.limit_a - stray_a;
+    let mut left_w = budget.budget_w - stray_w - PROBE_RESERVE_W * 2.0 * n as f32;
     let mut reserved = [[0.0f32; 2]; MAX_LINKS];
     let mut allow = [[0.0f32; 2]; MAX_LINKS];
     // What each heater may take at most this tick: its cap, and for a busy link what it
@@ -487,7 +504,7 @@ pub fn allocate(budget: &SupplyBudget, supply_v: f32, demands: &[Demand], out: &
         let cfg = heater(h, demands[k].ohm[i]);
         let amps = v / cfg.resistance_ohm;
         let want = window_for(&cfg, reserved[k][i], v);
-        let (start, len) = profile.place(amps, want, budget.limit_a);
+        let (start, len) = profile.place(amps, want, limit_a);
         slot[k][i] = profile.n;
         profile.push(start, len, amps);
     }
@@ -501,8 +518,8 @@ pub fn allocate(budget: &SupplyBudget, supply_v: f32, demands: &[Demand], out: &
             // Grown where it is, or moved wherever the whole of it fits; never shrunk.
             let (start, len) = if want > len {
                 profile.windows[j].1 = 0.0;
-                let here = profile.room(start, amps, want, budget.limit_a);
-                let (s2, l2) = profile.place(amps, want, budget.limit_a);
+                let here = profile.room(start, amps, want, limit_a);
+                let (s2, l2) = profile.place(amps, want, limit_a);
                 let best = if l2 > here + 1e-6 {
                     (s2, l2)
                 } else {
@@ -561,6 +578,7 @@ mod tests {
                 tca_w: reserve.1,
             },
             ohm: [30.0, 6.5],
+            stray_a: [0.0; 2],
         }
     }
 
@@ -642,6 +660,52 @@ mod tests {
     }
 
     #[test]
+    fn a_current_no_gate_governs_is_counted_before_every_allowance() {
+        // Link 1 faulted with its TCA MOSFET shorted behind a stuck cut-off: 1.8 A flow, its
+        // gate off. Link 2 asks for its TCA's whole power on a 3 A supply.
+        let budget = SupplyBudget {
+            budget_w: 40.0,
+            limit_a: 3.0,
+        };
+        let mut stuck = busy(Class::Idle, 0, (0.0, 0.0), (0.0, 0.0));
+        stuck.stray_a = [0.0, 1.8];
+        let d = [stuck, busy(Class::Holding, 1, (0.0, 20.0), (0.0, 3.0))];
+        let mut out = [[Share::default(); 2]; 2];
+        allocate(&budget, 12.0, &d, &mut out);
+        let tca = heater(Heater::Tca, 6.5);
+        let duty = tca.duty(out[1][1].allow_w, 12.0).min(out[1][1].window);
+        let peak = 1.8 + peak_amps(&[out[1][1].phase], &[duty], &[12.0 / 6.5]);
+        // Any instant with link 2's TCA on draws 1.8 + 1.85 A, over 3 A: it may not be on.
+        assert!(peak <= 3.0 + 1e-3, "peak {peak} A, duty {duty}");
+        assert_eq!(out[1][1].allow_w, 0.0);
+        // Its PLA (0.4 A) fits beside the stray current.
+        let d = [stuck, busy(Class::Holding, 1, (2.0, 0.0), (2.0, 0.0))];
+        allocate(&budget, 12.0, &d, &mut out);
+        assert!(out[1][0].allow_w > 1.9, "{}", out[1][0].allow_w);
+        // The power budget counts the stray 21.6 W too.
+        let tight = SupplyBudget {
+            budget_w: 25.0,
+            limit_a: LIMIT_MAX_A,
+        };
+        allocate(&tight, 12.0, &d, &mut out);
+        assert!(
+            out[1][1].allow_w <= 25.0 - 21.6 + 1e-3,
+            "{}",
+            out[1][1].allow_w
+        );
+        assert!(!admits(
+            &tight,
+            12.0,
+            &d,
+            Powers {
+                pla_w: 3.0,
+                tca_w: 0.5
+            },
+            [30.0, 6.5]
+        ));
+    }
+
+    #[test]
     fn two_tcas_that_together_pass_the_limit_are_never_on_at_once() {
         let budget = SupplyBudget {
             budget_w: 50.0,
@@ -683,6 +747,7 @@ mod tests {
                 wanted_w: Powers { pla_w: l.2, tca_w: l.3 },
                 reserve_w: Powers { pla_w: l.4, tca_w: l.5 },
                 ohm: [l.6, l.7],
+                stray_a: [0.0; 2],
             }).collect();
             let mut out = [[Share::default(); 2]; MAX_LINKS];
             allocate(&budget, supply_v, &d, &mut out[..d.len()]);

@@ -12,6 +12,7 @@
 
 use crate::budget::{self, Class, Demand, LinkShare, Share, SupplyBudget, MAX_LINKS};
 use crate::controller::{Config, Controller, Inputs, Outputs};
+use crate::electrical::{Currents, ShuntSense, SHORT_MIN_A};
 use crate::heater::HeaterConfig;
 use crate::protocol::links::{self as wire, Address, LinksCommand, SupplySetting};
 use crate::protocol::{self, Command, ConfigCommand, Mode, OutLine, SimCommand};
@@ -54,6 +55,11 @@ pub struct Links<const N: usize> {
     events: Deque<OutLine, LINK_EVENTS>,
     /// Where the round-robin over the links' events goes on.
     next_event: usize,
+    /// The board's current sense (reads each link's stray current).
+    shunt: ShuntSense,
+    /// Each link's heaters' current while their gates are off, last tick, A: see
+    /// [`Demand::stray_a`].
+    stray_a: [[f32; 2]; N],
 }
 
 impl<const N: usize> Links<N> {
@@ -74,6 +80,8 @@ impl<const N: usize> Links<N> {
             shares: [[Share::default(); 2]; N],
             events: Deque::new(),
             next_event: 0,
+            shunt: cfg.shunt,
+            stray_a: [[0.0; 2]; N],
         }
     }
 
@@ -151,6 +159,7 @@ impl<const N: usize> Links<N> {
             wanted_w: c.wanted(),
             reserve_w: c.reserve_w(),
             ohm: c.heater_ohm(),
+            stray_a: self.stray_a[k],
         }
     }
 
@@ -170,6 +179,15 @@ impl<const N: usize> Links<N> {
     /// One control tick at `now_ms`: `inputs[k]` is link `k`'s frame (its thermistors and
     /// currents, the shared ambient and supply), `out[k]` gets its outputs.
     pub fn step(&mut self, now_ms: u64, inputs: &[Inputs], out: &mut [LinkOutputs]) {
+        // A current over the short threshold with the gate off: a stuck MOSFET whose cut-off
+        // did not open. It flows whatever the allowances say, so the scheduler counts it.
+        for (s, i) in self.stray_a.iter_mut().zip(inputs) {
+            *s = i.current.map_or([0.0; 2], |c| {
+                Currents::of(&c, &self.shunt)
+                    .off_a
+                    .map(|a| if a > SHORT_MIN_A { a } else { 0.0 })
+            });
+        }
         self.start_queued(now_ms);
         for k in 0..self.count() {
             let busy = self.ctrl[k].busy();
