@@ -11,19 +11,43 @@ use morphlink_plant::hifi::{Grid, Hifi, HifiSpec};
 use morphlink_plant::Lumped;
 use morphlink_sim::{LinkSetup, MultiRig, SharedSupply};
 
+/// `plants` on one stiff bench supply of `limit_a`, booted.
+fn on_supply<P: morphlink_plant::Plant>(
+    plants: impl IntoIterator<Item = P>,
+    noise: Noise,
+    limit_a: f64,
+) -> MultiRig<P> {
+    let supply = SharedSupply {
+        limit_a,
+        ..SharedSupply::STIFF
+    };
+    let mut rig = MultiRig::new(plants, noise, supply);
+    rig.boot(1000);
+    rig
+}
+
 /// Four nominal lumped links on a bench supply of `limit_a`.
 fn four(limit_a: f64) -> MultiRig<Lumped> {
     let plants = (0..4).map(|_| LinkSetup::NOMINAL.lumped());
-    let mut rig = MultiRig::new(
-        plants,
-        LinkSetup::NOMINAL.noise(),
-        SharedSupply {
-            limit_a,
-            ..SharedSupply::STIFF
-        },
+    on_supply(plants, LinkSetup::NOMINAL.noise(), limit_a)
+}
+
+/// Holds that every alarm in `events` is link 2's and links 1, 3 and 4 ended `done`.
+fn only_link_2_stopped(events: &[String], what: &str) {
+    let alarms: Vec<_> = events.iter().filter(|e| e.contains("alarm:")).collect();
+    assert!(!alarms.is_empty(), "{what}: no alarm");
+    assert!(
+        alarms.iter().all(|a| a.starts_with("@2 ")),
+        "{what}: another link alarmed: {alarms:?}"
     );
-    rig.boot(1000);
-    rig
+    for k in [1, 3, 4] {
+        assert!(
+            events
+                .iter()
+                .any(|e| e.starts_with(&format!("@{k} event: done"))),
+            "{what}: link {k} did not finish: {events:?}"
+        );
+    }
 }
 
 /// The reply lines to `line`.
@@ -167,25 +191,12 @@ fn a_fault_on_one_link_stops_it_and_the_others_finish() {
         let r = say(&mut rig, &format!("@2 {fault}"));
         assert!(r[0].starts_with("ok"), "{fault}: {r:?}");
         let events = run_until_idle(&mut rig, 1500, |_| {});
-        let alarms: Vec<_> = events.iter().filter(|e| e.contains("alarm:")).collect();
-        assert!(!alarms.is_empty(), "{fault}: no alarm");
-        assert!(
-            alarms.iter().all(|a| a.starts_with("@2 ")),
-            "{fault}: another link alarmed: {alarms:?}"
-        );
+        only_link_2_stopped(&events, fault);
         assert_eq!(rig.links.link(1).phase(), Phase::Fault, "{fault}");
         assert!(
             !rig.links.link(1).outputs().supply_on,
             "{fault}: link 2's cut-off closed"
         );
-        for k in [1, 3, 4] {
-            assert!(
-                events
-                    .iter()
-                    .any(|e| e.starts_with(&format!("@{k} event: done"))),
-                "{fault}: link {k} did not finish: {events:?}"
-            );
-        }
     }
 }
 
@@ -193,16 +204,11 @@ fn a_fault_on_one_link_stops_it_and_the_others_finish() {
 fn four_hifi(limit_a: f64) -> MultiRig<Hifi> {
     let spec = HifiSpec::nominal(LinkSetup::NOMINAL.params, Grid::Reduced).unwrap();
     let plant = Hifi::new(spec).unwrap();
-    let mut rig = MultiRig::new(
+    on_supply(
         (0..4).map(|_| plant.clone()),
         LinkSetup::NOMINAL.noise(),
-        SharedSupply {
-            limit_a,
-            ..SharedSupply::STIFF
-        },
-    );
-    rig.boot(1000);
-    rig
+        limit_a,
+    )
 }
 
 #[test]
@@ -220,25 +226,13 @@ fn a_short_behind_a_stuck_cut_off_is_a_load_the_others_are_scheduled_around() {
         assert!(say(&mut rig, "@2 SIM FAULT cutoff-stuck")[0].starts_with("ok"));
         assert!(say(&mut rig, "@2 SIM FAULT heater-stuck tca")[0].starts_with("ok"));
         let events = run_until_idle(&mut rig, 1500, |_| {});
-        let alarms: Vec<_> = events.iter().filter(|e| e.contains("alarm:")).collect();
         assert!(
-            alarms
+            events
                 .iter()
                 .any(|a| a.starts_with("@2 alarm: heater-short tca")),
-            "{plant}: {alarms:?}"
+            "{plant}: {events:?}"
         );
-        assert!(
-            alarms.iter().all(|a| a.starts_with("@2 ")),
-            "{plant}: another link alarmed: {alarms:?}"
-        );
-        for k in [1, 3, 4] {
-            assert!(
-                events
-                    .iter()
-                    .any(|e| e.starts_with(&format!("@{k} event: done"))),
-                "{plant}: link {k} did not finish: {events:?}"
-            );
-        }
+        only_link_2_stopped(&events, plant);
     }
     run(four(3.0), "lumped");
     // The first four water links of the hifi ensemble (`cargo xtask gait`'s), the noise of the
@@ -256,13 +250,7 @@ fn a_short_behind_a_stuck_cut_off_is_a_load_the_others_are_scheduled_around() {
             noise.get_or_insert(n);
         }
     }
-    let supply = SharedSupply {
-        limit_a: 3.0,
-        ..SharedSupply::STIFF
-    };
-    let mut rig = MultiRig::new(plants, noise.unwrap(), supply);
-    rig.boot(1000);
-    run(rig, "hifi draws");
+    run(on_supply(plants, noise.unwrap(), 3.0), "hifi draws");
 }
 
 #[test]
