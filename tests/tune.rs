@@ -29,6 +29,7 @@ on_both_links!(
     an_implausible_report_says_which_bound_and_changes_nothing,
     the_strain_term_is_learnt_at_rest_and_closed_bends_on_the_own_temperature,
     a_heater_stuck_in_a_second_tune_keeps_reset_refused_while_it_heats,
+    a_tuned_link_in_the_stillest_rated_air_raises_no_supervisor_alarm,
 );
 
 /// Runs TUNE to its end; returns the line that ended it.
@@ -209,6 +210,32 @@ fn in_still_air_tune_sets_the_still_air_model_and_water_sets_it_back(link: Link)
         b.rig.ctrl.calibration().convection_w_m2k,
         Calibration::DEFAULT.convection_w_m2k
     );
+}
+
+/// A report from a link outside the project's plants: a thermistor-only board in still air of
+/// about 25 W/(m² K), `TUNE`, then `MORPH 40`, raised `heating-while-off`. Here the nominal
+/// links in still air from that convection down to the least the convection setting is rated
+/// for: after TUNE, no check of the supervisor alarms on them (a strategy's phase timeout is
+/// the strategy's, counted by `cargo xtask strategies`).
+fn a_tuned_link_in_the_stillest_rated_air_raises_no_supervisor_alarm(link: Link) {
+    let least = f64::from(morphlink::link::CONVECTION_RANGE_W_M2K.0);
+    for h_w_m2k in [25.0, least] {
+        let mut b = Bench::in_air_at(link, h_w_m2k).thermistors_only();
+        b.run_for(2.0);
+        let end = tune(&mut b);
+        assert!(
+            end.starts_with("event: tune done"),
+            "{h_w_m2k} W/m2K: {end}"
+        );
+        b.run_for(120.0);
+        b.morph(40.0, "auto");
+        let alarms: Vec<_> = b
+            .alarms()
+            .into_iter()
+            .filter(|a| !a.starts_with("alarm: phase-timeout"))
+            .collect();
+        assert_eq!(alarms, Vec::<String>::new(), "{h_w_m2k} W/m2K");
+    }
 }
 
 fn abort_in_every_step_ends_the_tune_with_heaters_off(link: Link) {

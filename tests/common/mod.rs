@@ -86,6 +86,30 @@ impl Bench {
         }
     }
 
+    /// The nominal `link` in still air of convection `h_w_m2k` (W/(m² K)).
+    pub fn in_air_at(link: Link, h_w_m2k: f64) -> Self {
+        let h_scale = h_w_m2k / morphlink_model::params::H_AIR_W_M2K;
+        match link {
+            Link::Lumped => Self::with_plant(
+                morphlink_sim::ensemble::Mismatch {
+                    air: true,
+                    h_scale,
+                    ..morphlink_sim::ensemble::Mismatch::NONE
+                }
+                .plant(),
+            ),
+            Link::Hifi => {
+                let mut spec = HifiSpec::nominal(LinkSetup::NOMINAL.params, Grid::Reduced).unwrap();
+                spec.medium = morphlink_plant::Medium::Air;
+                spec.h_scale = h_scale;
+                Self::with_rig(Rig::with_plant(
+                    Box::new(Hifi::new(spec).unwrap()),
+                    Noise::NOMINAL,
+                ))
+            }
+        }
+    }
+
     /// The lumped link `plant`.
     pub fn with_plant(plant: LinkSetup) -> Self {
         Self::with_rig(Rig::with_plant(Box::new(plant.lumped()), plant.noise()))

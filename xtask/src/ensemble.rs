@@ -142,6 +142,42 @@ impl Link {
         })
     }
 
+    /// The nominal link (lumped, or hifi where `hifi`) in the stillest air the calibration's
+    /// convection setting is rated for (`convection_w_m2k`'s least, 10 W/(m² K): half the
+    /// model's still air, under the ensemble's draws): where a still-air expectation is
+    /// furthest from water's.
+    pub fn nominal_stillest_air(hifi: bool) -> Result<Link, String> {
+        let h_w_m2k = f64::from(morphlink::link::CONVECTION_RANGE_W_M2K.0);
+        let h_scale = h_w_m2k / morphlink_model::params::H_AIR_W_M2K;
+        let name = format!(
+            "{} nominal air {h_w_m2k} W/m2K",
+            if hifi { "hifi" } else { "lumped" }
+        );
+        let mut link = if hifi {
+            Link::hifi_nominal(true)?
+        } else {
+            Link::lumped_nominal(true, Mismatch::NONE.sensor_tau_s)
+        };
+        match &mut link.body {
+            Body::Lumped(_) => {
+                let mismatch = Mismatch {
+                    air: true,
+                    h_scale,
+                    ..Mismatch::NONE
+                };
+                link.body = Body::Lumped(mismatch.plant().lumped());
+                link.mismatch = Some(mismatch);
+            }
+            Body::Hifi(p) => {
+                let mut spec = *p.spec();
+                spec.h_scale = h_scale;
+                **p = Hifi::new(spec).map_err(|e| format!("{name}: {e}"))?;
+            }
+        }
+        link.name = name;
+        Ok(link)
+    }
+
     /// Lumped link number `draw` of the ensemble with seed `seed`.
     pub fn lumped_draw(seed: u64, draw: u64) -> Link {
         let mismatch = Mismatch::draw(seed, draw);

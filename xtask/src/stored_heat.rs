@@ -164,12 +164,16 @@ fn run_for<P: Plant>(rig: &mut Rig<P>, ticks: u64, seen: &mut impl FnMut(&str)) 
     }
 }
 
-/// The links: the lumped nominal ones with each bead, the hifi nominal ones, the hifi draws.
+/// The links: the lumped nominal ones with each bead, the hifi nominal ones, both in the
+/// stillest rated air, the hifi draws.
 fn links(a: &Args) -> Result<Vec<Link>, String> {
     let mut v = Vec::new();
     for air in [false, true] {
         v.extend(LUMPED_BEAD_TAUS_S.map(|tau| Link::lumped_nominal(air, tau)));
         v.push(Link::hifi_nominal(air)?);
+    }
+    for hifi in [false, true] {
+        v.push(Link::nominal_stillest_air(hifi)?);
     }
     for d in 0..a.hifi_draws {
         v.push(Link::hifi_draw(a.common.seed, d)?);
