@@ -818,7 +818,7 @@ impl Controller {
                 let lines = reply::HELP.iter().chain(sim).chain(&reply::HELP_TAIL);
                 for h in lines.chain(tune_reply::HELP.iter()) {
                     l.clear();
-                    reply::data_text(&mut l, h);
+                    reply::help_line(&mut l, h);
                     out(&l);
                 }
                 out(protocol::OK);

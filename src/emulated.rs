@@ -1,14 +1,17 @@
-//! The emulated board's simulated link (firmware only, declared by `main.rs` for the
-//! `board-b-l475e-iot01a-emulated` feature): the nominal lumped plant on the core's simulated
-//! board ([`morphlink::bench`]: the host rig's board, with its supply cut-off and its heaters'
-//! current sense), kept here and lent to the board's ADC, PWM and cut-off stand-ins through
-//! `morphlink_boards::emulated::SimulatedLink`. The plant runs at firmware time.
+//! The emulated board's simulated links (firmware only, declared by `main.rs` for the
+//! `board-b-l475e-iot01a-emulated` feature): per link the nominal lumped plant on the core's
+//! simulated board ([`morphlink::bench`]: the host rig's board, with its supply cut-off and
+//! its heaters' current sense), kept here and lent to the board's ADC, PWM and cut-off
+//! stand-ins through `morphlink_boards::emulated::SimulatedLink`. The plants run at firmware
+//! time; an image of several links ([`crate::LINKS`]) gives each link its own bench and supply
+//! (the shared bench supply that sags is the host's, `morphlink_sim::MultiRig`).
 
+use crate::LINKS;
 use core::cell::RefCell;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
 use morphlink::bench::{Bench, Noise, NOMINAL_LINK};
-use morphlink::controller::{Config, Controller, Outputs};
+use morphlink::controller::{Config, Outputs};
 use morphlink::protocol::SimCommand;
 use morphlink_boards::emulated::SimulatedLink;
 use morphlink_boards::{CurrentSums, INPUTS};
@@ -34,22 +37,28 @@ impl State {
     }
 }
 
-static STATE: Mutex<CriticalSectionRawMutex, RefCell<Option<State>>> =
+static STATE: Mutex<CriticalSectionRawMutex, RefCell<Option<[State; LINKS]>>> =
     Mutex::new(RefCell::new(None));
 
-fn with_state<R>(f: impl FnOnce(&mut State) -> R) -> R {
-    STATE.lock(|s| f(s.borrow_mut().as_mut().expect("set up by init")))
+/// Runs `f` on link `k`'s state (a link past the image's is link 0's: the board asks only for
+/// the image's links).
+fn with_state<R>(k: usize, f: impl FnOnce(&mut State) -> R) -> R {
+    STATE.lock(|s| {
+        let mut s = s.borrow_mut();
+        let states = s.as_mut().expect("set up by init");
+        f(&mut states[if k < LINKS { k } else { 0 }])
+    })
 }
 
-/// The simulated link the board reads and drives.
+/// The simulated links the board reads and drives.
 pub struct Link;
 
 /// The one instance, lent to the board.
 pub static LINK: Link = Link;
 
 impl SimulatedLink for Link {
-    fn read(&self, now_ms: u64) -> [u16; INPUTS] {
-        with_state(|s| {
+    fn read(&self, link: usize, now_ms: u64) -> [u16; INPUTS] {
+        with_state(link, |s| {
             s.advance_to(now_ms);
             // The currents once a tick (`currents`), not with each of the sixteen reads: the
             // bench's noise is software double precision on this CPU.
@@ -60,8 +69,8 @@ impl SimulatedLink for Link {
         })
     }
 
-    fn currents(&self) -> Option<CurrentSums> {
-        with_state(|s| {
+    fn currents(&self, link: usize) -> Option<CurrentSums> {
+        with_state(link, |s| {
             let at_ms = s.last_read_ms;
             s.bench.current_counts(at_ms).map(|c| CurrentSums {
                 on: c.on,
@@ -70,8 +79,8 @@ impl SimulatedLink for Link {
         })
     }
 
-    fn apply(&self, now_ms: u64, pla_duty: f32, tca_duty: f32, supply_on: bool) {
-        with_state(|s| {
+    fn apply(&self, link: usize, now_ms: u64, pla_duty: f32, tca_duty: f32, supply_on: bool) {
+        with_state(link, |s| {
             s.advance_to(now_ms);
             let out = Outputs {
                 pla_duty,
@@ -85,7 +94,7 @@ impl SimulatedLink for Link {
     fn heaters_off(&self) {
         STATE.lock(|s| {
             if let Ok(mut s) = s.try_borrow_mut() {
-                if let Some(s) = s.as_mut() {
+                for s in s.iter_mut().flatten() {
                     s.bench.heaters_off();
                 }
             }
@@ -93,23 +102,23 @@ impl SimulatedLink for Link {
     }
 }
 
-/// Builds the nominal link at rest, read through the default board's ADC model; call before
+/// Builds each nominal link at rest, read through the default board's ADC model; call before
 /// the board starts.
 pub fn init() -> &'static Link {
     STATE.lock(|s| {
-        *s.borrow_mut() = Some(State {
+        *s.borrow_mut() = Some(core::array::from_fn(|_| State {
             bench: Bench::new(Lumped::new(NOMINAL_LINK), Config::DEFAULT, Noise::NOMINAL),
             last_ms: 0,
             last_read_ms: 0,
-        })
+        }))
     });
     &LINK
 }
 
-/// Carries out a `SIM` command on the simulated link at firmware time `now_ms`; `SIM PANIC`
-/// panics on purpose, to prove the panic path, and `SIM STALL` stops the tasks, to prove the
-/// watchdog.
-pub fn sim_command(_: &mut Controller, now_ms: u64, cmd: SimCommand, out: &mut dyn FnMut(&str)) {
+/// Carries out a `SIM` command on simulated link `link` (0-based) at firmware time `now_ms`;
+/// `SIM PANIC` panics on purpose, to prove the panic path, and `SIM STALL` stops the tasks, to
+/// prove the watchdog.
+pub fn sim_command(link: usize, now_ms: u64, cmd: SimCommand, out: &mut dyn FnMut(&str)) {
     if cmd == SimCommand::Panic {
         panic!("SIM PANIC asked for a panic");
     }
@@ -120,7 +129,7 @@ pub fn sim_command(_: &mut Controller, now_ms: u64, cmd: SimCommand, out: &mut d
             cortex_m::asm::nop();
         }
     }
-    with_state(|s| {
+    with_state(link, |s| {
         s.advance_to(now_ms);
         s.bench.command(cmd, &mut |l| out(l));
     });
@@ -132,7 +141,8 @@ pub fn sim_command(_: &mut Controller, now_ms: u64, cmd: SimCommand, out: &mut d
 /// zeroes: SAVE survives a reset (`SIM PANIC`, the watchdog), not a restart of QEMU.
 pub type SettingsFlash = morphlink::settings::ram_flash::RamFlash<4096, 2048, 8>;
 
-/// The emulated settings area: the whole [`SettingsFlash`], two 2 KiB pages as on the L475.
+/// The emulated settings area: the whole [`SettingsFlash`], two 2 KiB pages as on the L475
+/// (one such flash per link: each link keeps its own settings).
 pub const SETTINGS_AREA: core::ops::Range<u32> = 0..4096;
 
 /// Marks a [`SettingsFlash`] the firmware set up; anything else is power-on garbage.
@@ -141,7 +151,7 @@ const FLASH_MAGIC: u32 = 0x4D4C_5346; // "MLSF"
 #[repr(C)]
 struct KeptFlash {
     magic: u32,
-    flash: SettingsFlash,
+    flash: [SettingsFlash; LINKS],
 }
 
 struct FlashSlot(core::cell::UnsafeCell<core::mem::MaybeUninit<KeptFlash>>);
@@ -153,9 +163,9 @@ unsafe impl Sync for FlashSlot {}
 static FLASH_SLOT: FlashSlot =
     FlashSlot(core::cell::UnsafeCell::new(core::mem::MaybeUninit::uninit()));
 
-/// The settings flash kept across resets: erased at the first boot after power-on (no magic),
-/// as it was otherwise. Call once.
-pub fn settings_flash() -> &'static mut SettingsFlash {
+/// Each link's settings flash, kept across resets: erased at the first boot after power-on
+/// (no magic), as it was otherwise. Call once.
+pub fn settings_flash() -> &'static mut [SettingsFlash; LINKS] {
     static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
     assert!(
         !TAKEN.swap(true, core::sync::atomic::Ordering::Relaxed),
@@ -167,7 +177,10 @@ pub fn settings_flash() -> &'static mut SettingsFlash {
     unsafe {
         let magic = core::ptr::addr_of!((*kept).magic).read_volatile();
         if magic != FLASH_MAGIC {
-            core::ptr::addr_of_mut!((*kept).flash).write(SettingsFlash::new());
+            let first = core::ptr::addr_of_mut!((*kept).flash) as *mut SettingsFlash;
+            for k in 0..LINKS {
+                first.add(k).write(SettingsFlash::new());
+            }
             core::ptr::addr_of_mut!((*kept).magic).write_volatile(FLASH_MAGIC);
         }
         &mut (*kept).flash

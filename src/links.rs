@@ -60,6 +60,8 @@ pub struct Links<const N: usize> {
     /// Each link's heaters' current while their gates are off, last tick, A: see
     /// [`Demand::stray_a`].
     stray_a: [[f32; 2]; N],
+    /// The link whose SAVE the shell is writing.
+    saving: usize,
 }
 
 impl<const N: usize> Links<N> {
@@ -82,6 +84,7 @@ impl<const N: usize> Links<N> {
             next_event: 0,
             shunt: cfg.shunt,
             stray_a: [[0.0; 2]; N],
+            saving: 0,
         }
     }
 
@@ -365,10 +368,7 @@ impl<const N: usize> Links<N> {
                 }
             }
             Ok(Some(Command::Abort)) if k.is_none() => {
-                for j in 0..self.count() {
-                    self.queued[j] = None;
-                    self.ctrl[j].handle(now_ms, Command::Abort, &mut |_| {});
-                }
+                self.abort_all(now_ms);
                 out(protocol::OK);
                 return None;
             }
@@ -384,7 +384,7 @@ impl<const N: usize> Links<N> {
                 });
                 for h in wire::HELP_LINKS {
                     let mut l = OutLine::new();
-                    protocol::reply::data_text(&mut l, h);
+                    protocol::reply::help_line(&mut l, h);
                     out(&l);
                 }
                 out(&last);
@@ -409,6 +409,34 @@ impl<const N: usize> Links<N> {
 
     /// Whether link `k` would refuse a MORPH on its own (busy, faulted, no reading, radius):
     /// it then answers it itself.
+    /// Every link's heaters off and every queued morph dropped (an unaddressed ABORT, also
+    /// the moment its line is read).
+    pub fn abort_all(&mut self, now_ms: u64) {
+        for j in 0..self.count() {
+            self.queued[j] = None;
+            self.ctrl[j].handle(now_ms, Command::Abort, &mut |_| {});
+        }
+    }
+
+    /// The SAVE a line asked of one link, once, with that link (0-based): each link keeps its
+    /// own settings, so the shell writes them where that link's are kept.
+    pub fn take_save_request(&mut self) -> Option<(usize, crate::settings::codec::Blob)> {
+        let (k, blob) =
+            (0..self.count()).find_map(|k| self.ctrl[k].take_save_request().map(|b| (k, b)))?;
+        self.saving = k;
+        Some((k, blob))
+    }
+
+    /// The SAVE handed out by [`Links::take_save_request`] is done: its link's final reply.
+    pub fn finish_save(
+        &mut self,
+        result: Result<crate::settings::store::SaveReport, crate::settings::store::StoreError>,
+        out: &mut dyn FnMut(&str),
+    ) {
+        let k = self.saving.min(self.count() - 1);
+        self.ctrl[k].finish_save(result, &mut |l: &str| out(l));
+    }
+
     fn refuses_morph(&self, k: usize, radius_mm: f32) -> bool {
         let c = &self.ctrl[k];
         c.busy()

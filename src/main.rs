@@ -2,7 +2,9 @@
 //! hardware-free core. Builds only for the target (`thumbv7em-none-eabihf`); on the host it
 //! prints how to build it.
 //!
-//! Two embassy tasks share one [`morphlink::controller::Controller`]:
+//! Two embassy tasks share the core: one [`morphlink::controller::Controller`], or with the
+//! `links-2` feature a `morphlink::links::Links` of two (both behind
+//! `morphlink::session::Served`):
 //! - `control`, every [`TICK_MS`] (10 Hz): ADC burst (16 samples per input), then the heaters'
 //!   currents where the board senses them (16 readings inside the pulses and between them) →
 //!   `Controller::step` → PWM duties and the supply's cut-off; feeds the watchdog; records its
@@ -28,11 +30,23 @@
 ))]
 compile_error!("no board: build with exactly one `board-*` feature (see boards/README.md)");
 
+#[cfg(all(target_os = "none", feature = "links-2", not(emulated)))]
+compile_error!(
+    "`links-2`: only the emulated board is wired for two links yet (docs/multilink.md, \"Boards\")"
+);
+
+/// How many links this image drives: two with the `links-2` feature (the emulated board),
+/// one otherwise. A one-link image serves its `Controller` directly, exactly as before several
+/// links existed; several links are served by `morphlink::links::Links`.
+#[cfg(target_os = "none")]
+pub const LINKS: usize = if cfg!(feature = "links-2") { 2 } else { 1 };
+
 #[cfg(all(target_os = "none", emulated))]
 mod emulated;
 
 #[cfg(target_os = "none")]
 mod firmware {
+    use crate::LINKS;
     use core::cell::RefCell;
     use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
     use defmt_rtt as _;
@@ -44,12 +58,12 @@ mod firmware {
     use embassy_sync::signal::Signal;
     use embassy_time::{Duration, Instant, Ticker, Timer};
     use embedded_io_async::Write;
-    use morphlink::controller::{Config, Controller, Inputs, Outputs, OVERSAMPLE, TICK_MS};
+    use morphlink::controller::{Config, Inputs, Outputs, OVERSAMPLE, TICK_MS};
     use morphlink::electrical::{CurrentCounts, ShuntSense};
     use morphlink::protocol::{reply, OutLine, SimCommand};
-    use morphlink::session::{Session, OUT_BYTES};
+    use morphlink::session::{Served, Session, OUT_BYTES};
     use morphlink::settings::codec::LoadError;
-    use morphlink::settings::store::SettingsStore;
+    use morphlink::settings::store::{Loaded, SettingsStore};
     use morphlink::stats::{write_boot_line, LoopTiming};
     use morphlink::vocab::ResetCause;
     use morphlink_boards::selected as board;
@@ -82,9 +96,25 @@ mod firmware {
         ..Config::DEFAULT
     };
 
-    /// The controller, shared by the two tasks. Both run in the same thread-mode executor, so
-    /// the lock never contends and never masks interrupts (the UART interrupt keeps running
-    /// while the control task steps).
+    /// What the tasks serve: the one link's controller.
+    #[cfg(not(feature = "links-2"))]
+    type Core = morphlink::controller::Controller;
+    /// What the tasks serve: the board's links.
+    #[cfg(feature = "links-2")]
+    type Core = morphlink::links::Links<LINKS>;
+
+    /// The core at rest, no budget set.
+    fn new_core() -> Core {
+        #[cfg(not(feature = "links-2"))]
+        let core = Core::new(CONFIG);
+        #[cfg(feature = "links-2")]
+        let core = Core::new(CONFIG, LINKS);
+        core
+    }
+
+    /// The core, shared by the two tasks. Both run in the same thread-mode executor, so the
+    /// lock never contends and never masks interrupts (the UART interrupt keeps running while
+    /// the control task steps).
     static CONTROLLER: Mutex<ThreadModeRawMutex, RefCell<Slot>> =
         Mutex::new(RefCell::new(Slot::Empty));
 
@@ -94,7 +124,7 @@ mod firmware {
     #[repr(u8)]
     enum Slot {
         Empty = 0,
-        Ready(Controller) = 1,
+        Ready(Core) = 1,
     }
 
     /// Control → serial: new event or alarm lines may be queued.
@@ -103,8 +133,8 @@ mod firmware {
     /// Serial → control: a command changed the duties (ABORT); apply them now, not next tick.
     static APPLY_NOW: Signal<ThreadModeRawMutex, ()> = Signal::new();
 
-    /// Runs `f` on the controller, briefly holding the lock.
-    fn with_controller<R>(f: impl FnOnce(&mut Controller) -> R) -> R {
+    /// Runs `f` on the core, briefly holding the lock.
+    fn with_core<R>(f: impl FnOnce(&mut Core) -> R) -> R {
         CONTROLLER.lock(|c| match &mut *c.borrow_mut() {
             Slot::Ready(c) => f(c),
             Slot::Empty => panic!("set up in main"),
@@ -118,20 +148,48 @@ mod firmware {
     #[cfg(emulated)]
     type SettingsFlash = &'static mut crate::emulated::SettingsFlash;
 
-    /// The settings store over the board's settings area (`None` if the area is unusable: the
+    /// Each link's settings store over its settings area (`None` if the area is unusable: the
     /// defaults then hold and SAVE is unsupported).
     #[cfg(not(emulated))]
-    fn settings_store(flash: board::SettingsFlash) -> Option<SettingsStore<SettingsFlash>> {
-        SettingsStore::new(flash, morphlink_boards::settings_area()).ok()
+    fn settings_stores(flash: board::SettingsFlash) -> Stores {
+        [SettingsStore::new(flash, morphlink_boards::settings_area()).ok()]
     }
     #[cfg(emulated)]
-    fn settings_store(_: ()) -> Option<SettingsStore<SettingsFlash>> {
-        let flash = crate::emulated::settings_flash();
-        SettingsStore::new(flash, crate::emulated::SETTINGS_AREA).ok()
+    fn settings_stores(_: ()) -> Stores {
+        let mut flashes = crate::emulated::settings_flash().iter_mut();
+        core::array::from_fn(|_| {
+            let f = flashes.next()?;
+            SettingsStore::new(f, crate::emulated::SETTINGS_AREA).ok()
+        })
     }
 
-    /// The settings store the serial task carries out SAVE with.
-    type Store = Option<SettingsStore<SettingsFlash>>;
+    /// The settings stores the serial task carries out SAVE with, one per link.
+    type Stores = [Option<SettingsStore<SettingsFlash>>; LINKS];
+
+    /// Puts link `k`'s settings loaded at boot in force, range-checked, or the defaults and why
+    /// (`loaded`), and tells it whether SAVE has somewhere to write (`storage`).
+    fn put_settings(k: usize, loaded: Result<Loaded, LoadError>, storage: bool) {
+        with_core(|c| {
+            let c = c.link_mut(k);
+            c.load_settings(loaded);
+            if storage {
+                c.enable_storage();
+            }
+        });
+    }
+
+    /// Link `k`'s settings store, if it has one (a one-link image without an index: its
+    /// bounds check cost flash the image does not have).
+    #[inline(always)]
+    fn store_of(stores: &mut Stores, k: usize) -> Option<&mut SettingsStore<SettingsFlash>> {
+        #[cfg(not(feature = "links-2"))]
+        let [store] = stores;
+        #[cfg(not(feature = "links-2"))]
+        let _ = k;
+        #[cfg(feature = "links-2")]
+        let store = stores.get_mut(k)?;
+        store.as_mut()
+    }
 
     /// The board's parts; the emulated board gets the firmware's simulated link.
     fn board_parts() -> board::Parts {
@@ -143,13 +201,22 @@ mod firmware {
 
     /// Where `SIM` commands go: the simulated link on the emulated board; on hardware the
     /// core's `error: unsupported` reply.
-    fn sim_command(c: &mut Controller, now_ms: u64, sim: SimCommand, out: &mut dyn FnMut(&str)) {
+    fn sim_command(
+        c: &mut Core,
+        now_ms: u64,
+        (k, sim): (usize, SimCommand),
+        out: &mut dyn FnMut(&str),
+    ) {
         #[cfg(emulated)]
-        crate::emulated::sim_command(c, now_ms, sim, out);
+        {
+            let _ = c;
+            crate::emulated::sim_command(k, now_ms, sim, out);
+        }
         #[cfg(not(emulated))]
-        c.handle(now_ms, morphlink::protocol::Command::Sim(sim), &mut |l| {
-            out(l)
-        });
+        c.link_mut(k)
+            .handle(now_ms, morphlink::protocol::Command::Sim(sim), &mut |l| {
+                out(l)
+            });
     }
 
     #[embassy_executor::main]
@@ -165,24 +232,36 @@ mod firmware {
 
         // Built in its static, not in `main`'s future: held across the settings load below it
         // would take its 3.5 KiB again in the task's RAM.
-        CONTROLLER.lock(|c| *c.borrow_mut() = Slot::Ready(Controller::new(CONFIG)));
-        with_controller(|c| {
-            c.enable_timing(LoopTiming::new(board::CPU_HZ, TICK_MS as u32 * 1000, cause))
+        CONTROLLER.lock(|c| *c.borrow_mut() = Slot::Ready(new_core()));
+        with_core(|c| {
+            c.link_mut(0).enable_timing(LoopTiming::new(
+                board::CPU_HZ,
+                TICK_MS as u32 * 1000,
+                cause,
+            ))
         });
-        // The stored settings, range-checked, or the defaults and why; before the control task
-        // starts, and heaters stay off whatever it finds.
-        let mut store = settings_store(parts.settings_flash);
-        let loaded = match &mut store {
-            Some(s) => s.load().await,
-            None => Err(LoadError::Flash),
-        };
-        let storage = store.is_some();
-        with_controller(|c| {
-            c.load_settings(loaded);
-            if storage {
-                c.enable_storage();
-            }
-        });
+        // Each link's stored settings, range-checked, or the defaults and why; before the
+        // control task starts, and heaters stay off whatever it finds.
+        let mut stores = settings_stores(parts.settings_flash);
+        // A one-link image loads its one store without a loop: an await inside a loop costs its
+        // future some 90 B of flash, which the L475 image does not have.
+        #[cfg(not(feature = "links-2"))]
+        {
+            let [store] = &mut stores;
+            let loaded = match store {
+                Some(s) => s.load().await,
+                None => Err(LoadError::Flash),
+            };
+            put_settings(0, loaded, store.is_some());
+        }
+        #[cfg(feature = "links-2")]
+        for (k, store) in stores.iter_mut().enumerate() {
+            let loaded = match store {
+                Some(s) => s.load().await,
+                None => Err(LoadError::Flash),
+            };
+            put_settings(k, loaded, store.is_some());
+        }
 
         let mut boot = OutLine::new();
         write_boot_line(&mut boot, cause, board::NAME);
@@ -192,7 +271,7 @@ mod firmware {
         }
 
         spawner.spawn(control(parts.sensors, parts.heaters, parts.watchdog).expect("spawned once"));
-        spawner.spawn(serial(parts.tx, parts.rx, boot, store).expect("spawned once"));
+        spawner.spawn(serial(parts.tx, parts.rx, boot, stores).expect("spawned once"));
     }
 
     #[embassy_executor::task]
@@ -201,27 +280,30 @@ mod firmware {
     }
 
     #[embassy_executor::task]
-    async fn serial(tx: board::SerialTx, rx: board::SerialRx, boot: OutLine, store: Store) {
-        serial_loop(tx, rx, boot, store).await
+    async fn serial(tx: board::SerialTx, rx: board::SerialRx, boot: OutLine, stores: Stores) {
+        serial_loop(tx, rx, boot, stores).await
     }
 
-    /// Sums [`READS_PER_TICK`] reads of every input, [`SAMPLE_SPACING`] apart.
-    async fn read_burst(sensors: &mut impl AnalogInputs) -> [u32; INPUTS] {
-        let mut sums = [0u32; INPUTS];
+    /// Sums [`READS_PER_TICK`] reads of every link's inputs, [`SAMPLE_SPACING`] apart (every
+    /// link in each read, so the burst spans 16 ms however many links there are).
+    async fn read_burst(sensors: &mut impl AnalogInputs) -> [[u32; INPUTS]; LINKS] {
+        let mut sums = [[0u32; INPUTS]; LINKS];
         for i in 0..READS_PER_TICK {
             if i > 0 {
                 Timer::after(SAMPLE_SPACING).await;
             }
-            for (s, v) in sums.iter_mut().zip(sensors.read()) {
-                *s += u32::from(v);
+            for (k, link) in sums.iter_mut().enumerate() {
+                for (s, v) in link.iter_mut().zip(sensors.read_link(k)) {
+                    *s += u32::from(v);
+                }
             }
         }
         sums
     }
 
-    /// Drives the heaters and the supply's cut-off as `o` says.
-    fn drive(heaters: &mut impl HeaterOutputs, o: Outputs) {
-        heaters.apply(o.pla_duty, o.tca_duty, o.supply_on);
+    /// Drives link `k`'s heaters and cut-off as `o` says.
+    fn drive(heaters: &mut impl HeaterOutputs, k: usize, o: Outputs) {
+        heaters.apply_link(k, o.pla_duty, o.tca_duty, o.supply_on);
     }
 
     /// When the control loop's last tick started, ms (the low 32 bits of [`Instant`]): the
@@ -253,7 +335,9 @@ mod firmware {
         let mut ticker = Ticker::every(Duration::from_millis(TICK_MS));
         loop {
             if let Either::Second(()) = select(ticker.next(), APPLY_NOW.wait()).await {
-                drive(&mut heaters, with_controller(|c| c.outputs()));
+                for k in 0..LINKS {
+                    drive(&mut heaters, k, with_core(|c| c.link_outputs(k)));
+                }
                 continue;
             }
             let start = board::cycles();
@@ -263,26 +347,38 @@ mod firmware {
             // stale-sensor check (`STALE_AFTER_MS`) refuses it.
             let sample_ms = Instant::now().as_millis();
             let sums = read_burst(&mut sensors).await;
-            let current = sensors.read_currents(OVERSAMPLE).await;
+            let mut inputs = [Inputs {
+                thermistor_counts: [0; 3],
+                supply_counts: 0,
+                sample_ms,
+                current: None,
+            }; LINKS];
+            for (k, i) in inputs.iter_mut().enumerate() {
+                i.thermistor_counts = [
+                    sums[k][Input::PlaThermistor as usize],
+                    sums[k][Input::TcaThermistor as usize],
+                    sums[k][Input::AmbThermistor as usize],
+                ];
+                i.supply_counts = sums[k][Input::Supply as usize];
+                i.current =
+                    sensors
+                        .read_link_currents(k, OVERSAMPLE)
+                        .await
+                        .map(|c| CurrentCounts {
+                            on: c.on,
+                            off: c.off,
+                        });
+            }
             let adc_done = board::cycles();
             let now_ms = Instant::now().as_millis();
-            let inputs = Inputs {
-                thermistor_counts: [
-                    sums[Input::PlaThermistor as usize],
-                    sums[Input::TcaThermistor as usize],
-                    sums[Input::AmbThermistor as usize],
-                ],
-                supply_counts: sums[Input::Supply as usize],
-                sample_ms,
-                current: current.map(|c| CurrentCounts {
-                    on: c.on,
-                    off: c.off,
-                }),
-            };
-            drive(&mut heaters, with_controller(|c| c.step(now_ms, &inputs)));
+            let mut outs = [Outputs::default(); LINKS];
+            with_core(|c| c.tick(now_ms, &inputs, &mut outs));
+            for (k, o) in outs.into_iter().enumerate() {
+                drive(&mut heaters, k, o);
+            }
             let applied = board::cycles();
             wdg.feed();
-            with_controller(|c| c.record_timing(start, adc_done, applied));
+            with_core(|c| c.link_mut(0).record_timing(start, adc_done, applied));
             EVENTS.signal(());
         }
     }
@@ -298,28 +394,30 @@ mod firmware {
         mut tx: impl Write,
         mut rx: impl SerialReceive,
         boot: OutLine,
-        mut store: Store,
+        mut stores: Stores,
     ) {
         let mut session: Session<SERIAL_RX_BYTES, OUT_BYTES> = Session::new(&boot);
         loop {
             if let Some(wait) = tick_window_wait() {
                 wait.await;
             }
-            with_controller(|c| session.refill(c));
+            with_core(|c| session.refill(c));
             if session.has_input() {
                 let now_ms = Instant::now().as_millis();
-                let answered = with_controller(|c| session.answer_next(c, now_ms, sim_command));
+                let answered = with_core(|c| session.answer_next(c, now_ms, sim_command));
                 if let Some(a) = answered {
                     if a.apply_now {
                         APPLY_NOW.signal(());
                     }
                     // SAVE: only ever handed out while nothing heats, so the CPU stalling on
                     // its flash during an erase or write holds no heater on.
-                    if let (Some(blob), Some(s)) = (a.save, &mut store) {
-                        let t0 = Instant::now();
-                        let r = s.save(&blob).await;
-                        defmt::info!("SAVE took {} ms", t0.elapsed().as_millis());
-                        with_controller(|c| session.finish_save(c, r));
+                    if let Some((k, blob)) = a.save {
+                        if let Some(s) = store_of(&mut stores, k) {
+                            let t0 = Instant::now();
+                            let r = s.save(&blob).await;
+                            defmt::info!("SAVE took {} ms", t0.elapsed().as_millis());
+                            with_core(|c| session.finish_save(c, r));
+                        }
                     }
                 }
                 // Offer output without waiting for room, then let the control task run.
@@ -352,7 +450,7 @@ mod firmware {
             };
             if let Some(r) = got {
                 let now_ms = Instant::now().as_millis();
-                if with_controller(|c| session.received(c, now_ms, r.len, r.lost_after)) {
+                if with_core(|c| session.received(c, now_ms, r.len, r.lost_after)) {
                     APPLY_NOW.signal(());
                 }
             }

@@ -10,11 +10,156 @@
 //! flash with the heaters off and hands the result back ([`Session::finish_save`]). The shell
 //! only moves bytes between the port and this type, and carries out the SAVE.
 
-use crate::controller::{Controller, MAX_REPLY_BYTES};
+use crate::controller::{Controller, Inputs, Outputs, MAX_REPLY_BYTES};
+use crate::links::{LinkOutputs, Links};
 use crate::protocol::serial::{is_abort, Outbox, SerialInput};
-use crate::protocol::{format_error, Command, SimCommand};
+use crate::protocol::{format_error, Command, OutLine, SimCommand};
 use crate::settings::codec::Blob;
 use crate::settings::store::{SaveReport, StoreError};
+
+/// What the firmware's shell serves: one link's [`Controller`] (a one-link image, exactly as
+/// before several links existed) or a board's [`Links`]. The session and the firmware's tasks
+/// are written once against it; each image monomorphises them for its own.
+pub trait Served {
+    /// The outputs, compared before and after a line (an ABORT changes them).
+    type Out: PartialEq;
+    /// How many links.
+    fn count(&self) -> usize;
+    /// Link `k`'s controller (0-based): its settings, storage and loop timing.
+    fn link_mut(&mut self, k: usize) -> &mut Controller;
+    /// ABORT as soon as its line is read: every link's heaters off.
+    fn abort(&mut self, now_ms: u64);
+    /// Runs one command line; a `SIM` command is handed back to the shell with its link
+    /// (0-based).
+    fn handle_line(
+        &mut self,
+        now_ms: u64,
+        line: &str,
+        out: &mut dyn FnMut(&str),
+    ) -> Option<(usize, SimCommand)>;
+    /// One control tick: `inputs[k]` is link `k`'s frame, `out[k]` gets its duties and
+    /// cut-off (each duty already clipped to its PWM window where a budget binds).
+    fn tick(&mut self, now_ms: u64, inputs: &[Inputs], out: &mut [Outputs]);
+    /// Link `k`'s outputs now (right after a command too).
+    fn link_outputs(&self, k: usize) -> Outputs;
+    /// Every link's outputs now.
+    fn outputs_now(&self) -> Self::Out;
+    /// The SAVE a line asked for, once: the link (0-based) whose settings the blob holds.
+    fn take_save_request(&mut self) -> Option<(usize, Blob)>;
+    /// The SAVE handed out is done: its final reply.
+    fn finish_save(&mut self, result: Result<SaveReport, StoreError>, out: &mut dyn FnMut(&str));
+    /// The next event or alarm line.
+    fn pop_event_line(&mut self) -> Option<OutLine>;
+}
+
+impl Served for Controller {
+    type Out = Outputs;
+
+    fn count(&self) -> usize {
+        1
+    }
+
+    fn link_mut(&mut self, _: usize) -> &mut Controller {
+        self
+    }
+
+    fn abort(&mut self, now_ms: u64) {
+        self.handle(now_ms, Command::Abort, &mut |_| {});
+    }
+
+    fn handle_line(
+        &mut self,
+        now_ms: u64,
+        line: &str,
+        out: &mut dyn FnMut(&str),
+    ) -> Option<(usize, SimCommand)> {
+        Controller::handle_line(self, now_ms, line, out).map(|s| (0, s))
+    }
+
+    fn tick(&mut self, now_ms: u64, inputs: &[Inputs], out: &mut [Outputs]) {
+        out[0] = self.step(now_ms, &inputs[0]);
+    }
+
+    fn link_outputs(&self, _: usize) -> Outputs {
+        self.outputs()
+    }
+
+    fn outputs_now(&self) -> Self::Out {
+        self.outputs()
+    }
+
+    fn take_save_request(&mut self) -> Option<(usize, Blob)> {
+        Controller::take_save_request(self).map(|b| (0, b))
+    }
+
+    fn finish_save(&mut self, result: Result<SaveReport, StoreError>, out: &mut dyn FnMut(&str)) {
+        Controller::finish_save(self, result, &mut |l: &str| out(l));
+    }
+
+    fn pop_event_line(&mut self) -> Option<OutLine> {
+        Controller::pop_event_line(self)
+    }
+}
+
+impl<const N: usize> Served for Links<N> {
+    type Out = [LinkOutputs; N];
+
+    fn count(&self) -> usize {
+        Links::count(self)
+    }
+
+    fn link_mut(&mut self, k: usize) -> &mut Controller {
+        Links::link_mut(self, k)
+    }
+
+    fn abort(&mut self, now_ms: u64) {
+        self.abort_all(now_ms);
+    }
+
+    fn handle_line(
+        &mut self,
+        now_ms: u64,
+        line: &str,
+        out: &mut dyn FnMut(&str),
+    ) -> Option<(usize, SimCommand)> {
+        Links::handle_line(self, now_ms, line, out)
+    }
+
+    fn tick(&mut self, now_ms: u64, inputs: &[Inputs], out: &mut [Outputs]) {
+        let mut links = [LinkOutputs::default(); N];
+        let n = out.len().min(N);
+        self.step(now_ms, inputs, &mut links[..n]);
+        for (o, l) in out.iter_mut().zip(links) {
+            *o = l.out;
+        }
+    }
+
+    fn link_outputs(&self, k: usize) -> Outputs {
+        self.outputs(k).out
+    }
+
+    fn outputs_now(&self) -> [LinkOutputs; N] {
+        core::array::from_fn(|k| {
+            if k < Links::count(self) {
+                self.outputs(k)
+            } else {
+                LinkOutputs::default()
+            }
+        })
+    }
+
+    fn take_save_request(&mut self) -> Option<(usize, Blob)> {
+        Links::take_save_request(self)
+    }
+
+    fn finish_save(&mut self, result: Result<SaveReport, StoreError>, out: &mut dyn FnMut(&str)) {
+        Links::finish_save(self, result, out);
+    }
+
+    fn pop_event_line(&mut self) -> Option<OutLine> {
+        Links::pop_event_line(self)
+    }
+}
 
 /// The firmware's output queue, bytes: two of the longest replies.
 pub const OUT_BYTES: usize = 2 * MAX_REPLY_BYTES;
@@ -29,7 +174,8 @@ pub struct Answered {
     pub apply_now: bool,
     /// A SAVE to carry out (only ever while nothing heats): write it, then call
     /// [`Session::finish_save`], which queues the reply. `None`: the reply is queued already.
-    pub save: Option<Blob>,
+    /// With the link (0-based) whose settings the blob holds.
+    pub save: Option<(usize, Blob)>,
 }
 
 /// The serial session over an `RX`-byte receive buffer and an `OUT`-byte output queue.
@@ -74,16 +220,16 @@ impl<const RX: usize, const OUT: usize> Session<RX, OUT> {
     /// Reports a read of `len` bytes into [`Session::buffer`] (`lost_after` if input was lost
     /// right after them). A whole ABORT line among them stops what runs now; returns true if
     /// so (apply the duties now). The line is still answered in its turn.
-    pub fn received(
+    pub fn received<C: Served>(
         &mut self,
-        c: &mut Controller,
+        c: &mut C,
         now_ms: u64,
         len: usize,
         lost_after: bool,
     ) -> bool {
         let abort = self.input.received(len, lost_after);
         if abort {
-            c.handle(now_ms, Command::Abort, &mut |_| {});
+            c.abort(now_ms);
         }
         abort
     }
@@ -91,11 +237,11 @@ impl<const RX: usize, const OUT: usize> Session<RX, OUT> {
     /// Answers the next received line, if a whole one is there: runs it (`sim` carries out a
     /// `SIM` command for a simulated build, writing its reply through the given sink) and
     /// queues its reply, or counts it as dropped. `None` when no whole line is there yet.
-    pub fn answer_next(
+    pub fn answer_next<C: Served>(
         &mut self,
-        c: &mut Controller,
+        c: &mut C,
         now_ms: u64,
-        sim: impl FnOnce(&mut Controller, u64, SimCommand, &mut dyn FnMut(&str)),
+        sim: impl FnOnce(&mut C, u64, (usize, SimCommand), &mut dyn FnMut(&str)),
     ) -> Option<Answered> {
         let out = &self.out;
         let reply = &mut self.reply;
@@ -104,7 +250,7 @@ impl<const RX: usize, const OUT: usize> Session<RX, OUT> {
             // Behind a flood the reply will be dropped: not built at all, so a long one (HELP)
             // does not hold the control task up (an ABORT's always is).
             let build = !out.drops_replies() || line.is_ok_and(is_abort);
-            let before = c.outputs();
+            let before = c.outputs_now();
             let mut sink = |l: &str| {
                 if build {
                     push_line(reply, l);
@@ -124,7 +270,7 @@ impl<const RX: usize, const OUT: usize> Session<RX, OUT> {
                     false
                 }
             };
-            (abort, build, c.outputs() != before)
+            (abort, build, c.outputs_now() != before)
         })?;
         let (abort, build, changed) = answered;
         let save = c.take_save_request();
@@ -140,14 +286,14 @@ impl<const RX: usize, const OUT: usize> Session<RX, OUT> {
     }
 
     /// The SAVE handed out by [`Session::answer_next`] is done (`result`): its reply is queued.
-    pub fn finish_save(&mut self, c: &mut Controller, result: Result<SaveReport, StoreError>) {
+    pub fn finish_save<C: Served>(&mut self, c: &mut C, result: Result<SaveReport, StoreError>) {
         let reply = &mut self.reply;
         c.finish_save(result, &mut |l| push_line(reply, l));
         let (abort, build) = self.waiting.take().unwrap_or((false, true));
         self.queue_reply(c, abort, build);
     }
 
-    fn queue_reply(&mut self, c: &mut Controller, abort: bool, build: bool) {
+    fn queue_reply<C: Served>(&mut self, c: &mut C, abort: bool, build: bool) {
         if build {
             self.out.push_reply(&self.reply, abort);
         } else if !self.reply.is_empty() {
@@ -158,7 +304,7 @@ impl<const RX: usize, const OUT: usize> Session<RX, OUT> {
     }
 
     /// Queues the controller's waiting events and alarms, as room allows.
-    pub fn refill(&mut self, c: &mut Controller) {
+    pub fn refill<C: Served>(&mut self, c: &mut C) {
         self.out.refill(|| c.pop_event_line());
     }
 
@@ -219,7 +365,7 @@ mod tests {
         c
     }
 
-    fn no_sim(_: &mut Controller, _: u64, _: SimCommand, out: &mut dyn FnMut(&str)) {
+    fn no_sim(_: &mut Controller, _: u64, _: (usize, SimCommand), out: &mut dyn FnMut(&str)) {
         out("error: unsupported SIM");
     }
 
@@ -333,7 +479,8 @@ mod tests {
         s.buffer()[..b.len()].copy_from_slice(b);
         s.received(&mut c, 0, b.len(), false);
         let a = s.answer_next(&mut c, 0, no_sim).unwrap();
-        let blob = a.save.expect("SAVE handed out");
+        let (link, blob) = a.save.expect("SAVE handed out");
+        assert_eq!(link, 0);
         assert!(!blob.as_bytes().is_empty());
         // Nothing but the boot line until the shell reports the write.
         let before = core::str::from_utf8(s.output()).unwrap().to_string();

@@ -45,6 +45,14 @@ pub trait AnalogInputs {
     /// One read of every input, ADC counts, indexed by [`Input`] (a read is one conversion,
     /// or the sum of `HW_OVERSAMPLE` conversions where the ADC oversamples in hardware).
     fn read(&mut self) -> [u16; INPUTS];
+
+    /// One read of link `link`'s inputs (0-based), as [`AnalogInputs::read`]: its own
+    /// thermistors, the shared ambient bead and supply. A board wired for one link has only
+    /// link 0, which is [`AnalogInputs::read`].
+    fn read_link(&mut self, link: usize) -> [u16; INPUTS] {
+        let _ = link;
+        self.read()
+    }
 }
 
 /// Both heaters' PWM outputs and the cut-off of their supply.
@@ -57,6 +65,13 @@ pub trait HeaterOutputs {
     /// Sets both duties, fractions in [0, 1] (anything else, NaN included, is off), then the
     /// cut-off: closed (the heaters supplied) if `supply_on`, open otherwise.
     fn apply(&mut self, pla_duty: f32, tca_duty: f32, supply_on: bool);
+
+    /// As [`HeaterOutputs::apply`], for link `link`'s heaters and cut-off (0-based; one cut-off
+    /// per link, docs/bringup.md). A board wired for one link has only link 0.
+    fn apply_link(&mut self, link: usize, pla_duty: f32, tca_duty: f32, supply_on: bool) {
+        let _ = link;
+        self.apply(pla_duty, tca_duty, supply_on);
+    }
 }
 
 /// Heater PWM frequency on every board, Hz: the core's `electrical::PWM_HZ` (the firmware
@@ -89,6 +104,13 @@ pub trait CurrentSense {
     /// probe pulse ([`PROBE_PULSE_US`]), and its one reading inside it counts `reads` times.
     /// `None` where the board senses no current.
     async fn read_currents(&mut self, reads: u32) -> Option<CurrentSums>;
+
+    /// As [`CurrentSense::read_currents`], for link `link`'s heaters (0-based). A board wired
+    /// for one link has only link 0.
+    async fn read_link_currents(&mut self, link: usize, reads: u32) -> Option<CurrentSums> {
+        let _ = link;
+        self.read_currents(reads).await
+    }
 }
 
 /// A board's current-sense chain, for the controller's conversion of counts to amperes.

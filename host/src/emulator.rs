@@ -51,6 +51,45 @@ pub fn find_qemu() -> Result<PathBuf, String> {
 /// Used for the emulated image here and for every board by `cargo xtask boards`; callers take
 /// `target_dir` from [`crate::workspace::Workspace`], so it honours `CARGO_TARGET_DIR`.
 pub fn build_firmware(workspace: &Path, board: &str, target_dir: &Path) -> Result<PathBuf, String> {
+    build_firmware_with(workspace, board, &[], target_dir)
+}
+
+/// As [`build_firmware`], with the firmware's further `features` (`links-2`). The ELF is
+/// copied to `<target_dir>/images/morphlink-<board>[-<feature>...].elf` and that copy returned,
+/// so images of other features built into the same `target_dir` later do not replace it.
+pub fn build_firmware_with(
+    workspace: &Path,
+    board: &str,
+    features: &[&str],
+    target_dir: &Path,
+) -> Result<PathBuf, String> {
+    // One build at a time in this process: cargo's lock serialises builds, not the copy after.
+    static BUILDING: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one = BUILDING.lock().unwrap_or_else(|p| p.into_inner());
+    let elf = build_elf(workspace, board, features, target_dir)?;
+    let mut name = format!("morphlink-{board}");
+    for f in features {
+        name.push('-');
+        name.push_str(f);
+    }
+    let dir = target_dir.join("images");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    let copy = dir.join(format!("{name}.elf"));
+    std::fs::copy(&elf, &copy).map_err(|e| format!("cannot copy {}: {e}", elf.display()))?;
+    Ok(copy)
+}
+
+fn build_elf(
+    workspace: &Path,
+    board: &str,
+    features: &[&str],
+    target_dir: &Path,
+) -> Result<PathBuf, String> {
+    let mut all = format!("board-{board}");
+    for f in features {
+        all.push(',');
+        all.push_str(f);
+    }
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut child = Command::new(cargo)
         .current_dir(workspace)
@@ -65,7 +104,7 @@ pub fn build_firmware(workspace: &Path, board: &str, target_dir: &Path) -> Resul
             // Artifacts as JSON on stdout; diagnostics still rendered for people on stderr.
             "--message-format=json-render-diagnostics",
         ])
-        .args(["--features", &format!("board-{board}")])
+        .args(["--features", &all])
         .env("CARGO_TARGET_DIR", target_dir)
         .stdout(Stdio::piped())
         .spawn()
@@ -93,7 +132,21 @@ pub fn build_firmware(workspace: &Path, board: &str, target_dir: &Path) -> Resul
 
 /// Builds the emulated image in release into `target_dir`; returns the ELF path.
 pub fn build_image(workspace: &Path, target_dir: &Path) -> Result<PathBuf, String> {
-    build_firmware(workspace, BOARD, target_dir)
+    build_firmware_with(workspace, BOARD, &[], target_dir)
+}
+
+/// Builds the emulated image of `links` links (1 or 2: the `links-2` feature) in release into
+/// `target_dir`; returns the ELF path.
+pub fn build_image_of(
+    workspace: &Path,
+    links: usize,
+    target_dir: &Path,
+) -> Result<PathBuf, String> {
+    match links {
+        1 => build_image(workspace, target_dir),
+        2 => build_firmware_with(workspace, BOARD, &["links-2"], target_dir),
+        n => Err(format!("the emulated image drives 1 or 2 links, not {n}")),
+    }
 }
 
 /// A free loopback TCP port (bound and released; a race with another process is possible but

@@ -2,7 +2,7 @@
 //! with protocol v1: morphs, STATUS, ABORT mid-phase, injected faults, bad lines, and the panic
 //! path. Needs `qemu-system-arm` 9 or newer; without it these tests fail and say how to install
 //! it, unless `MORPHLINK_SKIP_EMULATOR=1` is set, which skips them with a loud warning.
-use morphlink_host::emulator::{build_image, find_qemu, Emulator};
+use morphlink_host::emulator::{build_image_of, find_qemu, Emulator};
 use morphlink_host::workspace::Workspace;
 use std::path::{Path, PathBuf};
 use std::sync::{Condvar, Mutex, OnceLock};
@@ -15,29 +15,34 @@ const REPLY: Duration = Duration::from_secs(5);
 /// springs back within about 20 s under water).
 const COOL_S: f64 = 40.0;
 
-/// QEMU and the image, built once for all tests; `None` when skipping was asked for.
+/// QEMU and the one-link image, built once for all tests; `None` when skipping was asked for.
 fn setup() -> Option<(PathBuf, PathBuf)> {
     static SETUP: OnceLock<Option<(PathBuf, PathBuf)>> = OnceLock::new();
-    SETUP
-        .get_or_init(|| {
-            let qemu = match find_qemu() {
-                Ok(q) => q,
-                Err(e) if std::env::var_os("MORPHLINK_SKIP_EMULATOR").is_some() => {
-                    eprintln!(
-                        "\n!!!!! EMULATOR TESTS SKIPPED (MORPHLINK_SKIP_EMULATOR): {e} !!!!!\n"
-                    );
-                    return None;
-                }
-                Err(e) => panic!("{e}\n(set MORPHLINK_SKIP_EMULATOR=1 to skip the emulator tests)"),
-            };
-            // The workspace and cargo's target directory (CARGO_TARGET_DIR if set), from cargo.
-            let ws = Workspace::containing(Path::new(env!("CARGO_MANIFEST_DIR")))
-                .unwrap_or_else(|e| panic!("{e}"));
-            let image = build_image(&ws.root, &ws.target_dir.join("emulated"))
-                .unwrap_or_else(|e| panic!("{e}"));
-            Some((qemu, image))
-        })
-        .clone()
+    SETUP.get_or_init(|| setup_image(1)).clone()
+}
+
+/// QEMU and the two-link image (`links-2`), built once for the tests that use it.
+fn setup_two_links() -> Option<(PathBuf, PathBuf)> {
+    static SETUP: OnceLock<Option<(PathBuf, PathBuf)>> = OnceLock::new();
+    SETUP.get_or_init(|| setup_image(2)).clone()
+}
+
+/// QEMU and the image of `links` links; `None` when skipping was asked for.
+fn setup_image(links: usize) -> Option<(PathBuf, PathBuf)> {
+    let qemu = match find_qemu() {
+        Ok(q) => q,
+        Err(e) if std::env::var_os("MORPHLINK_SKIP_EMULATOR").is_some() => {
+            eprintln!("\n!!!!! EMULATOR TESTS SKIPPED (MORPHLINK_SKIP_EMULATOR): {e} !!!!!\n");
+            return None;
+        }
+        Err(e) => panic!("{e}\n(set MORPHLINK_SKIP_EMULATOR=1 to skip the emulator tests)"),
+    };
+    // The workspace and cargo's target directory (CARGO_TARGET_DIR if set), from cargo.
+    let ws = Workspace::containing(Path::new(env!("CARGO_MANIFEST_DIR")))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let image = build_image_of(&ws.root, links, &ws.target_dir.join("emulated"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    Some((qemu, image))
 }
 
 /// As many emulators at once as the machine has cores (at most [`MOST_AT_ONCE`]): each QEMU
@@ -847,5 +852,143 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
                 .iter()
                 .any(|l| l.starts_with("data: bend_timeout_s=120.0 s")),
         "{config:?}"
+    );
+}
+
+/// The two-link image: each link its own addressed morph under one supply budget (the second
+/// waits for room, then starts by itself), bad addresses and gaits refused, a fault on one link
+/// stopping that link alone while the other finishes, and each link's SAVE kept apart.
+#[test]
+fn two_links_share_one_budget_and_a_fault_on_one_stops_only_it() {
+    let Some((qemu, image)) = setup_two_links() else {
+        return;
+    };
+    let _slot = Slot::take(1);
+    let mut emu = Emulator::boot(&qemu, &image).unwrap_or_else(|e| panic!("{e}"));
+    emu.wait_ready(REPLY).unwrap();
+    let links = emu.command("LINKS", REPLY).unwrap();
+    check!(
+        emu,
+        links.last().unwrap().starts_with("ok links=2 ")
+            && links.iter().any(|l| l.starts_with("data: @2 phase=idle")),
+        "{links:?}"
+    );
+    // Bad input: refused with its reason, nothing changes.
+    let past = emu.command("@3 STATUS", REPLY).unwrap();
+    check!(
+        emu,
+        past.last()
+            .unwrap()
+            .starts_with("error: out-of-range no link 3"),
+        "{past:?}"
+    );
+    let short = emu.command("GAIT 34", REPLY).unwrap();
+    check!(
+        emu,
+        short
+            .last()
+            .unwrap()
+            .starts_with("error: bad-argument GAIT took 1"),
+        "{short:?}"
+    );
+    let zero = emu.command("CONFIG SET supply_budget_w 0", REPLY).unwrap();
+    check!(emu, zero.last().unwrap().starts_with("error: "), "{zero:?}");
+
+    // One soften's worth of budget: link 2 waits, then morphs once link 1 leaves room.
+    let set = emu.command("CONFIG SET supply_budget_w 5", REPLY).unwrap();
+    check!(
+        emu,
+        set.last().unwrap().starts_with("ok supply_budget_w=5.00"),
+        "{set:?}"
+    );
+    emu.command("GAIT 34 42", REPLY).unwrap();
+    let mut done = [None, None];
+    let mut queued = false;
+    while done.iter().any(Option::is_none) {
+        let line = emu.next_line(MORPH_WALL).unwrap_or_else(|e| panic!("{e}"));
+        check!(emu, !line.contains("alarm: "), "{line}");
+        queued |= line.starts_with("@2 event: queued ");
+        for (k, d) in done.iter_mut().enumerate() {
+            if line.starts_with(&format!("@{} event: done ", k + 1)) {
+                *d = field(&line, "radius_mm").and_then(|r| r.parse::<f64>().ok());
+            }
+        }
+    }
+    check!(emu, queued, "link 2 did not wait for the budget");
+    for (k, target) in [34.0, 42.0].into_iter().enumerate() {
+        let st = emu
+            .command(&format!("@{} SIM STATE", k + 1), REPLY)
+            .unwrap();
+        let radius = field(st.last().unwrap(), "radius_mm").and_then(|r| r.parse::<f64>().ok());
+        check!(
+            emu,
+            radius.is_some_and(|r| (r - target).abs() < 1.0) && done[k].is_some(),
+            "link {}: {st:?} {done:?}",
+            k + 1
+        );
+    }
+
+    // A fault on link 2 stops link 2; link 1's morph goes on to done.
+    emu.command("CONFIG SET supply_budget_w 100", REPLY)
+        .unwrap();
+    emu.command("GAIT 38 38", REPLY).unwrap();
+    emu.wait_for("@2 event: phase soften", MORPH_WALL).unwrap();
+    emu.command("@2 SIM FAULT thermistor-open pla", REPLY)
+        .unwrap();
+    emu.wait_for("@2 alarm: thermistor-open pla", MORPH_WALL)
+        .unwrap();
+    let seen = emu.wait_for("@1 event: done ", MORPH_WALL).unwrap();
+    check!(
+        emu,
+        !seen.iter().any(|l| l.starts_with("@1 alarm:")),
+        "{seen:?}"
+    );
+    let st = emu.command("@2 STATUS", REPLY).unwrap();
+    let st = st.last().unwrap().clone();
+    check!(
+        emu,
+        field(&st, "phase").as_deref() == Some("fault")
+            && field(&st, "p_pla_w").as_deref() == Some("0.000")
+            && field(&st, "p_tca_w").as_deref() == Some("0.000"),
+        "{st}"
+    );
+    assert_idle_and_off(&mut emu, "link 1 after its morph");
+
+    // Each link keeps its own settings: link 2's SAVE survives a reset, link 1 has none.
+    emu.command("@2 SIM CLEAR", REPLY).unwrap();
+    // RESET is refused until the cleared bead has read healthy for a few ticks.
+    let reset_ok = (0..50).any(|_| {
+        std::thread::sleep(Duration::from_millis(100));
+        emu.command("@2 RESET", REPLY)
+            .is_ok_and(|r| r.last().is_some_and(|l| l.starts_with("ok")))
+    });
+    check!(
+        emu,
+        reset_ok,
+        "link 2's RESET was refused for 5 s after SIM CLEAR"
+    );
+    let set = emu
+        .command("@2 CONFIG SET lock_timeout_s 321", REPLY)
+        .unwrap();
+    check!(
+        emu,
+        set.last().unwrap() == "ok lock_timeout_s=321.0 saved=no",
+        "{set:?}"
+    );
+    let saved = emu.command("@2 SAVE", REPLY).unwrap();
+    check!(
+        emu,
+        saved.last().unwrap().starts_with("ok saved "),
+        "{saved:?}"
+    );
+    emu.write_raw(b"SIM PANIC\n").unwrap();
+    next_boot_line(&mut emu);
+    let first = emu.wait_for("@1 event: config ", REPLY).unwrap();
+    let second = emu.wait_for("@2 event: config ", REPLY).unwrap();
+    check!(
+        emu,
+        first.last().unwrap() == "@1 event: config defaults reason=absent"
+            && second.last().unwrap() == "@2 event: config loaded settings=24",
+        "{first:?} {second:?}"
     );
 }

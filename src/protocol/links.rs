@@ -168,10 +168,10 @@ pub fn supply_setting(name: &str) -> Option<SupplySetting> {
 
 /// HELP's lines of several links (a board with one link does not show them).
 pub const HELP_LINKS: [&str; 4] = [
-    "@<n> <command>                  the command for link n (from @1); no address is link 1",
-    "@* <command>                    the command on every link, one data line each; ABORT alone stops every link",
-    "GAIT <r1> .. <rN> [mode]        morph every link at once, one radius each (mm)",
-    "LINKS                           each link's phase and power, the supply's total against its budget",
+    "@<n> <command>\tthe command for link n (from @1); no address is link 1",
+    "@* <command>\tthe command on every link, one data line each; ABORT alone stops every link",
+    "GAIT <r1> .. <rN> [mode]\tmorph every link at once, one radius each (mm)",
+    "LINKS\teach link's phase and power, the supply's total against its budget",
 ];
 
 /// A MORPH for a link whose last MORPH still waits for the budget.

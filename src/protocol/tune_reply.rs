@@ -17,8 +17,8 @@ pub const CALIBRATION_DOC_SECTION: &str = "Tune and calibrate";
 
 /// HELP lines of the two commands (appended to [`super::reply::HELP`]).
 pub const HELP: [&str; 2] = [
-    "TUNE                            fit the thermal model to this link (heats, <3 min)",
-    "MEASURED <radius_mm>            the radius measured after the last morph (calibrates)",
+    "TUNE\tfit the thermal model to this link (heats, <3 min)",
+    "MEASURED <radius_mm>\tthe radius measured after the last morph (calibrates)",
 ];
 
 /// TUNE accepted: `ok total_s=<s>`.

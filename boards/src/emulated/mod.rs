@@ -47,19 +47,20 @@ pub const WATCHDOG_MS: u64 = 500;
 /// (`morphlink::bench`, the core's `ShuntSense::DEFAULT`).
 pub const SHUNT: ShuntChain = ShuntChain::INA180A1;
 
-/// What stands in for the ADC, the heater PWM and the cut-off: a simulated link the firmware
-/// keeps. Its methods take `&self` (it keeps its own lock) and firmware time in ms.
+/// What stands in for the ADC, the heater PWM and the cut-off: the simulated links the
+/// firmware keeps (one, or one per link of an image built for several). Its methods take
+/// `&self` (it keeps its own lock), the link (0-based) and firmware time in ms.
 pub trait SimulatedLink: Sync {
-    /// One read of every input at `now_ms`, ADC counts as [`AnalogInputs::read`] gives them;
-    /// the frame's currents are kept for [`SimulatedLink::currents`].
-    fn read(&self, now_ms: u64) -> [u16; INPUTS];
-    /// The currents of the frame the last [`SimulatedLink::read`] took, sums of the core's
-    /// oversampling count (`None`: the simulated board senses no current).
-    fn currents(&self) -> Option<CurrentSums>;
-    /// Applies both duties and the cut-off (`supply_on`: closed) from `now_ms` on.
-    fn apply(&self, now_ms: u64, pla_duty: f32, tca_duty: f32, supply_on: bool);
-    /// Both heaters off and the supply cut, from a panic or the watchdog: must not block or
-    /// panic.
+    /// One read of link `link`'s inputs at `now_ms`, ADC counts as [`AnalogInputs::read`]
+    /// gives them; the frame's currents are kept for [`SimulatedLink::currents`].
+    fn read(&self, link: usize, now_ms: u64) -> [u16; INPUTS];
+    /// The currents of the frame the last [`SimulatedLink::read`] of `link` took, sums of the
+    /// core's oversampling count (`None`: the simulated board senses no current).
+    fn currents(&self, link: usize) -> Option<CurrentSums>;
+    /// Applies link `link`'s duties and cut-off (`supply_on`: closed) from `now_ms` on.
+    fn apply(&self, link: usize, now_ms: u64, pla_duty: f32, tca_duty: f32, supply_on: bool);
+    /// Every link's heaters off and supplies cut, from a panic or the watchdog: must not block
+    /// or panic.
     fn heaters_off(&self);
 }
 
@@ -92,7 +93,11 @@ pub struct Sensors(&'static dyn SimulatedLink);
 
 impl AnalogInputs for Sensors {
     fn read(&mut self) -> [u16; INPUTS] {
-        self.0.read(now_ms())
+        self.0.read(0, now_ms())
+    }
+
+    fn read_link(&mut self, link: usize) -> [u16; INPUTS] {
+        self.0.read(link, now_ms())
     }
 }
 
@@ -101,7 +106,11 @@ impl CurrentSense for Sensors {
     /// oversampling count (which is what the firmware asks for: `reads` is not used), probe
     /// pulses included. The firmware reads them after the frame's [`AnalogInputs::read`].
     async fn read_currents(&mut self, _reads: u32) -> Option<CurrentSums> {
-        self.0.currents()
+        self.0.currents(0)
+    }
+
+    async fn read_link_currents(&mut self, link: usize, _reads: u32) -> Option<CurrentSums> {
+        self.0.currents(link)
     }
 }
 
@@ -110,7 +119,11 @@ pub struct Heaters(&'static dyn SimulatedLink);
 
 impl HeaterOutputs for Heaters {
     fn apply(&mut self, pla_duty: f32, tca_duty: f32, supply_on: bool) {
-        self.0.apply(now_ms(), pla_duty, tca_duty, supply_on);
+        self.0.apply(0, now_ms(), pla_duty, tca_duty, supply_on);
+    }
+
+    fn apply_link(&mut self, link: usize, pla_duty: f32, tca_duty: f32, supply_on: bool) {
+        self.0.apply(link, now_ms(), pla_duty, tca_duty, supply_on);
     }
 }
 
