@@ -1,6 +1,7 @@
 //! `cargo xtask boards`: builds the firmware for every board in `boards/` (release, one after
-//! the other in the shared `target/`), prints a table of flash and RAM use, and fails if an
-//! image breaks its budget.
+//! the other in the shared `target/`) and the images of several links ([`MULTI_LINK_IMAGES`]:
+//! the emulated board's two links), prints a table of flash and RAM use, and fails if an image
+//! breaks its budget.
 //!
 //! Budgets:
 //! - every image fits its board: flash ≤ the `FLASH` length of the board's `memory.x`, and
@@ -68,6 +69,8 @@ pub const TOP_SYMBOLS: usize = 15;
 /// One board's image.
 struct Image {
     board: String,
+    /// The firmware's further features (`links-2`), shown after the board's name.
+    features: &'static [&'static str],
     flash_bytes: u64,
     ram_bytes: u64,
     flash_size: u64,
@@ -482,8 +485,16 @@ fn linked_against(elf: &[u8], ram: Option<(u64, u64)>) -> bool {
     }
 }
 
-fn build(ws: &Workspace, board: &str) -> Result<PathBuf, String> {
-    let elf = morphlink_host::emulator::build_firmware(&ws.root, board, &ws.target_dir)?;
+/// The images of several links built besides each board's own: (board, features). Only the
+/// emulated board is wired for two links (docs/multilink.md, "Boards").
+const MULTI_LINK_IMAGES: [(&str, &[&str]); 1] = [("b-l475e-iot01a-emulated", &["links-2"])];
+
+fn build(ws: &Workspace, board: &str, features: &[&str]) -> Result<PathBuf, String> {
+    let elf =
+        morphlink_host::emulator::build_firmware_with(&ws.root, board, features, &ws.target_dir)?;
+    if !features.is_empty() {
+        return Ok(elf);
+    }
     // Each build overwrites the same ELF; keep a copy per board (e.g. to flash with probe-rs).
     let dir = ws.target_dir.join("boards");
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
@@ -501,10 +512,12 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
     let root = ws.root.as_path();
     let mut images = Vec::new();
     let mut failed = Vec::new();
-    for board in boards(root)? {
+    let one_link = boards(root)?.into_iter().map(|b| (b, &[][..]));
+    let several = MULTI_LINK_IMAGES.iter().map(|&(b, f)| (b.to_string(), f));
+    for (board, features) in one_link.chain(several) {
         // A board that does not build (or link: an image over its FLASH region) is reported
         // with the others' table, not instead of it.
-        let elf_path = match build(ws, &board) {
+        let elf_path = match build(ws, &board, features) {
             Ok(p) => p,
             Err(e) => {
                 failed.push(format!("{board}: {e}"));
@@ -533,7 +546,7 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
             settings_region(&mem).map_err(|e| format!("{}: {e}", mem_path.display()))?;
         }
         let syms = symbols(&elf)?;
-        if board == DEFAULT_BOARD {
+        if board == DEFAULT_BOARD && features.is_empty() {
             print_breakdown(&board, &syms, flash_bytes, ram_bytes);
         }
         let named = |f: fn(&str) -> bool| {
@@ -550,6 +563,7 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
             soft_double: named(is_soft_double),
             float_text: named(is_float_text),
             board,
+            features,
             flash_bytes,
             ram_bytes,
             flash_size: region("FLASH")?,
@@ -562,8 +576,12 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
     println!("| --- | --- | --- | --- | --- |");
     for i in &images {
         println!(
-            "| {} | {} ({} B) | {} | {} ({} B) | {} |",
+            "| {}{} | {} ({} B) | {} | {} ({} B) | {} |",
             i.board,
+            i.features
+                .iter()
+                .map(|f| format!(" {f}"))
+                .collect::<String>(),
             kib(i.flash_bytes),
             i.flash_bytes,
             kib(i.flash_size),
@@ -622,7 +640,7 @@ pub fn run(ws: &Workspace) -> Result<(), String> {
                 ));
             }
         }
-        if i.board == DEFAULT_BOARD {
+        if i.board == DEFAULT_BOARD && i.features.is_empty() {
             if i.flash_bytes > SMALL_PART_FLASH_BYTES {
                 errors.push(format!(
                     "{}: flash {} > the {} of the small-part budget",

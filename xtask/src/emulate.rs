@@ -2,7 +2,7 @@
 //! b-l475e-iot01a machine, either serving USART1 on a loopback TCP port for any client, or
 //! running one morph and printing what the firmware says.
 use morphlink_host::emulator::{
-    build_image, demo_morph, find_qemu, qemu_command, run_to_end_or_signal, Clock, Ended,
+    build_image_of, demo_morph, find_qemu, qemu_command, run_to_end_or_signal, Clock, Ended,
 };
 use morphlink_host::workspace::Workspace;
 use std::path::Path;
@@ -16,6 +16,10 @@ pub struct Args {
     /// Instead: boot, morph the simulated link to this radius (mm), print the phases and stop.
     #[arg(long, conflicts_with = "port")]
     morph: Option<f32>,
+    /// How many links the image drives: 1, or 2 (the `links-2` image: addresses, GAIT and the
+    /// supply budget, docs/multilink.md).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=2))]
+    links: u8,
 }
 
 /// Runs the task.
@@ -26,7 +30,11 @@ pub fn run(args: &Args, ws: &Workspace) -> Result<(), String> {
     }
     let qemu = find_qemu()?;
     // Its own directory inside cargo's target directory, as the emulator tests use.
-    let image = build_image(&ws.root, &ws.target_dir.join("emulated"))?;
+    let image = build_image_of(
+        &ws.root,
+        usize::from(args.links),
+        &ws.target_dir.join("emulated"),
+    )?;
     match (args.port, args.morph) {
         (Some(port), _) => serve(&qemu, &image, port),
         (None, Some(radius_mm)) => demo(&qemu, &image, radius_mm),
