@@ -364,3 +364,66 @@ fn sigint_during_a_tune_sends_abort_and_the_device_reports_the_heaters_off() {
     assert_heated_then_off(&dir, "p_tca_w", "tune");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A gait interrupted while its links heat: one ABORT stops every link, and every link's
+/// STATUS (`@* STATUS`) shows it before morphctl exits.
+#[test]
+fn sigint_during_a_gait_stops_every_link_and_checks_each() {
+    let dir = scratch("gait-sigint");
+    let device = recording_sim(&dir);
+    let (child, out) = start(&[
+        "--sim",
+        "--sim-links",
+        "2",
+        "--sim-speed",
+        "4",
+        "--sim-program",
+        device.to_str().unwrap(),
+        "gait",
+        "34",
+        "42",
+    ]);
+    let t0 = Instant::now();
+    let mut bending = [false; 2];
+    while !bending.iter().all(|b| *b) {
+        let l = out
+            .recv_timeout(Duration::from_secs(30))
+            .expect("morphctl printed both links' bend phase");
+        for (k, b) in bending.iter_mut().enumerate() {
+            *b |= l.starts_with(&format!("@{} event: phase bend", k + 1));
+        }
+        assert!(t0.elapsed() < Duration::from_secs(30), "no bend phases");
+    }
+    // SAFETY: kill(2) on our own child's pid.
+    assert_eq!(
+        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) },
+        0
+    );
+    let (status, err) = finish(child, Duration::from_secs(20));
+    assert_eq!(status.code(), Some(130), "{err}");
+    assert!(err.contains("sent ABORT"), "{err}");
+    let from = eventually(&dir.join("from_device.log"), |t| {
+        t.contains("\nok links=2\n")
+    });
+    // The last `@* STATUS` answered after the ABORT: both links off.
+    let last: Vec<&str> = from
+        .lines()
+        .rev()
+        .skip_while(|l| *l != "ok links=2")
+        .skip(1)
+        .take(2)
+        .collect();
+    assert_eq!(last.len(), 2, "{from}");
+    for l in last {
+        let status = l
+            .strip_prefix("data: @")
+            .and_then(|r| r.split_once(' '))
+            .map(|(_, s)| s)
+            .unwrap_or("");
+        assert!(heaters_off(status), "{l}\n{from}");
+    }
+    let to = std::fs::read_to_string(dir.join("to_device.log")).unwrap();
+    let sent: Vec<&str> = to.lines().collect();
+    let abort = sent.iter().rposition(|l| *l == "ABORT").expect("ABORT sent");
+    assert!(sent[abort..].contains(&"@* STATUS"), "{to}");
+}

@@ -902,3 +902,70 @@ fn the_running_line_and_the_log_say_when_an_alarm_opens_the_cutoff() {
     assert!(i_tca_a < 0.05, "{log}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `gait` on two simulated links under a budget of one soften: link 2 waits, both finish,
+/// the log has a row per link per poll with the supply's total never over the budget, and
+/// `plot` reads the log back; a device of one link is told it needs several.
+#[test]
+fn a_gait_logs_a_row_per_link_under_its_budget_and_plots_it() {
+    let dir = scratch("gait");
+    let csv = dir.join("gait.csv");
+    let svg = dir.join("gait.svg");
+    let out = morphctl(&[
+        "--sim",
+        "--sim-links",
+        "2",
+        "--sim-speed",
+        "100",
+        "gait",
+        "34",
+        "42",
+        "--budget-w",
+        "5",
+        "--log",
+        csv.to_str().unwrap(),
+        "--plot",
+        svg.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("@2 event: queued "), "{text}");
+    assert!(
+        text.contains("@1 event: done ") && text.contains("@2 event: done "),
+        "{text}"
+    );
+    let log = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = log.lines();
+    assert!(lines.next().unwrap().starts_with("link,t_s,phase,"));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert!(rows.len() >= 10, "{log}");
+    assert_eq!(
+        rows.iter().filter(|r| r[0] == "1").count(),
+        rows.len() / 2,
+        "{log}"
+    );
+    let total = rows[0].len() - 2;
+    for r in &rows {
+        let (t, b): (f64, f64) = (r[total].parse().unwrap(), r[total + 1].parse().unwrap());
+        assert!(t <= b + 1e-6 && b == 5.0, "{r:?}");
+    }
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("budget"));
+    let again = dir.join("again.svg");
+    let out = morphctl(&["plot", csv.to_str().unwrap(), again.to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let one = morphctl(&["--sim", "--sim-speed", "100", "gait", "34"]);
+    let err = String::from_utf8_lossy(&one.stderr);
+    assert!(
+        !one.status.success() && err.contains("a gait needs several"),
+        "{err}"
+    );
+}

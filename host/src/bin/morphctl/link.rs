@@ -104,6 +104,8 @@ pub enum Target {
         speed: f64,
         /// morph-sim's `--flash-file`: where the simulated settings flash is kept.
         flash_file: Option<PathBuf>,
+        /// morph-sim's `--links` (`--sim-links`), if given.
+        links: Option<u8>,
     },
     /// A serial port served over TCP at `HOST:PORT` (`cargo xtask emulate --port`, ser2net).
     Tcp {
@@ -150,6 +152,9 @@ pub struct Link {
     pub name: String,
     /// The simulator's plant, where known (`lumped`, `hifi`, `--plant-cmd`), for titles.
     pub plant: Option<String>,
+    /// How many links the device drives, as far as morphctl knows (1 until a gait asks
+    /// `LINKS`): stopping the heaters then checks every link's STATUS.
+    pub links: usize,
 }
 
 /// Error text for a serial port that could not be opened.
@@ -269,6 +274,7 @@ impl Link {
             simulated,
             name,
             plant: None,
+            links: 1,
         }
     }
 
@@ -332,9 +338,13 @@ impl Link {
                 plant,
                 speed,
                 flash_file,
+                links,
             } => {
                 let mut command = Command::new(program);
                 command.args(args);
+                if let Some(n) = links {
+                    command.arg("--links").arg(n.to_string());
+                }
                 if let Some(f) = flash_file {
                     command.arg("--flash-file").arg(f);
                 }

@@ -3,6 +3,7 @@
 //! telemetry to CSV and plot a run (SVG or PNG, with text).
 mod bringup;
 mod config;
+mod gait;
 mod link;
 mod live;
 mod script;
@@ -75,6 +76,10 @@ struct Cli {
     /// file) is refused before the simulator starts.
     #[arg(long, requires = "sim")]
     sim_flash_file: Option<PathBuf>,
+    /// How many links morph-sim simulates on one supply (its `--links`, 1 to 4), for `gait`.
+    #[arg(long, requires = "sim", value_name = "N",
+          value_parser = clap::value_parser!(u8).range(1..=4))]
+    sim_links: Option<u8>,
     #[command(subcommand)]
     cmd: Cmd,
 }
@@ -103,6 +108,31 @@ enum Cmd {
         /// Follow the morph in a live terminal view (key `a` aborts, `q` quits).
         #[arg(long)]
         live: bool,
+    },
+    /// Morph several links at once on one supply (GAIT, one radius per link) and follow each
+    /// to its end: each link's phase and power and the supply's total against its budget.
+    Gait {
+        /// One target radius per link, mm.
+        #[arg(required = true, num_args = 1..)]
+        radii_mm: Vec<f32>,
+        /// Strategy for every link: auto, paper, gated, boost or closed.
+        #[arg(long, default_value = "auto")]
+        mode: String,
+        /// Write the telemetry to this CSV file (a row per link per poll).
+        #[arg(long)]
+        log: Option<PathBuf>,
+        /// Plot the run to this file (.svg or .png; checked before the gait starts).
+        #[arg(long)]
+        plot: Option<PathBuf>,
+        /// Poll interval, ms of link time.
+        #[arg(long, default_value_t = DEFAULT_POLL_MS)]
+        poll_ms: u64,
+        /// Abort if not every link is done after this many seconds of link time.
+        #[arg(long, default_value_t = 2.0 * DEFAULT_MORPH_TIMEOUT_S)]
+        timeout_s: f64,
+        /// Set the supply budget first (`CONFIG SET supply_budget_w`), W.
+        #[arg(long)]
+        budget_w: Option<f32>,
     },
     /// Watch the device in a live terminal view without starting anything (`a` sends ABORT).
     Watch {
@@ -135,7 +165,7 @@ enum Cmd {
         #[arg(long)]
         log: Option<PathBuf>,
     },
-    /// Plot a telemetry CSV written by `morph --log` (needs no device).
+    /// Plot a telemetry CSV written by `morph --log` or `gait --log` (needs no device).
     Plot {
         /// The CSV file.
         csv: PathBuf,
@@ -217,6 +247,9 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
     // A plot that could not be written is refused before anything is sent.
     if let Cmd::Morph {
         plot: Some(path), ..
+    }
+    | Cmd::Gait {
+        plot: Some(path), ..
     } = &cli.cmd
     {
         plot::Format::of(path)?;
@@ -231,6 +264,12 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
     }
     if let Cmd::Plot { csv, out } = &cli.cmd {
         plot::Format::of(out)?;
+        if gait::is_gait_log(csv) {
+            let samples = gait::read_csv(csv)?;
+            gait::plot(&samples, &csv.display().to_string(), out)?;
+            println!("wrote {}", out.display());
+            return Ok(ExitCode::SUCCESS);
+        }
         let samples = telemetry::read_csv(csv)?;
         let name = csv.display().to_string();
         let title = match samples.iter().rev().find(|s| s.mode != "-") {
@@ -268,6 +307,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
             plant: cli.sim_plant.clone(),
             speed: cli.sim_speed,
             flash_file: cli.sim_flash_file.clone(),
+            links: cli.sim_links,
         }
     } else if let Some(addr) = &cli.tcp {
         Target::Tcp { addr: addr.clone() }
@@ -333,7 +373,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 timeout_s,
             };
             let mut csv = match &log {
-                Some(path) => Some(CsvLog::create(path)?),
+                Some(path) => Some(CsvLog::create(path, CSV_HEADER)?),
                 None => None,
             };
             let mut samples = Vec::new();
@@ -361,6 +401,57 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                             code = ExitCode::FAILURE;
                         }
                     }
+                }
+            }
+            Ok(code)
+        }
+        Cmd::Gait {
+            radii_mm,
+            mode,
+            log,
+            plot,
+            poll_ms,
+            timeout_s,
+            budget_w,
+        } => {
+            let opts = gait::Opts {
+                radii_mm,
+                mode,
+                poll: Duration::from_secs_f64(poll_ms as f64 / 1000.0 / speed),
+                timeout_s,
+                budget_w,
+            };
+            let mut csv = match &log {
+                Some(path) => Some(CsvLog::create(path, &gait::csv_header())?),
+                None => None,
+            };
+            let mut samples = Vec::new();
+            let end = match gait::gait(&mut link, &opts, &mut samples, &mut csv) {
+                Ok(code) => MorphEnd::Finished(code),
+                Err(e) => e,
+            };
+            let mut code = finish(&mut link, end);
+            if let (Some(path), Some(csv)) = (&log, &csv) {
+                println!("telemetry: {} ({} rows)", path.display(), csv.rows);
+                if let Some(e) = &csv.failed {
+                    eprintln!("morphctl: the log stopped early: {e}");
+                }
+            }
+            if let Some(path) = plot {
+                let radii: Vec<String> = opts.radii_mm.iter().map(|r| format!("{r}")).collect();
+                let title = format!(
+                    "GAIT {} {} on {}",
+                    radii.join(" "),
+                    opts.mode,
+                    link.device()
+                );
+                if samples.is_empty() {
+                    println!("plot: skipped, no samples were logged");
+                } else if let Err(e) = gait::plot(&samples, &title, &path) {
+                    eprintln!("morphctl: plot {}: {e}", path.display());
+                    code = ExitCode::FAILURE;
+                } else {
+                    println!("plot: {}", path.display());
                 }
             }
             Ok(code)
@@ -498,7 +589,8 @@ struct CsvLog {
 }
 
 impl CsvLog {
-    fn create(path: &Path) -> Result<CsvLog, String> {
+    /// A new log at `path` under `header`.
+    fn create(path: &Path, header: &str) -> Result<CsvLog, String> {
         let mut log = CsvLog {
             file: BufWriter::new(
                 File::create(path).map_err(|e| format!("cannot write {}: {e}", path.display()))?,
@@ -507,7 +599,7 @@ impl CsvLog {
             rows: 0,
             failed: None,
         };
-        log.line(CSV_HEADER);
+        log.line(header);
         match log.failed.take() {
             Some(e) => Err(e),
             None => Ok(log),
@@ -515,20 +607,26 @@ impl CsvLog {
     }
 
     /// Appends one line and flushes it to the file.
-    fn line(&mut self, text: &str) {
+    fn write_line(&mut self, text: &str) -> bool {
         if self.failed.is_some() {
-            return;
+            return false;
         }
         if let Err(e) = writeln!(self.file, "{text}").and_then(|_| self.file.flush()) {
             self.failed = Some(format!("cannot write {}: {e}", self.path.display()));
+            return false;
+        }
+        true
+    }
+
+    /// Appends one row.
+    fn line(&mut self, row: &str) {
+        if self.write_line(row) {
+            self.rows += 1;
         }
     }
 
     fn row(&mut self, s: &Sample) {
         self.line(&s.csv_row());
-        if self.failed.is_none() {
-            self.rows += 1;
-        }
     }
 }
 
@@ -744,6 +842,24 @@ fn abort_and_check(link: &mut Link) -> Result<String, String> {
     })?;
     if classify(&reply) != LineKind::Ok {
         return Err(format!("ABORT answered `{reply}`"));
+    }
+    if link.links > 1 {
+        // Every link's STATUS: the ABORT stopped them all; each must show it.
+        let (statuses, end) =
+            link.command_where("@* STATUS", REPLY_TIMEOUT_S, print_event, &|l| {
+                field(l, "links").is_some() || classify(l) == LineKind::Error
+            })?;
+        let all = statuses.len() == link.links
+            && statuses
+                .iter()
+                .all(|d| heaters_off(morphlink::protocol::client::link_of(d).1));
+        return if all {
+            Ok(format!("every link ({end})"))
+        } else {
+            Err(format!(
+                "@* STATUS does not show every link's heaters off: {statuses:?}"
+            ))
+        };
     }
     let (_, status) = link.command_where("STATUS", REPLY_TIMEOUT_S, print_event, &|l| {
         field(l, "phase").is_some() || classify(l) == LineKind::Error
