@@ -424,6 +424,9 @@ fn sigint_during_a_gait_stops_every_link_and_checks_each() {
     }
     let to = std::fs::read_to_string(dir.join("to_device.log")).unwrap();
     let sent: Vec<&str> = to.lines().collect();
-    let abort = sent.iter().rposition(|l| *l == "ABORT").expect("ABORT sent");
+    let abort = sent
+        .iter()
+        .rposition(|l| *l == "ABORT")
+        .expect("ABORT sent");
     assert!(sent[abort..].contains(&"@* STATUS"), "{to}");
 }

@@ -573,7 +573,11 @@ fn tcp_reaches_a_serial_port_served_over_tcp_and_finds_its_sim_commands() {
 fn the_live_view_without_a_terminal_is_refused_before_the_device_is_started() {
     let dir = scratch("live");
     let device = counted_sim(&dir);
-    for args in [&["morph", "38", "--live"][..], &["watch"][..]] {
+    for args in [
+        &["morph", "38", "--live"][..],
+        &["gait", "34", "42", "--live"][..],
+        &["watch"][..],
+    ] {
         let mut all = vec!["--sim", "--sim-program", device.to_str().unwrap()];
         all.extend_from_slice(args);
         let out = morphctl(&all);

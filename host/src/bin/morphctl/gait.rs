@@ -157,9 +157,12 @@ pub fn plot(samples: &[GaitSample], title: &str, path: &Path) -> Result<(), Stri
 
 /// How each link's morph stands.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum End {
+pub enum End {
+    /// Neither done nor alarmed yet.
     Running,
+    /// `event: done`.
     Done,
+    /// An alarm: the link's heaters are off.
     Alarm,
 }
 
@@ -171,6 +174,14 @@ pub fn gait(
     csv: &mut Option<CsvLog>,
 ) -> Result<ExitCode, MorphEnd> {
     let mut events: Vec<String> = Vec::new();
+    let n = start(link, o, &mut events)?;
+    follow(link, n, o, samples, csv, events)
+}
+
+/// Starts the gait: the device's links (`LINKS`; a device of one link is refused), the budget
+/// if asked, the first sensor reading, then `GAIT`. Returns how many links; lines that arrived
+/// meanwhile are in `events`.
+pub fn start(link: &mut Link, o: &Opts, events: &mut Vec<String>) -> Result<usize, MorphEnd> {
     let (_, links) = link
         .command("LINKS", REPLY_TIMEOUT_S, &mut |l| {
             events.push(l.to_string())
@@ -214,7 +225,7 @@ pub fn gait(
     if reply != morphlink::protocol::OK {
         return Err(MorphEnd::Failed(format!("GAIT refused: {reply}")));
     }
-    follow(link, n, o, samples, csv, events)
+    Ok(n)
 }
 
 fn follow(
@@ -225,8 +236,7 @@ fn follow(
     csv: &mut Option<CsvLog>,
     mut events: Vec<String>,
 ) -> Result<ExitCode, MorphEnd> {
-    let start = Instant::now();
-    let sim_start = sim_time_and_radius(link, &mut |l| events.push(l.to_string()))?.map(|x| x.0);
+    let mut clock = Clock::new();
     let mut ends = vec![End::Running; n];
     let mut last_line: Option<Instant> = None;
     loop {
@@ -252,7 +262,7 @@ fn follow(
                 ExitCode::FAILURE
             });
         }
-        let poll = poll(link, n, start, sim_start, &mut events)?;
+        let poll = poll(link, &mut clock, &mut |l| events.push(l.to_string()))?;
         if last_line.is_none_or(|t| t.elapsed() >= Duration::from_millis(200)) {
             println!("{}", running_line(&poll));
             let _ = std::io::stdout().flush();
@@ -290,40 +300,51 @@ fn follow(
     }
 }
 
-/// One poll: the time, each link's STATUS (`@* STATUS`) and true radius (`@k SIM STATE` on
-/// the simulator), and the supply's total power and budget (`LINKS`).
-fn poll(
-    link: &mut Link,
-    n: usize,
+/// The time of a gait's polls: the simulator's clock where it has one, else the host's, from
+/// the first poll.
+pub struct Clock {
     start: Instant,
     sim_start: Option<f64>,
-    events: &mut Vec<String>,
-) -> Result<Vec<GaitSample>, MorphEnd> {
-    let mut on_event = |l: &str| events.push(l.to_string());
-    let sim = sim_time_and_radius(link, &mut on_event)?;
-    let t_s = match (sim, sim_start) {
-        (Some((t, _)), Some(t0)) => t - t0,
-        _ => start.elapsed().as_secs_f64(),
+}
+
+impl Clock {
+    /// A clock starting at the first poll.
+    pub fn new() -> Clock {
+        Clock {
+            start: Instant::now(),
+            sim_start: None,
+        }
+    }
+}
+
+/// One poll: the time, each link's STATUS (`@* STATUS`) and true radius (`@k SIM STATE` on
+/// the simulator), and the supply's total power and budget (`LINKS`).
+pub fn poll(
+    link: &mut Link,
+    clock: &mut Clock,
+    on_event: &mut dyn FnMut(&str),
+) -> Result<Vec<GaitSample>, LinkError> {
+    let sim = sim_time_and_radius(link, on_event)?;
+    let t_s = match sim {
+        Some((t, _)) => t - *clock.sim_start.get_or_insert(t),
+        None => clock.start.elapsed().as_secs_f64(),
     };
-    let (statuses, _) = link.command("@* STATUS", REPLY_TIMEOUT_S, &mut on_event)?;
-    let (_, links) = link.command("LINKS", REPLY_TIMEOUT_S, &mut on_event)?;
+    let (statuses, _) = link.command("@* STATUS", REPLY_TIMEOUT_S, on_event)?;
+    let (_, links) = link.command("LINKS", REPLY_TIMEOUT_S, on_event)?;
     let num = |key: &str| {
         field(&links, key)
             .and_then(|v| v.parse::<f64>().ok())
             .unwrap_or(f64::NAN)
     };
     let (total_w, budget_w) = (num("power_w"), num("budget_w"));
-    let mut out = Vec::with_capacity(n);
+    let mut out = Vec::with_capacity(statuses.len());
     for d in &statuses {
         let (Some(k), status) = link_of(d) else {
             continue;
         };
         let radius_mm = if link.simulated {
-            let (_, st) = link.command(
-                &format!("@{} SIM STATE", k + 1),
-                REPLY_TIMEOUT_S,
-                &mut on_event,
-            )?;
+            let (_, st) =
+                link.command(&format!("@{} SIM STATE", k + 1), REPLY_TIMEOUT_S, on_event)?;
             field(&st, "radius_mm")
                 .and_then(|v| v.parse().ok())
                 .unwrap_or(f64::NAN)

@@ -62,6 +62,8 @@ pub fn key_action(code: KeyCode, modifiers: KeyModifiers) -> Action {
 pub enum Outcome {
     /// `event: done`, with the controller's radius estimate, mm.
     Done(f64),
+    /// A gait: every link's `event: done`.
+    EveryLinkDone,
     /// An alarm line: the controller has turned the heaters off.
     Alarm(String),
 }
@@ -270,7 +272,8 @@ pub fn draw(frame: &mut Frame, st: &LiveState) {
             bold.fg(Color::Green),
         ),
         Some(Outcome::Alarm(a)) => Line::styled(a.clone(), bold.fg(Color::Red)),
-        None => Line::from(status),
+        // A morph's view never holds a gait's outcome.
+        Some(Outcome::EveryLinkDone) | None => Line::from(status),
     };
     frame.render_widget(
         Paragraph::new(head_text)
@@ -542,8 +545,77 @@ pub enum LiveEnd {
     TimedOut,
 }
 
-/// The view's loop on `terminal`: STATUS (and SIM STATE on a simulator) every `poll`, the
-/// device's lines and the keys in between. Each sample also goes to `record`.
+/// What the view's loop drives ([`run_view`]): a state fed the device's lines and its polls,
+/// drawn on each pass. One morph ([`run`]) and a gait (`gait_view`) are two of them.
+pub trait View {
+    /// Takes in one unsolicited line (event, done, alarm, boot).
+    fn line(&mut self, l: &str);
+    /// Polls the device once; lines that arrive meanwhile go to `on_event`.
+    fn poll(&mut self, link: &mut Link, on_event: &mut dyn FnMut(&str)) -> Result<(), LinkError>;
+    /// Draws the view into `frame`.
+    fn draw(&self, frame: &mut Frame);
+    /// True while something this morphctl started still runs (`q` then aborts it).
+    fn running(&self) -> bool;
+    /// True once morphctl's own limit on what it started has run out.
+    fn timed_out(&self) -> bool;
+    /// How what the view follows ended, once it has.
+    fn outcome(&self) -> Option<Outcome>;
+}
+
+/// One morph (or `watch`) as a [`View`]: STATUS (and SIM STATE on a simulator) per poll, each
+/// sample also to `record` until the morph ends.
+struct MorphView<'a> {
+    st: &'a mut LiveState,
+    start: Instant,
+    sim_start: Option<f64>,
+    record: &'a mut dyn FnMut(&Sample),
+}
+
+impl View for MorphView<'_> {
+    fn line(&mut self, l: &str) {
+        self.st.line(l);
+    }
+
+    fn poll(&mut self, link: &mut Link, on_event: &mut dyn FnMut(&str)) -> Result<(), LinkError> {
+        let sim = sim_time_and_radius(link, on_event)?;
+        let (_, status) = link.command("STATUS", REPLY_TIMEOUT_S, on_event)?;
+        let t_s = match sim {
+            Some((t, _)) => t - *self.sim_start.get_or_insert(t),
+            None => self.start.elapsed().as_secs_f64(),
+        };
+        let s = Sample::from_status(t_s, &status, sim.map_or(f64::NAN, |x| x.1));
+        // The record ends with the morph: the view stays until `q`, the log does not.
+        if self.st.sample(s.clone()) {
+            (self.record)(&s);
+        }
+        Ok(())
+    }
+
+    fn draw(&self, frame: &mut Frame) {
+        draw(frame, self.st);
+    }
+
+    fn running(&self) -> bool {
+        self.st.started && self.st.morphing()
+    }
+
+    fn timed_out(&self) -> bool {
+        self.running()
+            && self
+                .st
+                .last
+                .as_ref()
+                .is_some_and(|s| s.t_s > self.st.timeout_s)
+    }
+
+    fn outcome(&self) -> Option<Outcome> {
+        self.st.outcome.clone()
+    }
+}
+
+/// The view's loop on `terminal` for one morph or `watch`: STATUS (and SIM STATE on a
+/// simulator) every `poll`, the device's lines and the keys in between. Each sample also goes
+/// to `record`.
 pub fn run(
     terminal: &mut ratatui::DefaultTerminal,
     link: &mut Link,
@@ -552,39 +624,40 @@ pub fn run(
     pending: Vec<String>,
     record: &mut dyn FnMut(&Sample),
 ) -> LiveEnd {
-    let start = Instant::now();
+    let mut view = MorphView {
+        st,
+        start: Instant::now(),
+        sim_start: None,
+        record,
+    };
+    run_view(terminal, link, &mut view, poll, pending)
+}
+
+/// The loop of any [`View`] on `terminal`: a poll every `poll`, the device's lines and the
+/// keys in between (`a` aborts; `q` quits, aborting what this morphctl started and still runs).
+pub fn run_view(
+    terminal: &mut ratatui::DefaultTerminal,
+    link: &mut Link,
+    view: &mut dyn View,
+    poll: Duration,
+    pending: Vec<String>,
+) -> LiveEnd {
     let mut lines = pending;
-    let mut sim_start: Option<f64> = None;
     let mut next_poll = Instant::now();
     loop {
         for l in lines.drain(..) {
-            st.line(&l);
+            view.line(&l);
         }
         if Instant::now() >= next_poll {
             next_poll = Instant::now() + poll;
-            let mut on_event = |l: &str| lines.push(l.to_string());
-            let sim = match sim_time_and_radius(link, &mut on_event) {
-                Ok(x) => x,
-                Err(e) => return LiveEnd::Broken(e),
-            };
-            let status = match link.command("STATUS", REPLY_TIMEOUT_S, &mut on_event) {
-                Ok((_, s)) => s,
-                Err(e) => return LiveEnd::Broken(e),
-            };
-            let t_s = match sim {
-                Some((t, _)) => t - *sim_start.get_or_insert(t),
-                None => start.elapsed().as_secs_f64(),
-            };
-            let s = Sample::from_status(t_s, &status, sim.map_or(f64::NAN, |x| x.1));
-            // The record ends with the morph: the view stays until `q`, the log does not.
-            if st.sample(s.clone()) {
-                record(&s);
+            if let Err(e) = view.poll(link, &mut |l| lines.push(l.to_string())) {
+                return LiveEnd::Broken(e);
             }
-            if st.started && st.morphing() && t_s > st.timeout_s {
+            if view.timed_out() {
                 return LiveEnd::TimedOut;
             }
         }
-        if let Err(e) = terminal.draw(|f| draw(f, st)) {
+        if let Err(e) = terminal.draw(|f| view.draw(f)) {
             return LiveEnd::Broken(LinkError::Closed(format!("cannot draw the live view: {e}")));
         }
         match event::poll(Duration::from_millis(KEY_POLL_MS)) {
@@ -593,8 +666,8 @@ pub fn run(
                     if k.kind == KeyEventKind::Press {
                         match key_action(k.code, k.modifiers) {
                             Action::Abort => return LiveEnd::Abort,
-                            Action::Quit if st.started && st.morphing() => return LiveEnd::Abort,
-                            Action::Quit => return LiveEnd::Quit(st.outcome.clone()),
+                            Action::Quit if view.running() => return LiveEnd::Abort,
+                            Action::Quit => return LiveEnd::Quit(view.outcome()),
                             Action::None => {}
                         }
                     }

@@ -4,6 +4,7 @@
 mod bringup;
 mod config;
 mod gait;
+mod gait_view;
 mod link;
 mod live;
 mod script;
@@ -133,6 +134,9 @@ enum Cmd {
         /// Set the supply budget first (`CONFIG SET supply_budget_w`), W.
         #[arg(long)]
         budget_w: Option<f32>,
+        /// Follow the gait in a live terminal view, a row per link (key `a` aborts, `q` quits).
+        #[arg(long)]
+        live: bool,
     },
     /// Watch the device in a live terminal view without starting anything (`a` sends ABORT).
     Watch {
@@ -256,7 +260,10 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
         check_writable(path, "--plot")?;
     }
     // The live view needs a terminal to draw on, known before anything is sent.
-    if matches!(cli.cmd, Cmd::Morph { live: true, .. } | Cmd::Watch { .. }) {
+    if matches!(
+        cli.cmd,
+        Cmd::Morph { live: true, .. } | Cmd::Gait { live: true, .. } | Cmd::Watch { .. }
+    ) {
         use std::io::IsTerminal;
         if !std::io::stdout().is_terminal() || !std::io::stdin().is_terminal() {
             return Err("the live view needs a terminal (stdin and stdout); without --live, morph prints its progress as lines".into());
@@ -413,6 +420,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
             poll_ms,
             timeout_s,
             budget_w,
+            live,
         } => {
             let opts = gait::Opts {
                 radii_mm,
@@ -426,11 +434,15 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 None => None,
             };
             let mut samples = Vec::new();
-            let end = match gait::gait(&mut link, &opts, &mut samples, &mut csv) {
-                Ok(code) => MorphEnd::Finished(code),
-                Err(e) => e,
+            let mut code = if live {
+                gait_live(&mut link, &opts, &mut samples, &mut csv)
+            } else {
+                let end = match gait::gait(&mut link, &opts, &mut samples, &mut csv) {
+                    Ok(code) => MorphEnd::Finished(code),
+                    Err(e) => e,
+                };
+                finish(&mut link, end)
             };
-            let mut code = finish(&mut link, end);
             if let (Some(path), Some(csv)) = (&log, &csv) {
                 println!("telemetry: {} ({} rows)", path.display(), csv.rows);
                 if let Some(e) = &csv.failed {
@@ -778,12 +790,45 @@ fn morph_live(
     end_live(link, end)
 }
 
+/// A gait followed in the live view, a row per link: as `gait` starts it, then the view until
+/// the user quits, then as `morph --live` ends.
+fn gait_live(
+    link: &mut Link,
+    o: &gait::Opts,
+    samples: &mut Vec<gait::GaitSample>,
+    csv: &mut Option<CsvLog>,
+) -> ExitCode {
+    let mut events: Vec<String> = Vec::new();
+    let n = match gait::start(link, o, &mut events) {
+        Ok(n) => n,
+        Err(e) => return finish(link, e),
+    };
+    let radii: Vec<String> = o.radii_mm.iter().map(|r| r.to_string()).collect();
+    let title = format!("GAIT {} {} on {}", radii.join(" "), o.mode, link.device());
+    let mut record = |s: &gait::GaitSample| {
+        if let Some(csv) = csv.as_mut() {
+            csv.line(&s.csv_row());
+        }
+        samples.push(s.clone());
+    };
+    let mut view = gait_view::GaitView::new(title, n, o.timeout_s, &mut record);
+    let end = match LiveTerminal::open() {
+        Ok(mut term) => live::run_view(&mut term.0, link, &mut view, o.poll, events),
+        Err(e) => live::LiveEnd::Broken(LinkError::Closed(e)),
+    };
+    end_live(link, end)
+}
+
 /// The exit of a live view, after the terminal is restored: the outcome seen, or ABORT and
 /// a heaters-off STATUS.
 fn end_live(link: &mut Link, end: live::LiveEnd) -> ExitCode {
     match end {
         live::LiveEnd::Quit(Some(live::Outcome::Done(r))) => {
             println!("done: the controller estimates {r:.2} mm");
+            ExitCode::SUCCESS
+        }
+        live::LiveEnd::Quit(Some(live::Outcome::EveryLinkDone)) => {
+            println!("done: every link");
             ExitCode::SUCCESS
         }
         live::LiveEnd::Quit(Some(live::Outcome::Alarm(a))) => {
