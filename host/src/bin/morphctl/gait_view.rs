@@ -6,7 +6,7 @@
 
 use crate::gait::{self, Clock, End, GaitSample};
 use crate::link::{field, Link, LinkError};
-use crate::live::{Outcome, View};
+use crate::live::{events_panel, val, Outcome, View};
 use morphlink::protocol::client::{classify, link_of, LineKind};
 use ratatui::layout::{Constraint, Layout};
 use ratatui::style::{Color, Modifier, Style};
@@ -135,15 +135,6 @@ impl View for GaitView<'_> {
     }
 }
 
-/// `12.34 unit`, or `-` for NaN.
-fn val(v: f64, decimals: usize, unit: &str) -> String {
-    if v.is_finite() {
-        format!("{v:.decimals$} {unit}")
-    } else {
-        "-".into()
-    }
-}
-
 /// One link's row: its phase, temperatures, power, radius against target, and its end.
 fn row(k: usize, s: Option<&GaitSample>, end: (End, f64)) -> Line<'static> {
     let nan = f64::NAN;
@@ -223,21 +214,7 @@ pub fn draw(frame: &mut Frame, v: &GaitView) {
             .label(format!("{} of {}", val(total, 2, "W"), val(budget, 2, "W"))),
         supply,
     );
-    let fit = events.height.saturating_sub(2) as usize;
-    let lines: Vec<Line> = v
-        .events
-        .iter()
-        .skip(v.events.len().saturating_sub(fit))
-        .map(|e| match classify(e) {
-            LineKind::Alarm => Line::styled(e.clone(), Style::default().fg(Color::Red)),
-            LineKind::Done => Line::styled(e.clone(), Style::default().fg(Color::Green)),
-            _ => Line::raw(e.clone()),
-        })
-        .collect();
-    frame.render_widget(
-        Paragraph::new(lines).block(Block::bordered().title("events")),
-        events,
-    );
+    events_panel(frame, events, &v.events);
     let help = if v.running() {
         "a: abort every link   q: quit (aborts the gait)"
     } else {

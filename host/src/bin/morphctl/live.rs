@@ -203,12 +203,31 @@ pub fn phase_timeout_s(mode: &str, phase: &str) -> Option<f64> {
 }
 
 /// `12.34` or `-` for NaN, with `unit`.
-fn val(v: f64, decimals: usize, unit: &str) -> String {
+pub fn val(v: f64, decimals: usize, unit: &str) -> String {
     if v.is_finite() {
         format!("{v:.decimals$} {unit}")
     } else {
         "-".into()
     }
+}
+
+/// The events panel in `area`: the newest of `events` that fit, at the bottom, alarms red and
+/// `done` green.
+pub fn events_panel(frame: &mut Frame, area: ratatui::layout::Rect, events: &VecDeque<String>) {
+    let fit = area.height.saturating_sub(2) as usize;
+    let lines: Vec<Line> = events
+        .iter()
+        .skip(events.len().saturating_sub(fit))
+        .map(|e| match classify(e) {
+            LineKind::Alarm => Line::styled(e.clone(), Style::default().fg(Color::Red)),
+            LineKind::Done => Line::styled(e.clone(), Style::default().fg(Color::Green)),
+            _ => Line::raw(e.clone()),
+        })
+        .collect();
+    frame.render_widget(
+        Paragraph::new(lines).block(Block::bordered().title("events")),
+        area,
+    );
 }
 
 /// Rows the view needs with its temperature chart (at least 8 rows high); a smaller terminal
@@ -502,23 +521,7 @@ pub fn draw(frame: &mut Frame, st: &LiveState) {
         chart,
     );
 
-    // Events.
-    // The newest that fit, at the bottom.
-    let fit = events.height.saturating_sub(2) as usize;
-    let lines: Vec<Line> = st
-        .events
-        .iter()
-        .skip(st.events.len().saturating_sub(fit))
-        .map(|e| match classify(e) {
-            LineKind::Alarm => Line::styled(e.clone(), Style::default().fg(Color::Red)),
-            LineKind::Done => Line::styled(e.clone(), Style::default().fg(Color::Green)),
-            _ => Line::raw(e.clone()),
-        })
-        .collect();
-    frame.render_widget(
-        Paragraph::new(lines).block(Block::bordered().title("events")),
-        events,
-    );
+    events_panel(frame, events, &st.events);
 
     let help = if st.started && st.morphing() {
         "a: abort   q: quit (aborts the morph)"
