@@ -78,7 +78,37 @@ impl SupplyBudget {
     pub fn binding(&self) -> bool {
         self.budget_w < BUDGET_MAX_W || self.limit_a < LIMIT_MAX_A
     }
+
+    /// The stored form SAVE writes beside link 1's settings: a format byte, then the budget
+    /// and the limit as little-endian `f32`s. The map item's own CRC guards it; a load
+    /// range-checks what it decodes as a `CONFIG SET` would.
+    pub fn to_bytes(&self) -> [u8; SUPPLY_RECORD_BYTES] {
+        let mut b = [0; SUPPLY_RECORD_BYTES];
+        b[0] = SUPPLY_RECORD_FORMAT;
+        b[1..5].copy_from_slice(&self.budget_w.to_le_bytes());
+        b[5..9].copy_from_slice(&self.limit_a.to_le_bytes());
+        b
+    }
+
+    /// Decodes [`SupplyBudget::to_bytes`]; `None` for another length or format.
+    pub fn from_bytes(b: &[u8]) -> Option<SupplyBudget> {
+        let b: &[u8; SUPPLY_RECORD_BYTES] = b.try_into().ok()?;
+        if b[0] != SUPPLY_RECORD_FORMAT {
+            return None;
+        }
+        let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+        Some(SupplyBudget {
+            budget_w: f(1),
+            limit_a: f(5),
+        })
+    }
 }
+
+/// Length of the supply's stored form, bytes ([`SupplyBudget::to_bytes`]).
+pub const SUPPLY_RECORD_BYTES: usize = 9;
+/// Format byte of the supply's stored form: a change of layout takes a new one, and an older
+/// form then boots as the defaults.
+const SUPPLY_RECORD_FORMAT: u8 = 1;
 
 /// Why a budget was refused.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -562,6 +592,19 @@ pub fn peak_amps(phase: &[f32], duty: &[f32], amps: &[f32]) -> f32 {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_supplys_stored_form_reads_back_and_refuses_another_format() {
+        let b = SupplyBudget {
+            budget_w: 8.5,
+            limit_a: 3.0,
+        };
+        assert_eq!(SupplyBudget::from_bytes(&b.to_bytes()), Some(b));
+        let mut other = b.to_bytes();
+        other[0] = 2;
+        assert_eq!(SupplyBudget::from_bytes(&other), None);
+        assert_eq!(SupplyBudget::from_bytes(&other[..8]), None);
+    }
+
     use super::*;
     use proptest::prelude::*;
 

@@ -621,6 +621,54 @@ impl<const N: usize> Links<N> {
         out(&l);
     }
 
+    /// What SAVE writes of the board's own settings with link `k`'s (0-based): the supply's
+    /// budget and limit, with link 1's settings.
+    pub fn board_record(&self, k: usize) -> Option<[u8; budget::SUPPLY_RECORD_BYTES]> {
+        (k == 0).then(|| self.budget.to_bytes())
+    }
+
+    /// Puts the supply settings a SAVE kept in force at boot (`stored`: what link 1's store
+    /// holds, `Ok(None)` if nothing), each checked as `CONFIG SET` checks it; anything else
+    /// leaves the defaults. Either way an event says which. Call after every link's settings
+    /// are loaded (the least budget depends on their calibrations).
+    pub fn load_board(&mut self, stored: Result<Option<&[u8]>, ()>) {
+        let why = match stored {
+            Ok(Some(bytes)) => match budget::SupplyBudget::from_bytes(bytes) {
+                Some(b) => {
+                    let before = self.budget;
+                    let limit = self.check_supply(SupplySetting::LimitA, b.limit_a);
+                    if limit.is_ok() {
+                        self.budget.limit_a = b.limit_a;
+                    }
+                    let budget = self.check_supply(SupplySetting::BudgetW, b.budget_w);
+                    if limit.is_ok() && budget.is_ok() {
+                        self.budget.budget_w = b.budget_w;
+                        let mut l = OutLine::new();
+                        wire::supply_loaded_event(&mut l, b.budget_w, b.limit_a);
+                        self.push_board_event(l);
+                        return;
+                    }
+                    self.budget = before;
+                    wire::SupplyDefaults::OutOfRange
+                }
+                None => wire::SupplyDefaults::Format,
+            },
+            Ok(None) => wire::SupplyDefaults::Absent,
+            Err(()) => wire::SupplyDefaults::Flash,
+        };
+        let mut l = OutLine::new();
+        wire::supply_defaults_event(&mut l, why);
+        self.push_board_event(l);
+    }
+
+    /// Queues a line of the board's own (no link's address).
+    fn push_board_event(&mut self, line: OutLine) {
+        if self.events.is_full() {
+            self.events.pop_front();
+        }
+        let _ = self.events.push_back(line);
+    }
+
     /// The least budget that lets every link soften its cheapest morph, W.
     pub fn least_budget_w(&self) -> f32 {
         let (min_mm, max_mm) = crate::table::range_mm();

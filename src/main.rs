@@ -255,12 +255,20 @@ mod firmware {
             put_settings(0, loaded, store.is_some());
         }
         #[cfg(feature = "links-2")]
-        for (k, store) in stores.iter_mut().enumerate() {
-            let loaded = match store {
-                Some(s) => s.load().await,
-                None => Err(LoadError::Flash),
+        {
+            for (k, store) in stores.iter_mut().enumerate() {
+                let loaded = match store {
+                    Some(s) => s.load().await,
+                    None => Err(LoadError::Flash),
+                };
+                put_settings(k, loaded, store.is_some());
+            }
+            // The supply's settings, kept with link 1's, once every link's calibration is in.
+            let board = match &mut stores[0] {
+                Some(s) => s.load_board().await.map_err(|_| ()),
+                None => Ok(None),
             };
-            put_settings(k, loaded, store.is_some());
+            with_core(|c| c.load_board(board.as_ref().map(|b| b.as_deref()).map_err(|_| ())));
         }
 
         let mut boot = OutLine::new();
@@ -414,7 +422,16 @@ mod firmware {
                     if let Some((k, blob)) = a.save {
                         if let Some(s) = store_of(&mut stores, k) {
                             let t0 = Instant::now();
-                            let r = s.save(&blob).await;
+                            #[cfg_attr(not(feature = "links-2"), allow(unused_mut))]
+                            let mut r = s.save(&blob).await;
+                            // Several links: the supply's settings go with link 1's (a
+                            // one-link image has none, and its flash no room for the code).
+                            #[cfg(feature = "links-2")]
+                            if let (Ok(_), Some(b)) = (&r, with_core(|c| c.board_record(k))) {
+                                if let Err(e) = s.save_board(&b).await {
+                                    r = Err(e);
+                                }
+                            }
                             defmt::info!("SAVE took {} ms", t0.elapsed().as_millis());
                             with_core(|c| session.finish_save(c, r));
                         }

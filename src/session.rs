@@ -10,6 +10,7 @@
 //! flash with the heaters off and hands the result back ([`Session::finish_save`]). The shell
 //! only moves bytes between the port and this type, and carries out the SAVE.
 
+use crate::budget::SUPPLY_RECORD_BYTES;
 use crate::controller::{Controller, Inputs, Outputs, MAX_REPLY_BYTES};
 use crate::links::{LinkOutputs, Links};
 use crate::protocol::serial::{is_abort, Outbox, SerialInput};
@@ -50,6 +51,17 @@ pub trait Served {
     fn finish_save(&mut self, result: Result<SaveReport, StoreError>, out: &mut dyn FnMut(&str));
     /// The next event or alarm line.
     fn pop_event_line(&mut self) -> Option<OutLine>;
+    /// The board's own settings SAVE writes beside link `k`'s (several links' supply budget,
+    /// with link 1's: [`Links::board_record`]); a one-link image has none.
+    fn board_record(&self, k: usize) -> Option<[u8; SUPPLY_RECORD_BYTES]> {
+        let _ = k;
+        None
+    }
+    /// Puts the board's own settings a SAVE kept in force at boot ([`Links::load_board`]); a
+    /// one-link image has none.
+    fn load_board(&mut self, stored: Result<Option<&[u8]>, ()>) {
+        let _ = stored;
+    }
 }
 
 impl Served for Controller {
@@ -158,6 +170,14 @@ impl<const N: usize> Served for Links<N> {
 
     fn pop_event_line(&mut self) -> Option<OutLine> {
         Links::pop_event_line(self)
+    }
+
+    fn board_record(&self, k: usize) -> Option<[u8; SUPPLY_RECORD_BYTES]> {
+        Links::board_record(self, k)
+    }
+
+    fn load_board(&mut self, stored: Result<Option<&[u8]>, ()>) {
+        Links::load_board(self, stored);
     }
 }
 

@@ -397,3 +397,50 @@ fn four_hifi_links_under_8_w_finish_within_the_budget() {
         "{events:?}"
     );
 }
+
+/// The supply's settings a SAVE kept come back at boot when `CONFIG SET` would take them; a
+/// record of another format, or one outside what the links allow now, leaves the defaults,
+/// and an event says which.
+#[test]
+fn the_supply_settings_kept_by_save_come_back_only_if_still_in_range() {
+    use morphlink::budget::SupplyBudget;
+    let mut rig = four(3.0);
+    say(&mut rig, "CONFIG SET supply_limit_a 3");
+    say(&mut rig, "CONFIG SET supply_budget_w 8");
+    let kept = rig
+        .links
+        .board_record(0)
+        .expect("link 1's SAVE carries the supply");
+    assert!(rig.links.board_record(1).is_none(), "only with link 1's");
+    // A boot with `stored`: the supply's settings and the board's events.
+    let boot = |stored: Result<Option<&[u8]>, ()>| {
+        let mut r = four(3.0);
+        r.links.load_board(stored);
+        let mut e = Vec::new();
+        r.drain_events(&mut |l: &str| e.push(l.to_string()));
+        (r.links.budget(), e.join("\n"))
+    };
+    let (back, e) = boot(Ok(Some(&kept)));
+    assert_eq!((back.budget_w, back.limit_a), (8.0, 3.0));
+    assert!(
+        e.contains("event: config supply loaded supply_budget_w=8.00 supply_limit_a=3.00"),
+        "{e}"
+    );
+    // Too small a budget for any soften: refused, the defaults stay.
+    let tiny = SupplyBudget {
+        budget_w: 0.5,
+        limit_a: 3.0,
+    }
+    .to_bytes();
+    let (back, e) = boot(Ok(Some(&tiny)));
+    assert_eq!(back, SupplyBudget::UNLIMITED);
+    assert!(
+        e.contains("event: config supply defaults reason=out-of-range"),
+        "{e}"
+    );
+    let (back, e) = boot(Ok(Some(&kept[..4])));
+    assert_eq!(back, SupplyBudget::UNLIMITED);
+    assert!(e.contains("reason=format"), "{e}");
+    assert!(boot(Ok(None)).1.contains("reason=absent"));
+    assert!(boot(Err(())).1.contains("reason=flash-error"));
+}

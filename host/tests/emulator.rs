@@ -857,7 +857,8 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
 
 /// The two-link image: each link its own addressed morph under one supply budget (the second
 /// waits for room, then starts by itself), bad addresses and gaits refused, a fault on one link
-/// stopping that link alone while the other finishes, and each link's SAVE kept apart.
+/// stopping that link alone while the other finishes, each link's SAVE kept apart, and the
+/// supply's budget kept with link 1's.
 #[test]
 fn two_links_share_one_budget_and_a_fault_on_one_stops_only_it() {
     let Some((qemu, image)) = setup_two_links() else {
@@ -981,14 +982,47 @@ fn two_links_share_one_budget_and_a_fault_on_one_stops_only_it() {
         saved.last().unwrap().starts_with("ok saved "),
         "{saved:?}"
     );
-    emu.write_raw(b"SIM PANIC\n").unwrap();
-    next_boot_line(&mut emu);
-    let first = emu.wait_for("@1 event: config ", REPLY).unwrap();
-    let second = emu.wait_for("@2 event: config ", REPLY).unwrap();
+    // The supply's settings are the board's: saved with link 1's (an unaddressed SAVE).
+    let set = emu.command("CONFIG SET supply_budget_w 6", REPLY).unwrap();
     check!(
         emu,
-        first.last().unwrap() == "@1 event: config defaults reason=absent"
-            && second.last().unwrap() == "@2 event: config loaded settings=24",
-        "{first:?} {second:?}"
+        set.last().unwrap().starts_with("ok supply_budget_w=6.00"),
+        "{set:?}"
+    );
+    let saved = emu.command("SAVE", REPLY).unwrap();
+    check!(
+        emu,
+        saved.last().unwrap().starts_with("ok saved "),
+        "{saved:?}"
+    );
+    emu.write_raw(b"SIM PANIC\n").unwrap();
+    next_boot_line(&mut emu);
+    // Every line from the boot to link 2's config event (the board's own come first).
+    let seen = emu.wait_for("@2 event: config ", REPLY).unwrap();
+    let has = |l: &str| seen.iter().any(|s| s == l);
+    check!(
+        emu,
+        has("@1 event: config loaded settings=24")
+            && has("@2 event: config loaded settings=24")
+            && has("event: config supply loaded supply_budget_w=6.00 supply_limit_a=20.00"),
+        "{seen:?}"
+    );
+    emu.wait_ready(REPLY).unwrap();
+    let links = emu.command("LINKS", REPLY).unwrap();
+    check!(
+        emu,
+        links.last().unwrap().contains(" budget_w=6.00 "),
+        "{links:?}"
+    );
+    let kept = |emu: &mut Emulator, k: usize| {
+        let config = emu.command(&format!("@{k} CONFIG"), REPLY).unwrap();
+        config
+            .iter()
+            .any(|l| l.starts_with("data: lock_timeout_s=321.0 s"))
+    };
+    check!(
+        emu,
+        kept(&mut emu, 2) && !kept(&mut emu, 1),
+        "each link keeps its own settings"
     );
 }

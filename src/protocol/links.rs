@@ -252,6 +252,41 @@ pub fn queued_dropped_event(l: &mut OutLine, refusal: &str) {
     let _ = write!(l, "event: queued-morph dropped ({refusal})");
 }
 
+/// Why the supply's settings boot as the defaults.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SupplyDefaults {
+    /// No SAVE kept them.
+    Absent,
+    /// Kept in a form this firmware does not read.
+    Format,
+    /// Kept, but outside what `CONFIG SET` would take now.
+    OutOfRange,
+    /// The flash could not be read.
+    Flash,
+}
+
+/// The supply's settings a SAVE kept, in force from boot:
+/// `event: config supply loaded supply_budget_w=<W> supply_limit_a=<A>`.
+pub fn supply_loaded_event(l: &mut OutLine, budget_w: f32, limit_a: f32) {
+    let _ = write!(
+        l,
+        "event: config supply loaded supply_budget_w={} supply_limit_a={}",
+        Fixed(budget_w, 2),
+        Fixed(limit_a, 2)
+    );
+}
+
+/// The supply's settings boot as their defaults: `event: config supply defaults reason=<why>`.
+pub fn supply_defaults_event(l: &mut OutLine, why: SupplyDefaults) {
+    let why = match why {
+        SupplyDefaults::Absent => "absent",
+        SupplyDefaults::Format => "format",
+        SupplyDefaults::OutOfRange => "out-of-range",
+        SupplyDefaults::Flash => "flash-error",
+    };
+    let _ = write!(l, "event: config supply defaults reason={why}");
+}
+
 /// `CONFIG SET` of a supply setting done: `ok <name>=<value> saved=no`.
 pub fn supply_set(l: &mut OutLine, s: SupplySetting, value: f32) {
     let _ = write!(l, "ok {}={} saved=no", s.as_str(), Fixed(value, 2));

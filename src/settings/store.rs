@@ -27,6 +27,13 @@ use sequential_storage::map::{MapConfig, MapStorage};
 /// The map key the settings blob is stored under.
 pub const SETTINGS_KEY: u8 = 1;
 
+/// The map key of the board's own settings (several links' supply budget), kept beside link
+/// 1's settings blob. Keys 1 and 2 are the blob's and its record's.
+pub const BOARD_KEY: u8 = 3;
+
+/// Longest board item, bytes.
+pub const BOARD_ITEM_MAX: usize = 16;
+
 /// Work buffer of the map, bytes: the key, the largest blob and word alignment (8 bytes on the
 /// G4 and L4).
 pub const BUFFER_BYTES: usize = BLOB_MAX + 16;
@@ -252,6 +259,42 @@ impl<S: NorFlash> SettingsStore<S> {
         })
     }
 
+    /// Writes the board's own settings under [`BOARD_KEY`] (at most [`BOARD_ITEM_MAX`] bytes),
+    /// beside the settings blob.
+    pub async fn save_board(&mut self, bytes: &[u8]) -> Result<(), StoreError> {
+        if bytes.len() > BOARD_ITEM_MAX {
+            return Err(StoreError::BadArea);
+        }
+        let mut buf = Buffer([0; BUFFER_BYTES]);
+        let config = MapConfig::try_new(self.area.clone()).map_err(|_| StoreError::BadArea)?;
+        let flash = Counting {
+            flash: &mut self.flash,
+            erases: 0,
+        };
+        let mut map = MapStorage::<u8, _, _>::new(flash, config, Cache::new_uncached());
+        map.store_item(&mut buf.0, &BOARD_KEY, &bytes)
+            .await
+            .map_err(|_| StoreError::Flash)
+    }
+
+    /// The board's own settings, if a SAVE wrote them ([`SettingsStore::save_board`]).
+    pub async fn load_board(
+        &mut self,
+    ) -> Result<Option<heapless::Vec<u8, BOARD_ITEM_MAX>>, LoadError> {
+        let mut buf = Buffer([0; BUFFER_BYTES]);
+        let config = MapConfig::try_new(self.area.clone()).map_err(|_| LoadError::Flash)?;
+        let flash = Counting {
+            flash: &mut self.flash,
+            erases: 0,
+        };
+        let mut map = MapStorage::<u8, _, _>::new(flash, config, Cache::new_uncached());
+        let found: Option<&[u8]> = map
+            .fetch_item(&mut buf.0, &BOARD_KEY)
+            .await
+            .map_err(|_| LoadError::Flash)?;
+        Ok(found.and_then(|b| heapless::Vec::from_slice(b).ok()))
+    }
+
     /// Erases the whole settings area (the next boot then has no settings).
     pub async fn erase_all(&mut self) -> Result<(), StoreError> {
         self.newest = Newest::Unknown;
@@ -330,6 +373,30 @@ mod tests {
         let s2 = with("bend_timeout_s", "200");
         block_on_ready(st.save(&codec::encode(&s2))).unwrap();
         assert_eq!(block_on_ready(st.load()), newest(s2));
+    }
+
+    #[test]
+    fn the_board_item_is_kept_beside_the_blob_through_many_saves() {
+        let mut st = store();
+        assert_eq!(block_on_ready(st.load_board()), Ok(None));
+        let s = with("lock_timeout_s", "300");
+        block_on_ready(st.save(&codec::encode(&s))).unwrap();
+        block_on_ready(st.save_board(&[1, 2, 3])).unwrap();
+        // Enough SAVEs of the blob alone to fill both pages: the map keeps the board's item.
+        for i in 0..60 {
+            let s = with("lock_timeout_s", &std::format!("{}", 100 + i));
+            block_on_ready(st.save(&codec::encode(&s))).unwrap();
+        }
+        let board = block_on_ready(st.load_board()).unwrap().unwrap();
+        assert_eq!(board.as_slice(), &[1, 2, 3]);
+        assert_eq!(
+            block_on_ready(st.load()),
+            newest(with("lock_timeout_s", "159"))
+        );
+        assert_eq!(
+            block_on_ready(st.save_board(&[0; BOARD_ITEM_MAX + 1])),
+            Err(StoreError::BadArea)
+        );
     }
 
     #[test]
