@@ -322,9 +322,15 @@ impl<const N: usize> Links<N> {
             }
             Some(Address::Link(k)) => self.board_or_link(now_ms, Some(k), rest, out),
             Some(Address::All) => {
-                if matches!(protocol::parse_line(rest), Ok(Some(Command::Sim(_)))) {
-                    // A simulated link's SIM line is answered by its rig, one link at a time.
-                    out(&protocol::format_error(&wire::ERR_SIM_EACH));
+                // A simulated link's SIM line is answered by its rig, one link at a time; each
+                // link's SAVE is a flash write of its own.
+                let each = match protocol::parse_line(rest) {
+                    Ok(Some(Command::Sim(_))) => Some(&wire::ERR_SIM_EACH),
+                    Ok(Some(Command::Save)) => Some(&wire::ERR_SAVE_EACH),
+                    _ => None,
+                };
+                if let Some(e) = each {
+                    out(&protocol::format_error(e));
                     return None;
                 }
                 for k in 0..n {
@@ -394,6 +400,10 @@ impl<const N: usize> Links<N> {
         }
         let k = k.unwrap_or(0);
         match parsed {
+            Ok(Some(Command::Save)) if self.count() > 1 && !self.idle() => {
+                out(&protocol::format_error(&wire::ERR_SAVE_BUSY));
+                None
+            }
             Ok(Some(Command::Morph { radius_mm, mode })) => {
                 self.morph(now_ms, k, radius_mm, mode, out);
                 None
@@ -407,8 +417,6 @@ impl<const N: usize> Links<N> {
         }
     }
 
-    /// Whether link `k` would refuse a MORPH on its own (busy, faulted, no reading, radius):
-    /// it then answers it itself.
     /// Every link's heaters off and every queued morph dropped (an unaddressed ABORT, also
     /// the moment its line is read).
     pub fn abort_all(&mut self, now_ms: u64) {
@@ -437,6 +445,8 @@ impl<const N: usize> Links<N> {
         self.ctrl[k].finish_save(result, &mut |l: &str| out(l));
     }
 
+    /// Whether link `k` would refuse a MORPH on its own (busy, faulted, no reading, radius):
+    /// it then answers it itself.
     fn refuses_morph(&self, k: usize, radius_mm: f32) -> bool {
         let c = &self.ctrl[k];
         c.busy()

@@ -51,6 +51,12 @@ pub trait Served {
     fn finish_save(&mut self, result: Result<SaveReport, StoreError>, out: &mut dyn FnMut(&str));
     /// The next event or alarm line.
     fn pop_event_line(&mut self) -> Option<OutLine>;
+    /// True if `line` starts heating, so that read ahead of an ABORT it is refused: MORPH,
+    /// TUNE and HEAT ([`crate::protocol::serial::starts_heating`]); several links add GAIT and
+    /// their addressed lines.
+    fn starts_heating(line: &str) -> bool {
+        crate::protocol::serial::starts_heating(line)
+    }
     /// The board's own settings SAVE writes beside link `k`'s (several links' supply budget,
     /// with link 1's: [`Links::board_record`]); a one-link image has none.
     fn board_record(&self, k: usize) -> Option<[u8; SUPPLY_RECORD_BYTES]> {
@@ -176,6 +182,10 @@ impl<const N: usize> Served for Links<N> {
         Links::board_record(self, k)
     }
 
+    fn starts_heating(line: &str) -> bool {
+        crate::protocol::links::starts_heating(line)
+    }
+
     fn load_board(&mut self, stored: Result<Option<&[u8]>, ()>) {
         Links::load_board(self, stored);
     }
@@ -265,33 +275,36 @@ impl<const RX: usize, const OUT: usize> Session<RX, OUT> {
     ) -> Option<Answered> {
         let out = &self.out;
         let reply = &mut self.reply;
-        let answered = self.input.next_line(|line| {
-            reply.clear();
-            // Behind a flood the reply will be dropped: not built at all, so a long one (HELP)
-            // does not hold the control task up (an ABORT's always is).
-            let build = !out.drops_replies() || line.is_ok_and(is_abort);
-            let before = c.outputs_now();
-            let mut sink = |l: &str| {
-                if build {
-                    push_line(reply, l);
-                } else if reply.is_empty() {
-                    let _ = reply.push('\n');
-                }
-            };
-            let abort = match line {
-                Ok(l) => {
-                    if let Some(s) = c.handle_line(now_ms, l, &mut sink) {
-                        sim(c, now_ms, s, &mut sink);
+        let answered = self.input.next_line_with(
+            |line| {
+                reply.clear();
+                // Behind a flood the reply will be dropped: not built at all, so a long one (HELP)
+                // does not hold the control task up (an ABORT's always is).
+                let build = !out.drops_replies() || line.is_ok_and(is_abort);
+                let before = c.outputs_now();
+                let mut sink = |l: &str| {
+                    if build {
+                        push_line(reply, l);
+                    } else if reply.is_empty() {
+                        let _ = reply.push('\n');
                     }
-                    is_abort(l)
-                }
-                Err(e) => {
-                    sink(&format_error(e));
-                    false
-                }
-            };
-            (abort, build, c.outputs_now() != before)
-        })?;
+                };
+                let abort = match line {
+                    Ok(l) => {
+                        if let Some(s) = c.handle_line(now_ms, l, &mut sink) {
+                            sim(c, now_ms, s, &mut sink);
+                        }
+                        is_abort(l)
+                    }
+                    Err(e) => {
+                        sink(&format_error(e));
+                        false
+                    }
+                };
+                (abort, build, c.outputs_now() != before)
+            },
+            C::starts_heating,
+        )?;
         let (abort, build, changed) = answered;
         let save = c.take_save_request();
         if save.is_some() {
@@ -514,6 +527,45 @@ mod tests {
         );
         let after = core::str::from_utf8(s.output()).unwrap().to_string();
         assert!(after.starts_with("event: boot\nok saved"), "{after:?}");
+    }
+
+    #[test]
+    fn on_several_links_gait_and_addressed_heating_lines_ahead_of_an_abort_are_refused() {
+        let cfg = Config::DEFAULT;
+        let mut links: Links<2> = Links::new(cfg, 2);
+        let counts = cfg.thermistor.counts_for_temp(22.0);
+        let frame = Inputs {
+            thermistor_counts: [counts; 3],
+            supply_counts: cfg.supply.counts(12.0),
+            sample_ms: 0,
+            current: None,
+        };
+        let mut out = [crate::links::LinkOutputs::default(); 2];
+        links.step(0, &[frame, frame], &mut out);
+        let mut s = S::new("event: boot");
+        let bytes = b"GAIT 34 42\n@2 MORPH 38\n@* HEAT pla 1 5\n@1 STATUS\nABORT\n";
+        s.buffer()[..bytes.len()].copy_from_slice(bytes);
+        assert!(s.received(&mut links, 0, bytes.len(), false));
+        let no_sim = |_: &mut Links<2>, _, _, out: &mut dyn FnMut(&str)| out("error: no SIM");
+        while s.has_input() {
+            s.answer_next(&mut links, 0, no_sim);
+        }
+        let text = drain(&mut s);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 6, "{text}");
+        for l in &lines[1..4] {
+            assert!(l.starts_with("error: aborted "), "{text}");
+        }
+        assert!(lines[4].starts_with("ok phase=idle "), "{text}");
+        assert_eq!(lines[5], "ok");
+        assert!(
+            links.idle(),
+            "a line read ahead of the ABORT started a link"
+        );
+        // One link's grammar is unchanged: an addressed line is not its.
+        assert!(!<Controller as Served>::starts_heating("@2 MORPH 38"));
+        assert!(<Links<2> as Served>::starts_heating("@2 MORPH 38"));
+        assert!(!<Links<2> as Served>::starts_heating("@2 STATUS"));
     }
 
     #[test]

@@ -444,3 +444,28 @@ fn the_supply_settings_kept_by_save_come_back_only_if_still_in_range() {
     assert!(boot(Ok(None)).1.contains("reason=absent"));
     assert!(boot(Err(())).1.contains("reason=flash-error"));
 }
+
+/// SAVE writes flash, which stalls the CPU: on several links it is refused while any link
+/// heats or waits for the budget, and under `@*` (each link's SAVE is its own), changing
+/// nothing.
+#[test]
+fn save_waits_for_every_link_and_is_not_sent_to_all_at_once() {
+    let mut rig = four(20.0);
+    let each = say(&mut rig, "@* SAVE");
+    assert_eq!(each.len(), 1, "{each:?}");
+    assert!(
+        each[0].starts_with("error: bad-argument SAVE one link at a time"),
+        "{each:?}"
+    );
+    say(&mut rig, "@2 MORPH 38");
+    assert!(!rig.links.idle());
+    let busy = say(&mut rig, "@3 SAVE");
+    assert!(
+        busy[0].starts_with("error: busy SAVE waits until every link is idle"),
+        "{busy:?}"
+    );
+    say(&mut rig, "ABORT");
+    // Idle again: the link's own answer (this rig keeps no flash).
+    let idle = say(&mut rig, "@3 SAVE");
+    assert!(!idle[0].contains("waits until every link"), "{idle:?}");
+}

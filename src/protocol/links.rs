@@ -103,6 +103,21 @@ pub fn split_address(line: &str) -> Result<(Option<Address>, &str), ProtoError> 
     Ok((Some(address), rest))
 }
 
+/// True if `line` starts heating on a board of several links, so that read ahead of an ABORT
+/// it is refused: GAIT (every link), and MORPH, TUNE or HEAT addressed to a link or to `@*`
+/// as unaddressed.
+pub fn starts_heating(line: &str) -> bool {
+    match split_address(line) {
+        Ok((_, cmd)) => {
+            matches!(
+                parse_links_command(cmd),
+                Some(Ok(LinksCommand::Gait { .. }))
+            ) || super::serial::starts_heating(cmd)
+        }
+        Err(_) => false,
+    }
+}
+
 /// Parses `line` if it is one of the several-links commands (`GAIT`, `LINKS`); `None` for
 /// any other line.
 pub fn parse_links_command(line: &str) -> Option<Result<LinksCommand, ProtoError>> {
@@ -182,6 +197,16 @@ pub const ERR_QUEUED: ProtoError = ProtoError {
 
 /// `@* SIM ...`: a simulated link's SIM line names one link.
 pub const ERR_SIM_EACH: ProtoError = bad("SIM lines name one link (@<n> SIM ...), not @*.");
+
+/// `SAVE` sent to every link at once: each link's SAVE is a flash write of its own.
+pub const ERR_SAVE_EACH: ProtoError = bad("SAVE one link at a time (SAVE is link 1's), not @*.");
+
+/// `SAVE` while any link heats or waits for the budget: a flash write stalls the CPU, and
+/// every link's heaters must be off through it.
+pub const ERR_SAVE_BUSY: ProtoError = ProtoError {
+    code: ErrorCode::Busy,
+    text: "SAVE waits until every link is idle (a flash write stalls the CPU); ABORT or wait",
+};
 
 /// `<prefix><line>`: a link's line as a board of several links sends it, `@<n> ` first.
 pub fn addressed(l: &mut OutLine, link: usize, line: &str) {

@@ -37,8 +37,9 @@ pub fn is_abort(line: &str) -> bool {
     matches!(parse_line(line), Ok(Some(Command::Abort)))
 }
 
-/// True if `line` is a command that starts heating: MORPH, TUNE or HEAT.
-fn starts_heating(line: &str) -> bool {
+/// True if `line` is a command that starts heating: MORPH, TUNE or HEAT (a board of several
+/// links adds its own: `session::Served::starts_heating`).
+pub fn starts_heating(line: &str) -> bool {
     matches!(
         parse_line(line),
         Ok(Some(
@@ -175,6 +176,16 @@ impl<const N: usize> SerialInput<N> {
         &mut self,
         f: impl FnOnce(Result<&str, &'static ProtoError>) -> R,
     ) -> Option<R> {
+        self.next_line_with(f, starts_heating)
+    }
+
+    /// As [`SerialInput::next_line`], with `heats` saying which lines start heating (refused
+    /// when read ahead of an ABORT).
+    pub fn next_line_with<R>(
+        &mut self,
+        f: impl FnOnce(Result<&str, &'static ProtoError>) -> R,
+        heats: impl Fn(&str) -> bool,
+    ) -> Option<R> {
         let mut answer = None;
         while self.pos < self.len {
             let byte = self.buf[self.pos];
@@ -182,9 +193,7 @@ impl<const N: usize> SerialInput<N> {
             if let Some(line) = self.lines.push_checked(byte) {
                 let ahead_of_abort = self.abort_end.is_some_and(|end| self.pos < end);
                 answer = Some(f(match line {
-                    Ok(Assembled::Line(l)) if ahead_of_abort && starts_heating(l) => {
-                        Err(&ERR_ABORTED_AHEAD)
-                    }
+                    Ok(Assembled::Line(l)) if ahead_of_abort && heats(l) => Err(&ERR_ABORTED_AHEAD),
                     Ok(Assembled::Line(l)) => Ok(l),
                     Ok(Assembled::TooLong) => Err(&ERR_LINE_TOO_LONG),
                     Ok(Assembled::Invalid) => Err(&ERR_INVALID_LINE),

@@ -292,7 +292,9 @@ impl<S: NorFlash> SettingsStore<S> {
             .fetch_item(&mut buf.0, &BOARD_KEY)
             .await
             .map_err(|_| LoadError::Flash)?;
-        Ok(found.and_then(|b| heapless::Vec::from_slice(b).ok()))
+        // An item too long for any board record is handed on empty: its decoder refuses it
+        // as another format, never as absent.
+        Ok(found.map(|b| heapless::Vec::from_slice(b).unwrap_or_default()))
     }
 
     /// Erases the whole settings area (the next boot then has no settings).

@@ -329,8 +329,20 @@ pub fn poll(
         Some((t, _)) => t - *clock.sim_start.get_or_insert(t),
         None => clock.start.elapsed().as_secs_f64(),
     };
-    let (statuses, _) = link.command("@* STATUS", REPLY_TIMEOUT_S, on_event)?;
+    let (statuses, end) = link.command("@* STATUS", REPLY_TIMEOUT_S, on_event)?;
     let (_, links) = link.command("LINKS", REPLY_TIMEOUT_S, on_event)?;
+    // A poll that is not every link's (an error reply, lost lines) cannot say the links have
+    // stopped: it breaks the gait, which then stops every heater.
+    if classify(&end) != LineKind::Ok
+        || classify(&links) != LineKind::Ok
+        || statuses.len() != link.links
+    {
+        return Err(LinkError::Protocol(format!(
+            "a poll of every link got `{end}` and `{links}` ({} of {} STATUS lines)",
+            statuses.len(),
+            link.links
+        )));
+    }
     let num = |key: &str| {
         field(&links, key)
             .and_then(|v| v.parse::<f64>().ok())
