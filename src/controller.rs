@@ -699,7 +699,7 @@ impl Controller {
                     let _ = events.push(Event::Seq(e));
                 });
                 ended = !self.seq.busy();
-                r.map_err(|t| t.fault())
+                r.map_err(|t| t.fault(m.t_pla_c))
             }
             Activity::Tune(t) => {
                 let ratio = self.elec.tca_ratio();

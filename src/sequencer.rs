@@ -91,12 +91,17 @@ pub const DONE_MISS_SHARE: f32 = 0.01;
 pub struct PhaseTimeout(pub Phase);
 
 impl PhaseTimeout {
-    /// The fault it latches: `phase-timeout <phase>`.
-    pub fn fault(self) -> crate::fault::Fault {
+    /// The fault it latches: `phase-timeout <phase>`; a lock's carries the PLA reading
+    /// `t_pla_c` (°C), which says why the rod did not turn rigid.
+    pub fn fault(self, t_pla_c: f32) -> crate::fault::Fault {
         crate::fault::Fault {
             code: crate::fault::FaultCode::PhaseTimeout,
             subject: crate::fault::Subject::Phase(self.0),
-            value: f32::NAN,
+            value: if self.0 == Phase::Lock {
+                t_pla_c
+            } else {
+                f32::NAN
+            },
         }
     }
 }

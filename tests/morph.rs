@@ -203,6 +203,38 @@ fn auto_morphs_to_34_mm_in_still_air_on_both_links() {
     }
 }
 
+/// A lock the link cannot finish (still air at 27 °C: the TCA holding 32.92 mm keeps the PLA
+/// at 59 °C, over the 58 °C the rod must cool under to hold the shape) ends within two minutes
+/// of lock, not at the ten-minute lock timeout, with both heaters off and an alarm that names
+/// the PLA's reading and what to do; the same link in 22 °C still air, whose PLA settles
+/// under the line, locks and ends `done` as before (`auto_morphs_to_34_mm_in_still_air_on_both_links`).
+#[test]
+fn a_lock_too_warm_to_finish_ends_early_and_says_why() {
+    let mut b = Bench::new();
+    assert!(b.send("SIM MEDIUM air")[0].starts_with("ok"));
+    assert!(b.send("SIM AMBIENT 27")[0].starts_with("ok"));
+    b.run_for(1500.0);
+    let from = b.lines.len();
+    let t = b.morph(32.92, "auto");
+    let alarms = b.alarms_since(from);
+    assert_eq!(alarms.len(), 1, "{alarms:?}");
+    assert!(
+        alarms[0].starts_with("alarm: phase-timeout phase lock did not finish: pla stays at ")
+            && alarms[0]
+                .contains("too warm to hold this radius here; morph larger or cool the link"),
+        "{alarms:?}"
+    );
+    let lock_s = t - b
+        .lines
+        .iter()
+        .skip(from)
+        .find_map(|l| l.strip_prefix("event: phase lock t="))
+        .and_then(|v| v.parse::<f64>().ok())
+        .expect("a lock phase");
+    assert!(lock_s < 120.0, "the lock ran {lock_s} s");
+    assert_eq!(b.rig.ctrl.powers().pla_w + b.rig.ctrl.powers().tca_w, 0.0);
+}
+
 /// A morph sent the moment the last one reports `done` (a warm link) rests, heaters off, until
 /// the link has cooled to the rest its model starts from, says so (`event: phase rest`), and
 /// then lands within 0.5 percentage points of the same morph from rest, on both plants. Before:

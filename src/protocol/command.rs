@@ -60,23 +60,21 @@ pub fn parse_line(line: &str) -> Result<Option<Command>, ProtoError> {
         return Ok(None);
     };
     let simple = [
-        ("STATUS", Command::Status, "STATUS takes no arguments."),
-        ("ABORT", Command::Abort, "ABORT takes no arguments."),
-        ("RESET", Command::Reset, "RESET takes no arguments."),
-        ("RANGE", Command::Range, "RANGE takes no arguments."),
-        ("TABLE", Command::Table, "TABLE takes no arguments."),
-        ("VERSION", Command::Version, "VERSION takes no arguments."),
-        ("HELP", Command::Help, "HELP takes no arguments."),
-        ("STATS", Command::Stats, "STATS takes no arguments."),
-        ("SAVE", Command::Save, "SAVE takes no arguments."),
+        ("STATUS", Command::Status),
+        ("ABORT", Command::Abort),
+        ("RESET", Command::Reset),
+        ("RANGE", Command::Range),
+        ("TABLE", Command::Table),
+        ("VERSION", Command::Version),
+        ("HELP", Command::Help),
+        ("STATS", Command::Stats),
+        ("SAVE", Command::Save),
+        ("TUNE", Command::Tune),
     ];
-    for (word, command, extra) in simple {
+    for (word, command) in simple {
         if first.eq_ignore_ascii_case(word) {
-            return no_more(args, extra).map(|()| Some(command));
+            return no_args(args, word).map(|()| Some(command));
         }
-    }
-    if first.eq_ignore_ascii_case("TUNE") {
-        return no_more(args, "TUNE takes no arguments.").map(|()| Some(Command::Tune));
     }
     if first.eq_ignore_ascii_case("MEASURED") {
         return parse_measured(args).map(Some);
@@ -97,6 +95,21 @@ pub fn parse_line(line: &str) -> Result<Option<Command>, ProtoError> {
         parse_heat(args).map(Some)
     } else {
         Err(UNKNOWN)
+    }
+}
+
+/// `Ok` if `args` is exhausted, else `bad-argument <command> takes no arguments.`
+/// ([`ErrorCode::NoArguments`]).
+pub(crate) fn no_args<'a>(
+    mut args: impl Iterator<Item = &'a str>,
+    command: &'static str,
+) -> Result<(), ProtoError> {
+    match args.next() {
+        None => Ok(()),
+        Some(_) => Err(ProtoError {
+            code: ErrorCode::NoArguments,
+            text: command,
+        }),
     }
 }
 
@@ -179,10 +192,10 @@ fn parse_sim<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<SimCommand, 
         return Err(bad(NEEDS_SUB));
     };
     let extra = match sim {
-        SimCommand::State => "SIM STATE takes no arguments.",
-        SimCommand::Clear => "SIM CLEAR takes no arguments.",
-        SimCommand::Panic => "SIM PANIC takes no arguments.",
-        SimCommand::Stall => "SIM STALL takes no arguments.",
+        SimCommand::State => return no_args(args, "SIM STATE").map(|()| sim),
+        SimCommand::Clear => return no_args(args, "SIM CLEAR").map(|()| sim),
+        SimCommand::Panic => return no_args(args, "SIM PANIC").map(|()| sim),
+        SimCommand::Stall => return no_args(args, "SIM STALL").map(|()| sim),
         SimCommand::Fault(..) => "SIM FAULT takes a kind and an optional target (pla, tca or amb).",
         SimCommand::Supply(_) => "SIM SUPPLY takes one voltage.",
         SimCommand::Ambient(_) => "SIM AMBIENT takes one temperature.",
@@ -241,7 +254,7 @@ fn parse_config<'a>(mut args: impl Iterator<Item = &'a str>) -> Result<ConfigCom
         return Ok(ConfigCommand::List);
     };
     if sub.eq_ignore_ascii_case("RESET") {
-        no_more(args, "CONFIG RESET takes no arguments.")?;
+        no_args(args, "CONFIG RESET")?;
         return Ok(ConfigCommand::Reset);
     }
     if !sub.eq_ignore_ascii_case("SET") {

@@ -126,7 +126,10 @@ pub fn parse_links_command(line: &str) -> Option<Result<LinksCommand, ProtoError
     if first.eq_ignore_ascii_case("LINKS") {
         return Some(match words.next() {
             None => Ok(LinksCommand::Links),
-            Some(_) => Err(bad("LINKS takes no arguments.")),
+            Some(_) => Err(ProtoError {
+                code: ErrorCode::NoArguments,
+                text: "LINKS",
+            }),
         });
     }
     if !first.eq_ignore_ascii_case("GAIT") {

@@ -234,6 +234,10 @@ pub enum ErrorCode {
     UnknownCommand,
     /// An argument is missing, extra or malformed.
     BadArgument,
+    /// A command that takes no arguments got some: the error's text is the command, and the
+    /// wire reads `bad-argument <command> takes no arguments.` (one sentence for every such
+    /// command, not one each in flash).
+    NoArguments,
     /// A radius outside the reachable range, or a SIM value outside its limits.
     OutOfRange,
     /// A morph is running; ABORT first.
@@ -274,7 +278,7 @@ impl ErrorCode {
     pub fn as_str(self) -> &'static str {
         match self {
             ErrorCode::UnknownCommand => "unknown-command",
-            ErrorCode::BadArgument => "bad-argument",
+            ErrorCode::BadArgument | ErrorCode::NoArguments => "bad-argument",
             ErrorCode::OutOfRange => "out-of-range",
             ErrorCode::Busy => "busy",
             ErrorCode::FaultLatched => "fault-latched",
@@ -477,7 +481,12 @@ pub type OutLine = heapless::String<OUT_LINE_BYTES>;
 /// text comes near it: a test holds every one under it).
 pub fn format_error(err: &ProtoError) -> OutLine {
     let mut out = OutLine::new();
-    for part in [ERROR_TAG, " ", err.code.as_str(), " ", err.text] {
+    let tail = if err.code == ErrorCode::NoArguments {
+        " takes no arguments."
+    } else {
+        ""
+    };
+    for part in [ERROR_TAG, " ", err.code.as_str(), " ", err.text, tail] {
         let _ = out.push_str(part);
     }
     out
@@ -539,8 +548,16 @@ mod tests {
         assert_eq!(parse_line("table"), Ok(Some(Command::Table)));
         assert_eq!(parse_line("VeRsIoN"), Ok(Some(Command::Version)));
         assert_eq!(parse_line("\thelp"), Ok(Some(Command::Help)));
-        assert_eq!(code("STATUS now"), Some(ErrorCode::BadArgument));
-        assert_eq!(code("HELP me"), Some(ErrorCode::BadArgument));
+        assert_eq!(code("STATUS now"), Some(ErrorCode::NoArguments));
+        assert_eq!(code("HELP me"), Some(ErrorCode::NoArguments));
+        assert_eq!(
+            format_error(&parse_line("TUNE now").unwrap_err()).as_str(),
+            "error: bad-argument TUNE takes no arguments."
+        );
+        assert_eq!(
+            format_error(&parse_line("config reset all").unwrap_err()).as_str(),
+            "error: bad-argument CONFIG RESET takes no arguments."
+        );
     }
 
     #[test]
@@ -639,7 +656,8 @@ mod tests {
             "SIM WAIT nan",
             "SIM WAIT 1 s",
         ] {
-            assert_eq!(code(bad), Some(ErrorCode::BadArgument), "{bad}");
+            // On the wire: `bad-argument` (a command of no arguments given some included).
+            assert_eq!(code(bad).map(ErrorCode::as_str), Some("bad-argument"), "{bad}");
         }
     }
 
@@ -648,7 +666,7 @@ mod tests {
         assert_eq!(code("FLY"), Some(ErrorCode::UnknownCommand));
         assert_eq!(code("MORPHX 38"), Some(ErrorCode::UnknownCommand));
         assert_eq!(code("ＳＴＡＴＵＳ"), Some(ErrorCode::UnknownCommand));
-        assert_eq!(code("STATUS ü"), Some(ErrorCode::BadArgument));
+        assert_eq!(code("STATUS ü"), Some(ErrorCode::NoArguments));
         assert_eq!(code("\u{FFFD}"), Some(ErrorCode::UnknownCommand));
     }
 
@@ -691,17 +709,17 @@ mod tests {
             reply::ERR_OVERRUN,
         ]);
         for err in errors {
-            let text = err.text;
+            // The sentence as the wire carries it (a command of no arguments: its word, then
+            // ` takes no arguments.`).
+            let out = format_error(&err);
+            let head = format!("error: {} ", err.code.as_str());
+            let text = out.as_str().strip_prefix(head.as_str()).unwrap();
+            assert!(text.starts_with(err.text), "{text}");
             assert!(
                 text.ends_with('.') && text.is_ascii() && !text.contains('\n'),
                 "{text}"
             );
             assert!(text.as_bytes()[0].is_ascii_uppercase(), "{text}");
-            let out = format_error(&err);
-            assert_eq!(
-                out.as_str(),
-                format!("error: {} {}", err.code.as_str(), text)
-            );
             assert!(out.len() < out.capacity());
         }
         assert!(ERR_LINE_TOO_LONG.text.contains(&format!("{MAX_LINE}")));

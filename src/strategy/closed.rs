@@ -97,6 +97,28 @@ const _: () = assert!(
         && CLOSED_LOCK_STALL_MAX_C < SOFT_THRESHOLD_C
 );
 
+/// A lock whose PLA cannot cool under [`CLOSED_LOCK_STALL_MAX_C`] ends at once, as its timeout
+/// would, with the PLA's reading in its alarm: the TCA holding this radius, or the
+/// surroundings, keep the rod too warm to hold the shape, and waiting out the lock timeout
+/// (`LOCK_TIMEOUT_S`, 600 s) with the TCA hot changes nothing. It cannot cool under it when even
+/// its slowest settling would leave it over the line by [`CLOSED_LOCK_STUCK_MARGIN_K`]: the PLA
+/// reading and estimate less how fast the reading fell over the last [`CLOSED_LOCK_STUCK_S`]
+/// times this, s, the slowest settling a lock sees (the links settle in their lock within
+/// 20–60 s once the PLA heater is off). The fall is the reading's over the window, not the
+/// observer's rate, whose 0.05 K/s of noise would hide any stall.
+pub const CLOSED_LOCK_SETTLE_TAU_S: f32 = 120.0;
+/// How far over [`CLOSED_LOCK_STALL_MAX_C`] the PLA's slowest settling must be, K, before a lock
+/// ends as too warm: the reading's noise over the window times [`CLOSED_LOCK_SETTLE_TAU_S`]
+/// (0.05 K over 30 s, 0.2 K) with room; a rod that settles nearer the line waits for the lock
+/// timeout, as before.
+pub const CLOSED_LOCK_STUCK_MARGIN_K: f32 = 0.5;
+/// The window over which the PLA's fall is read, s: long enough for its noise to matter little
+/// ([`CLOSED_LOCK_STUCK_MARGIN_K`]).
+pub const CLOSED_LOCK_STUCK_S: f32 = 30.0;
+const _: () = assert!(
+    CLOSED_LOCK_SETTLE_TAU_S > 0.0 && CLOSED_LOCK_STUCK_MARGIN_K > 0.0 && CLOSED_LOCK_STUCK_S > 0.0
+);
+
 /// The `closed` strategy.
 #[derive(Clone, Copy, Debug)]
 pub struct Closed {
@@ -107,6 +129,11 @@ pub struct Closed {
     map: (f32, f32),
     /// Since when the PLA has read stalled in lock, ms ([`CLOSED_LOCK_STALL_K_PER_S`]).
     stalled_since_ms: Option<u64>,
+    /// Where the current window of a too-warm lock began: ms and the PLA reading, °C
+    /// ([`CLOSED_LOCK_STUCK_S`]).
+    window: Option<(u64, f32)>,
+    /// The lock cannot finish: its timeout is now.
+    stuck: bool,
     /// The TCA's own temperature, where the morph started with one (a board that senses
     /// current, after `TUNE` fitted its coefficient): the TCA is then bent and held on it
     /// instead of on its thermistor.
@@ -130,6 +157,8 @@ impl Closed {
             drive: ModelDrive::new(s, t),
             map,
             stalled_since_ms: None,
+            window: None,
+            stuck: false,
             own: OwnTemp::new(s.now_ms, s.tca_self_c).filter(|_| s.cal.self_sensed()),
             strain_k: if strain_k.is_finite() { strain_k } else { 0.0 },
         }
@@ -179,6 +208,23 @@ impl Closed {
         let stalled = self.stalled_since_ms.is_some_and(|since| {
             t.now_ms.saturating_sub(since) as f32 / 1000.0 >= CLOSED_LOCK_STALL_S
         });
+        // Where the PLA settles at the slowest, judged over each window while it reads over
+        // the line: still over it, and the lock can never end.
+        let line_c = CLOSED_LOCK_STALL_MAX_C + CLOSED_LOCK_STUCK_MARGIN_K;
+        let warmest = m.t_pla_c.min(pla_c);
+        self.window = match self.window {
+            Some((t0, c0)) if warmest >= line_c => {
+                let dt_s = t.now_ms.saturating_sub(t0) as f32 / 1000.0;
+                if dt_s < CLOSED_LOCK_STUCK_S {
+                    Some((t0, c0))
+                } else {
+                    let fall = ((c0 - m.t_pla_c) / dt_s).max(0.0);
+                    self.stuck = warmest - fall * CLOSED_LOCK_SETTLE_TAU_S >= line_c;
+                    Some((t.now_ms, m.t_pla_c))
+                }
+            }
+            _ => (warmest >= line_c).then_some((t.now_ms, m.t_pla_c)),
+        };
         (pla_c < rigid_c && lead_c < rigid_c) || stalled
     }
 }
@@ -187,6 +233,13 @@ impl Strategy for Closed {
     fn enter(&mut self, _phase: Phase, _now_ms: u64) {
         self.drive.enter();
         self.stalled_since_ms = None;
+        self.window = None;
+    }
+
+    fn timeout_s(&self, phase: Phase) -> Option<f32> {
+        // A lock too warm to end: now (the sequencer's timeout ends the morph, its alarm names
+        // the PLA's reading).
+        (phase == Phase::Lock && self.stuck).then_some(0.0)
     }
 
     fn phase_done(&mut self, t: &Tick) -> bool {

@@ -70,6 +70,11 @@ impl fmt::Display for FaultText<'_> {
                 Fixed(SUPPLY_MIN_V, 1),
                 Fixed(SUPPLY_MAX_V, 1)
             ),
+            // A lock carries the PLA's reading: a rod this warm cannot hold the radius here.
+            FaultCode::PhaseTimeout if f.value.is_finite() => write!(
+                l,
+                "phase-timeout phase {s} did not finish: pla stays at {v} C, too warm to hold this radius here; morph larger or cool the link"
+            ),
             FaultCode::PhaseTimeout => write!(l, "phase-timeout phase {s} did not finish in time"),
             FaultCode::SensorFrozen => {
                 write!(l, "sensor-frozen {s} moved {v} K")
