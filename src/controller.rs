@@ -699,7 +699,12 @@ impl Controller {
                     let _ = events.push(Event::Seq(e));
                 });
                 ended = !self.seq.busy();
-                r.map_err(|t| t.fault(m.t_pla_c))
+                let reading = if self.seq.gave_up() {
+                    m.t_pla_c
+                } else {
+                    f32::NAN
+                };
+                r.map_err(|t| t.fault(reading))
             }
             Activity::Tune(t) => {
                 let ratio = self.elec.tca_ratio();

@@ -130,6 +130,10 @@ impl Fault {
             (FaultCode::SupplyOutOfRange, _) => {
                 "SUPPLY_MIN_V, SUPPLY_MAX_V, SUPPLY_READ_TOLERANCE_V"
             }
+            // A lock `closed` judged too warm to finish (it carries the PLA's reading).
+            (FaultCode::PhaseTimeout, Subject::Phase(Phase::Lock)) if self.value.is_finite() => {
+                "CLOSED_LOCK_SETTLE_TAU_S"
+            }
             (FaultCode::PhaseTimeout, Subject::Phase(phase)) => match phase {
                 Phase::Soften => "SOFTEN_TIMEOUT_S",
                 Phase::Bend => "BEND_TIMEOUT_S",

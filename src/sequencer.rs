@@ -91,17 +91,14 @@ pub const DONE_MISS_SHARE: f32 = 0.01;
 pub struct PhaseTimeout(pub Phase);
 
 impl PhaseTimeout {
-    /// The fault it latches: `phase-timeout <phase>`; a lock's carries the PLA reading
-    /// `t_pla_c` (°C), which says why the rod did not turn rigid.
-    pub fn fault(self, t_pla_c: f32) -> crate::fault::Fault {
+    /// The fault it latches: `phase-timeout <phase>`, carrying `value` (the PLA's reading, °C,
+    /// where the strategy judged its lock too warm to finish: [`Sequencer::gave_up`]; else
+    /// NaN).
+    pub fn fault(self, value: f32) -> crate::fault::Fault {
         crate::fault::Fault {
             code: crate::fault::FaultCode::PhaseTimeout,
             subject: crate::fault::Subject::Phase(self.0),
-            value: if self.0 == Phase::Lock {
-                t_pla_c
-            } else {
-                f32::NAN
-            },
+            value,
         }
     }
 }
@@ -181,6 +178,8 @@ pub struct Sequencer {
     rest_shape_per_m: f32,
     thresholds: Thresholds,
     timeouts: PhaseTimeouts,
+    /// The last phase timeout was the strategy's judgment, not the clock ([`Sequencer::gave_up`]).
+    gave_up: bool,
 }
 
 impl Default for Sequencer {
@@ -214,6 +213,7 @@ impl Sequencer {
             rest_shape_per_m: f32::NAN,
             thresholds: Thresholds::DEFAULT,
             timeouts: PhaseTimeouts::DEFAULT,
+            gave_up: false,
         }
     }
 
@@ -357,12 +357,21 @@ impl Sequencer {
     }
 
     fn check_timeout(&mut self, now_ms: u64) -> Result<(), PhaseTimeout> {
-        if self.busy() && since_s(now_ms, self.at.phase_ms) > self.timeout_s() {
+        let timeout_s = self.timeout_s();
+        if self.busy() && since_s(now_ms, self.at.phase_ms) > timeout_s {
             let p = self.at.phase;
+            // A strategy whose own timeout is now has judged the phase cannot finish.
+            self.gave_up = timeout_s <= 0.0;
             self.abort();
             return Err(PhaseTimeout(p));
         }
         Ok(())
+    }
+
+    /// True if the last phase timeout was the strategy's judgment that its phase cannot finish
+    /// (a lock too warm to end, `strategy::closed::CLOSED_LOCK_SETTLE_TAU_S`), not the clock.
+    pub fn gave_up(&self) -> bool {
+        self.gave_up
     }
 
     /// One control tick: advances the phase from the measurements and returns the powers.

@@ -204,7 +204,7 @@ fn auto_morphs_to_34_mm_in_still_air_on_both_links() {
 }
 
 /// A lock the link cannot finish (still air at 27 °C: the TCA holding 32.92 mm keeps the PLA
-/// at 59 °C, over the 58 °C the rod must cool under to hold the shape) ends within two minutes
+/// at 59 °C, over the 58 °C the rod must cool under to hold the shape) ends within five minutes
 /// of lock, not at the ten-minute lock timeout, with both heaters off and an alarm that names
 /// the PLA's reading and what to do; the same link in 22 °C still air, whose PLA settles
 /// under the line, locks and ends `done` as before (`auto_morphs_to_34_mm_in_still_air_on_both_links`).
@@ -231,7 +231,7 @@ fn a_lock_too_warm_to_finish_ends_early_and_says_why() {
         .find_map(|l| l.strip_prefix("event: phase lock t="))
         .and_then(|v| v.parse::<f64>().ok())
         .expect("a lock phase");
-    assert!(lock_s < 120.0, "the lock ran {lock_s} s");
+    assert!(lock_s < 300.0, "the lock ran {lock_s} s");
     assert_eq!(b.rig.ctrl.powers().pla_w + b.rig.ctrl.powers().tca_w, 0.0);
 }
 

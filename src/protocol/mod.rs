@@ -657,7 +657,11 @@ mod tests {
             "SIM WAIT 1 s",
         ] {
             // On the wire: `bad-argument` (a command of no arguments given some included).
-            assert_eq!(code(bad).map(ErrorCode::as_str), Some("bad-argument"), "{bad}");
+            assert_eq!(
+                code(bad).map(ErrorCode::as_str),
+                Some("bad-argument"),
+                "{bad}"
+            );
         }
     }
 

@@ -103,14 +103,16 @@ const _: () = assert!(
 /// (`LOCK_TIMEOUT_S`, 600 s) with the TCA hot changes nothing. It cannot cool under it when even
 /// its slowest settling would leave it over the line by [`CLOSED_LOCK_STUCK_MARGIN_K`]: the PLA
 /// reading and estimate less how fast the reading fell over the last [`CLOSED_LOCK_STUCK_S`]
-/// times this, s, the slowest settling a lock sees (the links settle in their lock within
-/// 20–60 s once the PLA heater is off). The fall is the reading's over the window, not the
+/// times this, s, over two windows in a row: a settling slower than any lock here shows (the
+/// links settle in their lock within 20–60 s once the PLA heater is off; a still-air link at
+/// the least rated convection is the slowest), so a rod that is still cooling towards a lockable
+/// temperature is not judged stuck. The fall is the reading's over the window, not the
 /// observer's rate, whose 0.05 K/s of noise would hide any stall.
-pub const CLOSED_LOCK_SETTLE_TAU_S: f32 = 120.0;
+pub const CLOSED_LOCK_SETTLE_TAU_S: f32 = 200.0;
 /// How far over [`CLOSED_LOCK_STALL_MAX_C`] the PLA's slowest settling must be, K, before a lock
-/// ends as too warm: the reading's noise over the window times [`CLOSED_LOCK_SETTLE_TAU_S`]
-/// (0.05 K over 30 s, 0.2 K) with room; a rod that settles nearer the line waits for the lock
-/// timeout, as before.
+/// ends as too warm: the noise of the fall between two readings over the window times
+/// [`CLOSED_LOCK_SETTLE_TAU_S`] is about 0.07 K / 30 s × 200 s, 0.5 K, and two windows in a row
+/// must agree; a rod that settles nearer the line waits for the lock timeout, as before.
 pub const CLOSED_LOCK_STUCK_MARGIN_K: f32 = 0.5;
 /// The window over which the PLA's fall is read, s: long enough for its noise to matter little
 /// ([`CLOSED_LOCK_STUCK_MARGIN_K`]).
@@ -132,8 +134,9 @@ pub struct Closed {
     /// Where the current window of a too-warm lock began: ms and the PLA reading, °C
     /// ([`CLOSED_LOCK_STUCK_S`]).
     window: Option<(u64, f32)>,
-    /// The lock cannot finish: its timeout is now.
-    stuck: bool,
+    /// Windows in a row whose slowest settling stayed over the line; at two the lock cannot
+    /// finish and its timeout is now.
+    stuck_windows: u8,
     /// The TCA's own temperature, where the morph started with one (a board that senses
     /// current, after `TUNE` fitted its coefficient): the TCA is then bent and held on it
     /// instead of on its thermistor.
@@ -158,7 +161,7 @@ impl Closed {
             map,
             stalled_since_ms: None,
             window: None,
-            stuck: false,
+            stuck_windows: 0,
             own: OwnTemp::new(s.now_ms, s.tca_self_c).filter(|_| s.cal.self_sensed()),
             strain_k: if strain_k.is_finite() { strain_k } else { 0.0 },
         }
@@ -219,11 +222,19 @@ impl Closed {
                     Some((t0, c0))
                 } else {
                     let fall = ((c0 - m.t_pla_c) / dt_s).max(0.0);
-                    self.stuck = warmest - fall * CLOSED_LOCK_SETTLE_TAU_S >= line_c;
+                    let over = warmest - fall * CLOSED_LOCK_SETTLE_TAU_S >= line_c;
+                    self.stuck_windows = if over {
+                        self.stuck_windows.saturating_add(1)
+                    } else {
+                        0
+                    };
                     Some((t.now_ms, m.t_pla_c))
                 }
             }
-            _ => (warmest >= line_c).then_some((t.now_ms, m.t_pla_c)),
+            _ => {
+                self.stuck_windows = 0;
+                (warmest >= line_c).then_some((t.now_ms, m.t_pla_c))
+            }
         };
         (pla_c < rigid_c && lead_c < rigid_c) || stalled
     }
@@ -234,12 +245,13 @@ impl Strategy for Closed {
         self.drive.enter();
         self.stalled_since_ms = None;
         self.window = None;
+        self.stuck_windows = 0;
     }
 
     fn timeout_s(&self, phase: Phase) -> Option<f32> {
         // A lock too warm to end: now (the sequencer's timeout ends the morph, its alarm names
         // the PLA's reading).
-        (phase == Phase::Lock && self.stuck).then_some(0.0)
+        (phase == Phase::Lock && self.stuck_windows >= 2).then_some(0.0)
     }
 
     fn phase_done(&mut self, t: &Tick) -> bool {

@@ -155,6 +155,13 @@ mod tests {
             (FaultCode::HeaterResistance, &heaters),
             (FaultCode::CutoffFailed, &[Subject::Supply]),
         ];
+        // Each with a value, and each phase timeout also as the clock's (no value: a lock's
+        // carries the PLA's reading only where `closed` judged it too warm to finish).
+        let clock = phases.map(|subject| Fault {
+            code: FaultCode::PhaseTimeout,
+            subject,
+            value: f32::NAN,
+        });
         cases
             .iter()
             .flat_map(|(code, subjects)| {
@@ -164,7 +171,37 @@ mod tests {
                     value: -123.4,
                 })
             })
+            .chain(clock)
             .collect()
+    }
+
+    #[test]
+    fn a_phase_timeout_by_the_clock_says_so_and_a_lock_too_warm_names_its_reading() {
+        let text = |phase, value| {
+            let mut l = OutLine::new();
+            alarm(
+                &mut l,
+                &Fault {
+                    code: FaultCode::PhaseTimeout,
+                    subject: Subject::Phase(phase),
+                    value,
+                },
+            );
+            l
+        };
+        let lock = text(Phase::Lock, f32::NAN);
+        assert!(
+            lock.starts_with("alarm: phase-timeout phase lock did not finish in time; ")
+                && lock.contains("(LOCK_TIMEOUT_S; "),
+            "{lock}"
+        );
+        let warm = text(Phase::Lock, 60.04);
+        assert!(
+            warm.starts_with(
+                "alarm: phase-timeout phase lock did not finish: pla stays at 60.0 C, too warm"
+            ) && warm.contains("(CLOSED_LOCK_SETTLE_TAU_S; "),
+            "{warm}"
+        );
     }
 
     /// The safety doc's section `heading` (a `## ` heading), up to the next `## ` heading.

@@ -92,9 +92,12 @@ pub fn parse(text: &str) -> Result<Vec<Line>, String> {
                 // The core's own parser: a line the device would refuse as unknown or
                 // malformed (`slep 3`, `MORPH`) is refused here, before anything is sent.
                 if let Err(e) = morphlink::protocol::links::check_line(&line) {
+                    // The sentence as the device would send it, after `error: <code> `.
+                    let wire = morphlink::protocol::format_error(&e);
+                    let sentence = wire.splitn(3, ' ').nth(2).unwrap_or(e.text);
                     return Err(err(format!(
                         "`{line}` is neither a script step (`wait done|alarm [<s>]`, `sleep <s>`) nor a protocol line the device accepts: {}",
-                        e.text.trim_end_matches('.')
+                        sentence.trim_end_matches('.')
                     )));
                 }
                 Step::Send(line)
@@ -319,6 +322,8 @@ mod tests {
                 "line 2: `slep 3` is neither a script step",
             ),
             ("MORPH\n", "line 1: `MORPH` is neither"),
+            // A command of no arguments given some: the device's whole sentence.
+            ("STATUS now\n", "accepts: STATUS takes no arguments"),
             (
                 "SIM FAULT nonsense tca\n",
                 "line 1: `SIM FAULT nonsense tca`",
