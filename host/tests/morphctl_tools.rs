@@ -952,6 +952,15 @@ fn a_gait_logs_a_row_per_link_under_its_budget_and_plots_it() {
         rows.len() / 2,
         "{log}"
     );
+    // Link 2 waits for the budget: its rows say so until it starts.
+    assert!(
+        rows.iter().any(|r| r[0] == "2" && r[2] == "queued"),
+        "{log}"
+    );
+    assert!(
+        rows.iter().any(|r| r[0] == "2" && r[2] == "soften"),
+        "{log}"
+    );
     let total = rows[0].len() - 2;
     for r in &rows {
         let (t, b): (f64, f64) = (r[total].parse().unwrap(), r[total + 1].parse().unwrap());

@@ -330,7 +330,12 @@ pub fn poll(
         None => clock.start.elapsed().as_secs_f64(),
     };
     let (statuses, end) = link.command("@* STATUS", REPLY_TIMEOUT_S, on_event)?;
-    let (_, links) = link.command("LINKS", REPLY_TIMEOUT_S, on_event)?;
+    let (rows, links) = link.command("LINKS", REPLY_TIMEOUT_S, on_event)?;
+    // A link whose MORPH waits for the budget reads idle in its STATUS: LINKS says it is queued.
+    let queued = |k: usize| {
+        rows.iter()
+            .any(|r| link_of(r).0 == Some(k) && field(r, "queued").as_deref() == Some("yes"))
+    };
     // A poll that is not every link's (an error reply, lost lines) cannot say the links have
     // stopped: it breaks the gait, which then stops every heater.
     if classify(&end) != LineKind::Ok
@@ -363,9 +368,13 @@ pub fn poll(
         } else {
             f64::NAN
         };
+        let mut sample = Sample::from_status(t_s, status, radius_mm);
+        if queued(k) {
+            sample.phase = "queued".into();
+        }
         out.push(GaitSample {
             link: k,
-            sample: Sample::from_status(t_s, status, radius_mm),
+            sample,
             total_w,
             budget_w,
         });
