@@ -1,6 +1,7 @@
 //! `cargo xtask boards`: builds the firmware for every board in `boards/` (release, one after
-//! the other in the shared `target/`) and the images of several links ([`MULTI_LINK_IMAGES`]:
-//! the emulated board's two links), prints a table of flash and RAM use, and fails if an image
+//! the other in the shared `target/`; the emulated board's in `target/emulated/`, where the
+//! emulator tests build it) and the images of several links ([`MULTI_LINK_IMAGES`]: the
+//! emulated board's two links), prints a table of flash and RAM use, and fails if an image
 //! breaks its budget.
 //!
 //! Budgets:
@@ -490,8 +491,15 @@ fn linked_against(elf: &[u8], ram: Option<(u64, u64)>) -> bool {
 const MULTI_LINK_IMAGES: [(&str, &[&str]); 1] = [("b-l475e-iot01a-emulated", &["links-2"])];
 
 fn build(ws: &Workspace, board: &str, features: &[&str]) -> Result<PathBuf, String> {
+    // The emulated images in the directory the emulator tests and `cargo xtask emulate` build
+    // them in: after `cargo test` (CI runs it first) they are already there, not built again.
+    let target_dir = if board == morphlink_host::emulator::BOARD {
+        ws.target_dir.join("emulated")
+    } else {
+        ws.target_dir.clone()
+    };
     let elf =
-        morphlink_host::emulator::build_firmware_with(&ws.root, board, features, &ws.target_dir)?;
+        morphlink_host::emulator::build_firmware_with(&ws.root, board, features, &target_dir)?;
     if !features.is_empty() {
         return Ok(elf);
     }
