@@ -671,27 +671,34 @@ impl Calibration {
     }
 
     /// Adds one report to the TCA map: the estimate's rise at lock `x_k` and the rise the
-    /// measured radius needs `y_k`, K; returns the new map `(a, b)`. Refused, changing nothing
+    /// measured radius needs `y_k`, K, counted `weight` (0–1] of a caliper's MEASURED (a rest
+    /// reading counts by its uncertainty, [`crate::shape`]); returns the new map `(a, b)`. Refused, changing nothing
     /// and saying why, if the refitted map's slope would be outside [`MAP_SLOPE_RANGE`] or it
     /// would correct by more than [`MAP_MAX_CORRECTION_K`] within [`MAP_SPAN_K`].
-    pub fn fold_map(&mut self, x_k: f32, y_k: f32) -> Result<(f32, f32), ReportRejection> {
-        if !(x_k.is_finite() && y_k.is_finite()) {
+    pub fn fold_map(
+        &mut self,
+        x_k: f32,
+        y_k: f32,
+        weight: f32,
+    ) -> Result<(f32, f32), ReportRejection> {
+        if !(x_k.is_finite() && y_k.is_finite() && weight > 0.0 && weight <= 1.0) {
             return Err(ReportRejection::NotFinite);
         }
+        let w = weight;
         let mut next = *self;
-        if next.map_count + 1.0 > MEASURED_MEMORY {
-            let keep = (MEASURED_MEMORY - 1.0) / next.map_count;
+        if next.map_count + w > MEASURED_MEMORY {
+            let keep = (MEASURED_MEMORY - w) / next.map_count;
             next.map_count *= keep;
             next.map_sum_x_k *= keep;
             next.map_sum_y_k *= keep;
             next.map_sum_xx_k2 *= keep;
             next.map_sum_xy_k2 *= keep;
         }
-        next.map_count += 1.0;
-        next.map_sum_x_k += x_k;
-        next.map_sum_y_k += y_k;
-        next.map_sum_xx_k2 += x_k * x_k;
-        next.map_sum_xy_k2 += x_k * y_k;
+        next.map_count += w;
+        next.map_sum_x_k += w * x_k;
+        next.map_sum_y_k += w * y_k;
+        next.map_sum_xx_k2 += w * x_k * x_k;
+        next.map_sum_xy_k2 += w * x_k * y_k;
         let (a, b) = next.map_fit();
         map_bounds(a, b)?;
         if let Some(f) = next.first_invalid() {
@@ -925,7 +932,7 @@ mod tests {
         let need = |x: f32| 0.9 * x - 4.0;
         let mut c = Calibration::default();
         for x in [20.0f32, 40.0, 60.0] {
-            c.fold_map(x, need(x)).unwrap();
+            c.fold_map(x, need(x), 1.0).unwrap();
         }
         let (a, b) = c.map();
         assert!((b - 0.9).abs() < 0.02 && (a + 4.0).abs() < 0.6, "{a} {b}");
@@ -947,7 +954,7 @@ mod tests {
         let mut c = Calibration::default();
         let mut last = miss(&c);
         for (n, x) in [40.0f32, 20.0, 60.0].into_iter().enumerate() {
-            c.fold_map(x, need(x)).unwrap();
+            c.fold_map(x, need(x), 1.0).unwrap();
             let (a, b) = c.map();
             let now = miss(&c);
             // One report splits its correction between offset and slope, both the right way,
@@ -968,7 +975,7 @@ mod tests {
         // Three reports at one rise: no slope information; the prior keeps it near 1.
         let mut c = Calibration::default();
         for _ in 0..3 {
-            c.fold_map(30.0, 27.0).unwrap();
+            c.fold_map(30.0, 27.0, 1.0).unwrap();
         }
         let (a, b) = c.map();
         assert!((a + 30.0 * (b - 1.0) + 3.0).abs() < 0.3, "{a} {b}");
@@ -976,7 +983,7 @@ mod tests {
         // Reports at zero rise fit the offset alone.
         let mut z = Calibration::default();
         for _ in 0..3 {
-            z.fold_map(0.0, -2.0).unwrap();
+            z.fold_map(0.0, -2.0, 1.0).unwrap();
         }
         let (a, b) = z.map();
         let shrunk = -2.0 * 3.0 / (3.0 + MAP_OFFSET_PRIOR_WEIGHT);
@@ -990,22 +997,25 @@ mod tests {
     fn absurd_reports_are_refused_say_why_and_change_nothing() {
         let mut c = Calibration::default();
         assert!(matches!(
-            c.fold_map(30.0, 90.0),
+            c.fold_map(30.0, 90.0, 1.0),
             Err(ReportRejection::Slope(_) | ReportRejection::Correction(_))
         ));
-        assert_eq!(c.fold_map(f32::NAN, 30.0), Err(ReportRejection::NotFinite));
         assert_eq!(
-            c.fold_map(30.0, f32::INFINITY),
+            c.fold_map(f32::NAN, 30.0, 1.0),
+            Err(ReportRejection::NotFinite)
+        );
+        assert_eq!(
+            c.fold_map(30.0, f32::INFINITY, 1.0),
             Err(ReportRejection::NotFinite)
         );
         assert_eq!(c, Calibration::default());
         // A slope past its range is refused, not clamped into use.
         let mut s = Calibration::default();
         for x in [20.0f32, 40.0] {
-            s.fold_map(x, 0.8 * x).unwrap();
+            s.fold_map(x, 0.8 * x, 1.0).unwrap();
         }
         let before = s;
-        match s.fold_map(60.0, 0.2 * 60.0) {
+        match s.fold_map(60.0, 0.2 * 60.0, 1.0) {
             Err(ReportRejection::Slope(b)) => assert!(b < MAP_SLOPE_RANGE.0, "{b}"),
             Err(ReportRejection::Correction(k)) => assert!(k > MAP_MAX_CORRECTION_K, "{k}"),
             other => panic!("{other:?}"),
@@ -1014,7 +1024,7 @@ mod tests {
         // A uniform offset beyond the largest correction.
         let mut o = Calibration::default();
         assert!(matches!(
-            o.fold_map(5.0, 5.0 + 4.0 * MAP_MAX_CORRECTION_K),
+            o.fold_map(5.0, 5.0 + 4.0 * MAP_MAX_CORRECTION_K, 1.0),
             Err(ReportRejection::Correction(_))
         ));
         assert_eq!(o, Calibration::default());

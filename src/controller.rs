@@ -17,6 +17,7 @@ use crate::sequencer::{SeqEvent, Sequencer};
 use crate::settings::codec::{self, Blob, LoadError};
 use crate::settings::store::{Loaded, SaveReport, StoreError};
 use crate::settings::{SetError, Settings, Spec, CALIBRATION_SPECS};
+use crate::shape::{self, Outcome, RestShape};
 use crate::stats::LoopTiming;
 use crate::strategy::model::MODEL_KEEP_ALIVE_W;
 use crate::supervisor::{Fault, FaultCode, Faults, Frame, Subject, Supervisor};
@@ -158,6 +159,14 @@ pub enum Event {
     Config(ConfigEvent),
     /// `TUNE` progress.
     Tune(TuneEvent),
+    /// What a rest at a new shape gave ([`crate::shape`]), and whether it was folded into the
+    /// calibration as a MEASURED.
+    Shape {
+        /// The shape read, or why none.
+        outcome: Outcome,
+        /// Folded into the calibration.
+        learnt: bool,
+    },
 }
 
 /// What the boot did with the stored settings ([`Controller::load_settings`]).
@@ -231,6 +240,11 @@ pub struct Controller {
     /// while one heats and after one that did not finish. The TCA's rest reference is tagged
     /// with it, so the strain term is learnt from the change of shape between two rests.
     shape_per_m: Option<f32>,
+    /// `shape_per_m` is known, not a morph's estimate: the link as built (no morph since
+    /// boot) or a MEASURED radius.
+    shape_known: bool,
+    /// The shape read from the TCA's resistance at rest ([`crate::shape`]).
+    rest_shape: RestShape,
 }
 
 /// What MEASURED needs of the last morph.
@@ -250,6 +264,9 @@ struct LastMorph {
     epoch: u32,
     /// A MEASURED report has been counted for it.
     counted: bool,
+    /// Its rest-shape reading has been counted for it ([`crate::shape`]): a caliper's
+    /// MEASURED may still follow (the reading does not stand in for one).
+    read: bool,
 }
 
 /// MEASURED accepts radii this share beyond the table's range on either side: a link that
@@ -294,6 +311,8 @@ impl Controller {
             cal_epoch: 0,
             heat_budget: crate::pulse::HeatBudget::default(),
             shape_per_m: None,
+            shape_known: false,
+            rest_shape: RestShape::default(),
         }
     }
 
@@ -632,6 +651,7 @@ impl Controller {
         let tca_driven = !(matches!(doing, Doing::Idle | Doing::Morph(Phase::Rest))
             || self.tune_step() == Some(crate::tune::TuneStep::Settle));
         self.note_rest(tca_driven, &m);
+        self.note_shape(tca_driven, &m);
         // Every tick, so a MORPH between ticks starts from this one's.
         self.seq.set_tca_self(
             self.tca_self_c().unwrap_or(f32::NAN),
@@ -664,9 +684,12 @@ impl Controller {
         // spring-back at rest is under 2 % of that curvature).
         let shape_per_m = match self.shape_per_m {
             Some(k) => k,
-            None if m.t_amb_c.is_finite() => *self
-                .shape_per_m
-                .insert(crate::lumped::curvature_per_m(m.t_amb_c)),
+            None if m.t_amb_c.is_finite() => {
+                self.shape_known = true;
+                *self
+                    .shape_per_m
+                    .insert(crate::lumped::curvature_per_m(m.t_amb_c))
+            }
             None => return,
         };
         let cal = &mut self.settings.cal;
@@ -678,6 +701,58 @@ impl Controller {
             // A report out of bounds (a coil replaced, a shape mis-estimated) teaches nothing.
             let _ = cal.fold_strain(dkappa_per_m, miss_k);
         }
+    }
+
+    /// Feeds the rest-shape sensor ([`crate::shape`]) a tick at rest after a morph's `done`
+    /// (or as built), queues what a finished rest gave, and, where the reading agrees with the
+    /// estimate and is tight enough, folds it into the calibration as a MEASURED would.
+    fn note_shape(&mut self, tca_driven: bool, m: &Measurements) {
+        let Some(k) = self.shape_per_m else {
+            return;
+        };
+        if tca_driven || self.fault().is_some() || !matches!(self.activity, Activity::Idle) {
+            self.rest_shape.interrupted();
+            return;
+        }
+        let sigma = match (self.shape_known, self.last.is_some()) {
+            (false, _) => shape::estimate_sigma_per_m(k),
+            (true, false) => shape::as_built_sigma_per_m(k),
+            (true, true) => shape::known_sigma_per_m(k),
+        };
+        let tcr_per_k = self.settings.cal.tca_tcr_ppm_per_k * 1e-6;
+        let dt_s = TICK_MS as f32 * 1e-3;
+        let r_ohm = match self.elec.on_a() {
+            Some(_) => Ok(self.elec.raw_ohm(Heater::Tca)),
+            None => Err(()),
+        };
+        let (t_tca, t_amb) = (m.t_tca_c, m.t_amb_c);
+        let Some(outcome) = self.rest_shape.note(
+            dt_s,
+            r_ohm,
+            t_tca,
+            t_amb,
+            (k, sigma, self.shape_known),
+            tcr_per_k,
+        ) else {
+            return;
+        };
+        let mut learnt = false;
+        if let Outcome::Shape(r) = outcome {
+            if r.learnable && !self.shape_known {
+                let mut l = OutLine::new();
+                self.fold_measured(r.radius_mm, Some(r.weight()), &mut l);
+                learnt = !l.starts_with(protocol::ERROR_TAG);
+            }
+        }
+        // As built (no morph since boot) the rest is the anchor; nobody asked for its shape.
+        if self.last.is_some() {
+            self.push(Event::Shape { outcome, learnt });
+        }
+    }
+
+    /// The rest-shape sensor ([`crate::shape`]): its anchor and gauge.
+    pub fn rest_shape(&self) -> &RestShape {
+        &self.rest_shape
     }
 
     /// Runs this tick of the activity in the slot: the powers it asks for, or the fault it
@@ -748,11 +823,16 @@ impl Controller {
                     last.done_mm = radius_mm;
                 }
                 self.shape_per_m = Some(1e3 / radius_mm);
+                self.shape_known = false;
+                self.rest_shape.moved();
             }
             Event::Seq(SeqEvent::Phase {
                 phase: Phase::Soften,
                 ..
-            }) => self.shape_per_m = Some(f32::NAN),
+            }) => {
+                self.shape_per_m = Some(f32::NAN);
+                self.rest_shape.moved();
+            }
             _ => {}
         }
         self.push(e);
@@ -938,6 +1018,7 @@ impl Controller {
                     map: self.settings.cal.map(),
                     done_mm: f32::NAN,
                     counted: false,
+                    read: false,
                     epoch: self.cal_epoch,
                 });
                 let cal = self.settings.cal;
@@ -1037,6 +1118,7 @@ impl Controller {
                 reply::config_defaults_event(&mut l, why.as_str(), setting)
             }
             Event::Tune(e) => tune_reply::tune_event(&mut l, &e),
+            Event::Shape { outcome, learnt } => tune_reply::shape_event(&mut l, &outcome, learnt),
         }
         Some(l)
     }
@@ -1248,32 +1330,41 @@ impl Controller {
     }
 
     fn measured(&mut self, radius_mm: f32, out: &mut dyn FnMut(&str)) {
-        use crate::strategy::model::target;
         let mut l = OutLine::new();
         // The busy rule of CONFIG SET (the calibration is a setting), in MEASURED's words.
-        if self.refused(Start::Measured, &mut l) {
-            return out(&l);
+        if !self.refused(Start::Measured, &mut l) {
+            self.fold_measured(radius_mm, None, &mut l);
         }
+        out(&l);
+    }
+
+    /// Folds the radius `radius_mm` the last morph turned out to have into the calibration,
+    /// the reply in `l`: measured by the user (`read` None) or read at rest with that weight
+    /// against a caliper's ([`crate::shape::Reading::weight`]). A caliper's radius is then the
+    /// link's known shape.
+    fn fold_measured(&mut self, radius_mm: f32, read: Option<f32>, l: &mut OutLine) {
+        let caliper = read.is_none();
+        use crate::strategy::model::target;
         let (min_mm, max_mm) = table::range_mm();
         let (lo, hi) = (
             min_mm * (1.0 - MEASURED_RANGE_MARGIN),
             max_mm * (1.0 + MEASURED_RANGE_MARGIN),
         );
         if !(radius_mm >= lo && radius_mm <= hi) {
-            tune_reply::measured_out_of_range(&mut l, lo, hi);
-            return out(&l);
+            tune_reply::measured_out_of_range(l, lo, hi);
+            return;
         }
         let Some(last) = self.last.filter(|m| m.done_mm.is_finite()) else {
-            tune_reply::measured_no_morph(&mut l);
-            return out(&l);
+            tune_reply::measured_no_morph(l);
+            return;
         };
-        if last.counted {
-            tune_reply::measured_twice(&mut l);
-            return out(&l);
+        if if caliper { last.counted } else { last.read } {
+            tune_reply::measured_twice(l);
+            return;
         }
         if last.epoch != self.cal_epoch {
-            tune_reply::measured_stale(&mut l);
-            return out(&l);
+            tune_reply::measured_stale(l);
+            return;
         }
         let amb = last.ambient_c;
         match last.mode {
@@ -1284,31 +1375,33 @@ impl Controller {
                 let reported_rise = target::lock_temp_for_final_radius_c(last.done_mm, amb) - amb;
                 let x = (reported_rise - a) / b;
                 let y = target::lock_temp_for_final_radius_c(radius_mm, amb) - amb;
-                match self.settings.cal.fold_map(x, y) {
-                    Ok((a, b)) => {
-                        tune_reply::measured_map(&mut l, a, b, self.settings.cal.map_count)
-                    }
-                    Err(why) => tune_reply::measured_implausible(&mut l, why),
+                match self.settings.cal.fold_map(x, y, read.unwrap_or(1.0)) {
+                    Ok((a, b)) => tune_reply::measured_map(l, a, b, self.settings.cal.map_count),
+                    Err(why) => tune_reply::measured_implausible(l, why),
                 }
             }
             _ => {
                 let need = table::power_for_radius_w(radius_mm).unwrap_or(0.0);
                 if !(need >= MEASURED_MIN_POWER_W) || !(last.power_w >= MEASURED_MIN_POWER_W) {
                     let why = ReportRejection::PowerTooSmall(MEASURED_MIN_POWER_W);
-                    tune_reply::measured_implausible(&mut l, why);
-                    return out(&l);
+                    tune_reply::measured_implausible(l, why);
+                    return;
                 }
                 match self.settings.cal.fold_power(last.power_w / need) {
                     Ok(scale) => {
-                        tune_reply::measured_power(&mut l, scale, self.settings.cal.power_count)
+                        tune_reply::measured_power(l, scale, self.settings.cal.power_count)
                     }
-                    Err(why) => tune_reply::measured_implausible(&mut l, why),
+                    Err(why) => tune_reply::measured_implausible(l, why),
                 }
             }
         }
         if !l.starts_with(protocol::ERROR_TAG) {
             if let Some(m) = self.last.as_mut() {
-                m.counted = true;
+                if caliper {
+                    m.counted = true;
+                } else {
+                    m.read = true;
+                }
             }
             // The link's shape is now measured, not estimated: the rest reference at it, read
             // or still to be read, counts the next morph's strain from the measured shape.
@@ -1316,9 +1409,13 @@ impl Controller {
             if self.shape_per_m == Some(done) {
                 self.shape_per_m = Some(measured);
                 self.elec.retag_rest_shape(done, measured);
+                if caliper {
+                    self.shape_known = true;
+                    let tcr_per_k = self.settings.cal.tca_tcr_ppm_per_k * 1e-6;
+                    self.rest_shape.measured(measured, tcr_per_k);
+                }
             }
         }
-        out(&l);
     }
 }
 

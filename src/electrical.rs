@@ -361,6 +361,11 @@ impl Electrical {
         t.is_finite().then_some(t)
     }
 
+    /// Heater `h`'s resistance this tick, unfiltered, Ω, where it was read within its range.
+    pub fn raw_ohm(&self, h: Heater) -> Option<f32> {
+        self.raw[h.index()]
+    }
+
     /// The TCA's resistance at rest and the ambient it was read at (Ω, °C).
     pub fn tca_rest(&self) -> Option<(f32, f32)> {
         self.rest

@@ -30,6 +30,7 @@ pub mod pulse;
 pub mod sequencer;
 pub mod session;
 pub mod settings;
+pub mod shape;
 pub mod stats;
 pub mod strategy;
 pub mod supervisor;

@@ -137,6 +137,19 @@ pub fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
     }
 }
 
+/// `sqrt` without `std`: Newton's iteration from a bit-level first guess; 4 steps give `f32`
+/// precision over the ranges used here (residuals, uncertainties). 0 for 0, NaN below it.
+pub fn sqrt(x: f32) -> f32 {
+    if !(x > 0.0) {
+        return if x == 0.0 { 0.0 } else { f32::NAN };
+    }
+    let mut r = f32::from_bits((x.to_bits() >> 1) + 0x1fc0_0000);
+    for _ in 0..4 {
+        r = 0.5 * (r + x / r);
+    }
+    r
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

@@ -138,20 +138,7 @@ pub fn residual_rms_k(y: &[f32], dt_s: f32, fit: &StepFit) -> f32 {
         let e = v - fit.rise_k * f;
         sse += e * e;
     }
-    libm_sqrt(sse / (y.len() - from) as f32)
-}
-
-/// `sqrt` without `std` (Newton's iteration from a bit-level first guess; 4 steps give f32
-/// precision for the residuals here).
-fn libm_sqrt(x: f32) -> f32 {
-    if !(x > 0.0) {
-        return if x == 0.0 { 0.0 } else { f32::NAN };
-    }
-    let mut r = f32::from_bits((x.to_bits() >> 1) + 0x1fc0_0000);
-    for _ in 0..4 {
-        r = 0.5 * (r + x / r);
-    }
-    r
+    crate::mathf::sqrt(sse / (y.len() - from) as f32)
 }
 
 #[cfg(test)]

@@ -35,6 +35,15 @@ pub const DEFAULT_TARGETS: usize = 5;
 /// Where in the reachable range the three measured morphs aim (fractions from the tightest):
 /// spread, so the map's slope is fitted, and inside the ends.
 pub const CALIBRATION_FRACTIONS: [f32; 3] = [0.15, 0.5, 0.85];
+/// Where the self-corrected morphs aim, after the first measured one (at
+/// `CALIBRATION_FRACTIONS[0]`): four other places in the range, each read at rest and folded
+/// in by the link itself (docs/shape.md).
+pub const READ_FRACTIONS: [f32; 4] = [0.5, 0.85, 0.3, 0.7];
+/// The stage of the evaluations after the read chain's one measured morph (its baseline: the
+/// same link, morph and MEASURED the readings then build on).
+pub const CHAIN_STAGE: usize = 4;
+/// The stage of the evaluations after the read chain's measured morph and its four read ones.
+pub const READ_STAGE: usize = 5;
 /// The user's measuring error, mm (uniform ±): a ruler or calliper on a curved link.
 pub const MEASURE_ERROR_MM: f64 = 0.3;
 /// The aims of the issue: p95 |error| after calibration, %, and median time, s.
@@ -116,6 +125,43 @@ struct Eval {
     end: &'static str,
 }
 
+/// One rest-shape outcome of the read chain.
+#[derive(Clone, Debug)]
+struct ShapeRow {
+    /// 0: as built, 1: the measured morph, 2..: the read morphs.
+    step: usize,
+    /// The event line (`event: shape ...`), or `(none)` if no line came.
+    line: String,
+    /// The plant's true radius when the line came, mm.
+    true_mm: f64,
+    /// Seconds from `done` (from boot, as built) to the line.
+    after_s: f64,
+}
+
+impl ShapeRow {
+    /// The reading's radius and sigma, mm, and whether it was learnt.
+    fn reading(&self) -> Option<(f64, f64, bool)> {
+        let field = |k: &str| {
+            self.line
+                .split_whitespace()
+                .find_map(|w| w.strip_prefix(k))
+                .and_then(|v| v.parse::<f64>().ok())
+        };
+        Some((
+            field("radius_mm=")?,
+            field("sigma_mm=")?,
+            field("learnt=")? == 1.0,
+        ))
+    }
+
+    /// The reason of a `none` line.
+    fn none_reason(&self) -> Option<&str> {
+        self.line
+            .split_whitespace()
+            .find_map(|w| w.strip_prefix("reason="))
+    }
+}
+
 /// What one link gave.
 struct LinkResult {
     plant: &'static str,
@@ -124,6 +170,8 @@ struct LinkResult {
     /// The end line of TUNE (`event: tune done ...` or `... failed ...`).
     tune_line: String,
     evals: Vec<Eval>,
+    /// The read chain's rest-shape outcomes.
+    shapes: Vec<ShapeRow>,
 }
 
 /// What one morph gave: MORPH to done, s, the true radius `SETTLE_AFTER_DONE_S` later, mm
@@ -219,6 +267,99 @@ fn rest_after(rig: &mut Rig<Box<dyn Plant>>) {
     }
 }
 
+/// Ticks `rig` until an `event: shape` line (or [`morphlink::shape::SHAPE_REST_MAX_S`] and a
+/// minute), sending `measured` (mm) as MEASURED [`SETTLE_AFTER_DONE_S`] in, as a user would.
+fn wait_shape(rig: &mut Rig<Box<dyn Plant>>, measured: Option<f64>) -> (String, f64, f64) {
+    let t0 = rig.now_ms();
+    let stop = t0 + ((morphlink::shape::SHAPE_REST_MAX_S as f64 + 60.0) * 1000.0) as u64;
+    let at = t0 + (SETTLE_AFTER_DONE_S * 1000.0) as u64;
+    let mut pending = measured;
+    let mut line = None;
+    while line.is_none() && rig.now_ms() < stop {
+        if rig.now_ms() >= at {
+            if let Some(r) = pending.take() {
+                rig.handle_line(&format!("MEASURED {r:.2}"), &mut |_| {});
+            }
+        }
+        rig.tick();
+        rig.drain_events(&mut |l| {
+            if l.starts_with("event: shape") {
+                line = Some(l.to_string());
+            }
+        });
+    }
+    let after_s = (rig.now_ms() - t0) as f64 / 1000.0;
+    (
+        line.unwrap_or_else(|| "(none)".into()),
+        rig.radius_mm(),
+        after_s,
+    )
+}
+
+/// The read chain: from `cal` on one link at rest as built, its rest read; one morph the user
+/// measures; then one morph to each of [`READ_FRACTIONS`], each corrected by its own rest
+/// reading. The calibrations after the measured morph and at the end, and the rest-shape
+/// outcomes.
+fn read_chain(
+    link: &Link,
+    cal: &Calibration,
+    s: &mut u64,
+) -> (Calibration, Calibration, Vec<ShapeRow>) {
+    let (min, max) = table::range_mm();
+    let mut rig = rig(link, cal);
+    let mut rows = Vec::new();
+    let (line, true_mm, after_s) = wait_shape(&mut rig, None);
+    rows.push(ShapeRow {
+        step: 0,
+        line,
+        true_mm,
+        after_s,
+    });
+    let fractions = core::iter::once(CALIBRATION_FRACTIONS[0]).chain(READ_FRACTIONS);
+    let mut measured_cal = *cal;
+    for (step, f) in fractions.enumerate() {
+        let target = min + (max - min) * f;
+        let t0 = rig.now_ms();
+        rig.handle_line(&format!("MORPH {target:.2}"), &mut |_| {});
+        let end = t0 + (MAX_MORPH_S * 1000.0) as u64;
+        while rig.ctrl.busy() && rig.now_ms() < end {
+            rig.tick();
+            rig.drain_events(&mut |_| {});
+        }
+        if rig.ctrl.busy() || rig.ctrl.fault().is_some() {
+            rig.handle_line("ABORT", &mut |_| {});
+            break;
+        }
+        // The first is measured 60 s after done, by the user.
+        let measured = (step == 0).then(|| {
+            let settled = wait_settled(&mut rig);
+            settled + uniform(s, (-MEASURE_ERROR_MM, MEASURE_ERROR_MM))
+        });
+        let (line, true_mm, after_s) = wait_shape(&mut rig, measured);
+        if step == 0 {
+            measured_cal = rig.ctrl.calibration();
+        }
+        rows.push(ShapeRow {
+            step: step + 1,
+            line,
+            true_mm,
+            after_s: after_s + if step == 0 { SETTLE_AFTER_DONE_S } else { 0.0 },
+        });
+    }
+    (measured_cal, rig.ctrl.calibration(), rows)
+}
+
+/// Ticks [`SETTLE_AFTER_DONE_S`] past `done`: the plant's true radius then (what a user
+/// measures).
+fn wait_settled(rig: &mut Rig<Box<dyn Plant>>) -> f64 {
+    let settle = (SETTLE_AFTER_DONE_S * 1000.0) as u64 / TICK_MS;
+    for _ in 0..settle {
+        rig.tick();
+        rig.drain_events(&mut |_| {});
+    }
+    rig.radius_mm()
+}
+
 fn evaluate(link: &Link, cal: &Calibration, measured: Option<usize>, targets: &[f32]) -> Vec<Eval> {
     targets
         .iter()
@@ -270,6 +411,7 @@ fn run_link(link: &Link, targets: &[f32], args: &Args) -> LinkResult {
         tune(link, &start)
     };
     evals.extend(evaluate(link, &cal, Some(0), targets));
+    let tuned = cal;
     let (min, max) = table::range_mm();
     let mut s = seed ^ draw.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (plant.len() as u64);
     splitmix(&mut s);
@@ -292,12 +434,16 @@ fn run_link(link: &Link, targets: &[f32], args: &Args) -> LinkResult {
         }
         evals.extend(evaluate(link, &cal, Some(k + 1), targets));
     }
+    let (chain_cal, read_cal, shapes) = read_chain(link, &tuned, &mut s);
+    evals.extend(evaluate(link, &chain_cal, Some(CHAIN_STAGE), targets));
+    evals.extend(evaluate(link, &read_cal, Some(READ_STAGE), targets));
     LinkResult {
         plant,
         draw,
         air,
         tune_line,
         evals,
+        shapes,
     }
 }
 
@@ -331,11 +477,21 @@ fn stage_name(m: Option<usize>) -> String {
     match m {
         None => "before TUNE".into(),
         Some(0) => "after TUNE".into(),
+        Some(CHAIN_STAGE) => "chain: TUNE + 1 measured".into(),
+        Some(READ_STAGE) => "chain: + 4 read".into(),
         Some(k) => format!("TUNE + {k} measured"),
     }
 }
 
-const STAGES: [Option<usize>; 5] = [None, Some(0), Some(1), Some(2), Some(3)];
+const STAGES: [Option<usize>; 7] = [
+    None,
+    Some(0),
+    Some(1),
+    Some(2),
+    Some(3),
+    Some(CHAIN_STAGE),
+    Some(READ_STAGE),
+];
 
 /// One plant's line on the chart: (stage index, p50, p95) per stage.
 type StageSeries = Vec<(f64, f64, f64)>;
@@ -360,11 +516,11 @@ impl Figure for Chart {
             .fold(AIM_ERROR_PCT, f64::max)
             * 1.1;
         let caption = format.has_text().then_some(
-            "auto's |radius error| on water links: before TUNE (x = -1), after TUNE (0), after n measured morphs",
+            "auto's |radius error| on water links: before TUNE (x = -1), after TUNE (0), after n measured morphs, the read chain after its measured morph (4) and its 4 read ones (5)",
         );
         let mut chart = Frame::new(16, 8, 40, 60)
             .builder(root, caption)
-            .build_cartesian_2d(-1.2f64..3.2f64, 0f64..top)?;
+            .build_cartesian_2d(-1.2f64..5.2f64, 0f64..top)?;
         mesh(
             &mut chart,
             "measured morphs (-1: before TUNE)",
@@ -374,7 +530,7 @@ impl Figure for Chart {
         .draw()?;
         line(
             &mut chart,
-            [(-1.2, AIM_ERROR_PCT), (3.2, AIM_ERROR_PCT)],
+            [(-1.2, AIM_ERROR_PCT), (5.2, AIM_ERROR_PCT)],
             BLACK.mix(0.5).stroke_width(1),
             format.has_text().then_some("aim: p95 2 %"),
         )?;
@@ -399,6 +555,63 @@ impl Figure for Chart {
             legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         }
         Ok(())
+    }
+}
+
+/// The read chain's tables: the rest-shape readings' own error against the plant's true
+/// radius, what gave none and why, and the time from `done` to the reading.
+fn shape_tables(sel: &[&LinkResult]) {
+    println!("\nRest-shape readings of the read chain (docs/shape.md):\n");
+    println!(
+        "| medium | steps | read | learnt | none (reasons) | reading \\|error\\| p50 | p95 | sigma p50 | \\|error\\|/sigma p95 | after done p50 | p95 |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    for air in [false, true] {
+        let rows: Vec<&ShapeRow> = sel
+            .iter()
+            .filter(|r| r.air == air)
+            .flat_map(|r| r.shapes.iter())
+            .filter(|r| r.step >= 2)
+            .collect();
+        if rows.is_empty() {
+            continue;
+        }
+        let mut reasons: std::collections::BTreeMap<&str, usize> = Default::default();
+        let (mut err, mut sig, mut z, mut after) = (vec![], vec![], vec![], vec![]);
+        let mut learnt = 0;
+        for r in &rows {
+            match r.reading() {
+                Some((mm, sigma, l)) => {
+                    err.push(((mm - r.true_mm) / r.true_mm * 100.0).abs());
+                    sig.push(sigma / mm * 100.0);
+                    z.push((mm - r.true_mm).abs() / sigma.max(1e-6));
+                    after.push(r.after_s);
+                    learnt += l as usize;
+                }
+                None => {
+                    *reasons
+                        .entry(r.none_reason().unwrap_or("no line"))
+                        .or_default() += 1
+                }
+            }
+        }
+        for v in [&mut err, &mut sig, &mut z, &mut after] {
+            v.sort_by(f64::total_cmp);
+        }
+        let none: Vec<String> = reasons.iter().map(|(k, v)| format!("{v} {k}")).collect();
+        println!(
+            "| {} | {} | {} | {learnt} | {} | {:.2} % | {:.2} % | {:.2} % | {:.1} | {:.0} s | {:.0} s |",
+            if air { "air" } else { "water" },
+            rows.len(),
+            err.len(),
+            if none.is_empty() { "0".into() } else { none.join(", ") },
+            percentile(&err, 50.0),
+            percentile(&err, 95.0),
+            percentile(&sig, 50.0),
+            percentile(&z, 95.0),
+            percentile(&after, 50.0),
+            percentile(&after, 95.0),
+        );
     }
 }
 
@@ -552,6 +765,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                 .collect::<Vec<_>>()
                 .join(", ")
         );
+        shape_tables(&sel);
         series.push((if plant == "hifi" { "hifi" } else { "lumped" }, pts));
     }
     let chart = Chart { series };
