@@ -116,23 +116,6 @@ pub const LAYOUT_VERSION: f32 = 4.0;
 /// correction over the table's whole bend (some 12 /m of curvature from the cast shape) stays
 /// under [`MAP_MAX_CORRECTION_K`]'s 25 K; the high-fidelity links' estimates reach 2.4 K·m.
 pub const STRAIN_MAX_K_M: f32 = 3.0;
-/// Least change of shape, 1/m of curvature, a strain report is taken from: under it the
-/// change of the rest resistance is mostly noise (some 0.1 K of the own temperature).
-pub const STRAIN_MIN_DKAPPA_PER_M: f32 = 1.0;
-/// Largest change of shape a strain report may describe, 1/m (the table's range spans 9 /m).
-pub const STRAIN_MAX_DKAPPA_PER_M: f32 = 50.0;
-/// The change of shape at which a strain report counts half, 1/m of curvature: each report's
-/// factor (what the own temperature missed over the change) moves the fitted one by
-/// `Δκ² / (Δκ² + STRAIN_HALF_DKAPPA_PER_M²)` of the way, so a morph across the table's range
-/// (some 6–12 /m) nearly sets it and a small change of shape, whose miss is mostly noise (some
-/// 0.1 K), barely moves it.
-pub const STRAIN_HALF_DKAPPA_PER_M: f32 = 3.0;
-const _: () = assert!(
-    STRAIN_MAX_K_M > 0.0
-        && STRAIN_MIN_DKAPPA_PER_M > 0.0
-        && STRAIN_MAX_DKAPPA_PER_M > STRAIN_MIN_DKAPPA_PER_M
-        && STRAIN_HALF_DKAPPA_PER_M >= STRAIN_MIN_DKAPPA_PER_M
-);
 
 /// The TCA's temperature coefficient of resistance an untuned controller takes, ppm/K: the
 /// silver-coated thread's 1.5e-3/K, an estimate (docs/plant.md); `TUNE` fits the link's own.
@@ -746,34 +729,24 @@ impl Calibration {
     /// tighter since its rest reference (the coil sits off the rod's axis, so the bend strains
     /// it and shifts its resistance; the sign is the link's own). The true temperature is the
     /// own reading plus this times the change of curvature; 0 (the default: no source gives the
-    /// term, sign included) until a morph has taught it. Within ±[`STRAIN_MAX_K_M`]: the field's
-    /// range, which `set`, a stored load, [`Calibration::fold_strain`] and `rescale_own` keep.
+    /// term, sign included) until the rest-shape gauge has been learnt from two known shapes
+    /// ([`Calibration::set_strain_from_gauge`]). Within ±[`STRAIN_MAX_K_M`]: the field's range,
+    /// which `set`, a stored load, the gauge and `rescale_own` keep.
     pub fn strain_k_m(&self) -> f32 {
         self.tca_strain_k_m
     }
 
-    /// Adds one strain report: the link's shape changed by `dkappa_per_m` (1/m of curvature)
-    /// between two rests, and at the second the own thermometer, still on the first's
-    /// reference, read `miss_k` below the ambient (K). The factor moves toward
-    /// `miss / Δκ` by `Δκ² / (Δκ² + STRAIN_HALF_DKAPPA_PER_M²)` of the way; returns it.
-    /// Refused, changing nothing, for a change under [`STRAIN_MIN_DKAPPA_PER_M`] or over
-    /// [`STRAIN_MAX_DKAPPA_PER_M`] or a factor past [`STRAIN_MAX_K_M`].
-    pub fn fold_strain(&mut self, dkappa_per_m: f32, miss_k: f32) -> Result<f32, ReportRejection> {
-        if !(dkappa_per_m.is_finite() && miss_k.is_finite()) {
+    /// Sets the strain factor from the rest-shape gauge ([`crate::shape`]): the coil's
+    /// `ΔR/R` per 1/m of bend, `gauge_per_m`, read as temperature through the coefficient is
+    /// what the own thermometer misses, `−gauge / α`; returns it. Refused, changing nothing, if
+    /// that is past ±[`STRAIN_MAX_K_M`] or not a number.
+    pub fn set_strain_from_gauge(&mut self, gauge_per_m: f32) -> Result<f32, ReportRejection> {
+        let s = -gauge_per_m / (self.tca_tcr_ppm_per_k * 1e-6);
+        if !s.is_finite() {
             return Err(ReportRejection::NotFinite);
         }
-        let d2 = dkappa_per_m * dkappa_per_m;
-        if !(dkappa_per_m.abs() >= STRAIN_MIN_DKAPPA_PER_M
-            && dkappa_per_m.abs() <= STRAIN_MAX_DKAPPA_PER_M)
-        {
-            return Err(ReportRejection::Correction(0.0));
-        }
-        let share = d2 / (d2 + STRAIN_HALF_DKAPPA_PER_M * STRAIN_HALF_DKAPPA_PER_M);
-        let s = self.strain_k_m() + share * (miss_k / dkappa_per_m - self.strain_k_m());
         if !(s.abs() <= STRAIN_MAX_K_M) {
-            return Err(ReportRejection::Correction(
-                s.abs() * STRAIN_MAX_DKAPPA_PER_M,
-            ));
+            return Err(ReportRejection::Correction(s.abs()));
         }
         self.tca_strain_k_m = s;
         Ok(s)
@@ -861,30 +834,19 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_strain_factor_follows_its_reports_bounded_and_rescaled_with_the_coefficient() {
+    fn the_strain_factor_follows_the_gauge_bounded_and_rescaled_with_the_coefficient() {
         let mut c = Calibration::DEFAULT;
         assert_eq!(c.strain_k_m(), 0.0);
-        // One report over a 10 /m bend that read 5 K low: 0.5 K·m, most of the way from 0.
-        let s = c.fold_strain(10.0, 5.0).unwrap();
-        assert!((s - 0.5 * 100.0 / 109.0).abs() < 1e-4, "{s}");
+        // A gauge of 3e-4 per 1/m at 1.5e-3/K reads 0.2 K low per 1/m of bend.
+        let s = c.set_strain_from_gauge(-3e-4).unwrap();
+        assert!((s - 0.2).abs() < 1e-5, "{s}");
         assert_eq!(c.strain_k_m(), s);
-        // Tiny, huge or non-finite changes and factors past the bound change nothing.
-        for (dk, miss) in [
-            (0.5, 1.0),
-            (60.0, 1.0),
-            (f32::NAN, 1.0),
-            (10.0, f32::INFINITY),
-            (10.0, 80.0),
-        ] {
+        // Past the bound or not a number: nothing changes.
+        for g in [0.01, -0.01, f32::NAN, f32::INFINITY] {
             let before = c;
-            assert!(c.fold_strain(dk, miss).is_err(), "{dk} {miss}");
+            assert!(c.set_strain_from_gauge(g).is_err(), "{g}");
             assert_eq!(c, before);
         }
-        // It follows: after a few reports at 0.2 K·m the factor is there.
-        for _ in 0..5 {
-            c.fold_strain(-8.0, -1.6).unwrap();
-        }
-        assert!((c.strain_k_m() - 0.2).abs() < 0.01, "{}", c.strain_k_m());
         // A coefficient twice as large reads every rise half as large: so does the factor.
         let before = c.strain_k_m();
         c.tca_tcr_ppm_per_k = 3000.0;

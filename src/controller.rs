@@ -159,14 +159,22 @@ pub enum Event {
     Config(ConfigEvent),
     /// `TUNE` progress.
     Tune(TuneEvent),
-    /// What a rest at a new shape gave ([`crate::shape`]), and whether it was folded into the
-    /// calibration as a MEASURED.
-    Shape {
-        /// The shape read, or why none.
-        outcome: Outcome,
-        /// Folded into the calibration.
-        learnt: bool,
-    },
+    /// What a rest at a new shape gave ([`crate::shape`]).
+    Shape(ShapeEvent),
+}
+
+/// What a rest at a new shape gave ([`crate::shape`]): a radius and its sigma, mm, or why
+/// none (kept to 12 bytes, the size of the other events, so the queue does not grow).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShapeEvent {
+    /// The radius read, mm (NaN with `none`).
+    pub radius_mm: f32,
+    /// Its uncertainty, mm.
+    pub sigma_mm: f32,
+    /// Why no shape was read, if none was.
+    pub none: Option<shape::NoShape>,
+    /// The reading was folded into the calibration as a MEASURED.
+    pub learnt: bool,
 }
 
 /// What the boot did with the stored settings ([`Controller::load_settings`]).
@@ -624,6 +632,9 @@ impl Controller {
     /// One control tick at `now_ms` with this tick's inputs; returns the duties to apply.
     /// The supervisor runs every tick, a latched fault included: STATUS stays live and a new
     /// fault alarms too (the first one found stays latched).
+    /// Not inlined: the firmware calls it from one place, where inlining it only grows the
+    /// control task's state machine (flash the L475 image does not have).
+    #[inline(never)]
     pub fn step(&mut self, now_ms: u64, inputs: &Inputs) -> Outputs {
         let frame = self.frame_of(inputs);
         self.frame = Some(frame);
@@ -651,6 +662,9 @@ impl Controller {
         let tca_driven = !(matches!(doing, Doing::Idle | Doing::Morph(Phase::Rest))
             || self.tune_step() == Some(crate::tune::TuneStep::Settle));
         self.note_rest(tca_driven, &m);
+        // The B-L475E-IOT01A's hardware image has no room for the rest-shape reading under the
+        // hardware budget (docs/firmware.md, "Size budget"); its emulated image has it.
+        #[cfg(not(feature = "board-b-l475e-iot01a"))]
         self.note_shape(tca_driven, &m);
         // Every tick, so a MORPH between ticks starts from this one's.
         self.seq.set_tca_self(
@@ -676,9 +690,7 @@ impl Controller {
         self.outputs
     }
 
-    /// Feeds the TCA's rest reference ([`Electrical::note_rest`]) with the link's shape, and
-    /// folds the strain report a new shape's reference gives into the calibration, whichever
-    /// view `closed` bends on (not a replacement: MEASURED reports stay current).
+    /// Feeds the TCA's rest reference ([`Electrical::note_rest`]) with the link's shape.
     fn note_rest(&mut self, tca_driven: bool, m: &Measurements) {
         // A link that never morphed is as built: bent by its cold TCA alone (the model's
         // spring-back at rest is under 2 % of that curvature).
@@ -692,20 +704,14 @@ impl Controller {
             }
             None => return,
         };
-        let cal = &mut self.settings.cal;
-        let tcr_per_k = cal.tca_tcr_ppm_per_k * 1e-6;
-        let report = self
-            .elec
-            .note_rest(tca_driven, m.t_tca_c, m.t_amb_c, shape_per_m, tcr_per_k);
-        if let Some((dkappa_per_m, miss_k)) = report {
-            // A report out of bounds (a coil replaced, a shape mis-estimated) teaches nothing.
-            let _ = cal.fold_strain(dkappa_per_m, miss_k);
-        }
+        self.elec
+            .note_rest(tca_driven, m.t_tca_c, m.t_amb_c, shape_per_m);
     }
 
     /// Feeds the rest-shape sensor ([`crate::shape`]) a tick at rest after a morph's `done`
     /// (or as built), queues what a finished rest gave, and, where the reading agrees with the
     /// estimate and is tight enough, folds it into the calibration as a MEASURED would.
+    #[cfg_attr(feature = "board-b-l475e-iot01a", allow(dead_code))]
     fn note_shape(&mut self, tca_driven: bool, m: &Measurements) {
         let Some(k) = self.shape_per_m else {
             return;
@@ -726,14 +732,16 @@ impl Controller {
             None => Err(()),
         };
         let (t_tca, t_amb) = (m.t_tca_c, m.t_amb_c);
-        let Some(outcome) = self.rest_shape.note(
+        let outcome = self.rest_shape.note(
             dt_s,
             r_ohm,
             t_tca,
             t_amb,
             (k, sigma, self.shape_known),
             tcr_per_k,
-        ) else {
+        );
+        self.strain_from_gauge();
+        let Some(outcome) = outcome else {
             return;
         };
         let mut learnt = false;
@@ -746,7 +754,24 @@ impl Controller {
         }
         // As built (no morph since boot) the rest is the anchor; nobody asked for its shape.
         if self.last.is_some() {
-            self.push(Event::Shape { outcome, learnt });
+            let (radius_mm, sigma_mm, none) = match outcome {
+                Outcome::Shape(r) => (r.radius_mm, r.sigma_mm, None),
+                Outcome::None(why) => (f32::NAN, f32::NAN, Some(why)),
+            };
+            self.push(Event::Shape(ShapeEvent {
+                radius_mm,
+                sigma_mm,
+                none,
+                learnt,
+            }));
+        }
+    }
+
+    /// A gauge just learnt is the own thermometer's strain factor too (one quantity: the
+    /// coil's resistance per 1/m of bend); one past the factor's bound is not.
+    fn strain_from_gauge(&mut self) {
+        if let Some(g) = self.rest_shape.take_new_gauge() {
+            let _ = self.settings.cal.set_strain_from_gauge(g);
         }
     }
 
@@ -1118,7 +1143,7 @@ impl Controller {
                 reply::config_defaults_event(&mut l, why.as_str(), setting)
             }
             Event::Tune(e) => tune_reply::tune_event(&mut l, &e),
-            Event::Shape { outcome, learnt } => tune_reply::shape_event(&mut l, &outcome, learnt),
+            Event::Shape(e) => tune_reply::shape_event(&mut l, &e),
         }
         Some(l)
     }
@@ -1413,6 +1438,7 @@ impl Controller {
                     self.shape_known = true;
                     let tcr_per_k = self.settings.cal.tca_tcr_ppm_per_k * 1e-6;
                     self.rest_shape.measured(measured, tcr_per_k);
+                    self.strain_from_gauge();
                 }
             }
         }

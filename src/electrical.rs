@@ -146,8 +146,8 @@ pub const SELF_REST_MAX_K: f32 = 1.0;
 /// the first 100 rest ticks, then follows with this weight (10 s), so the probe pulses' 0.2 %
 /// noise a reading averages to about 0.03 %, a tenth of a kelvin's worth.
 pub const REST_FILTER_WEIGHT: f32 = 0.01;
-/// Rest ticks a reference at a new shape needs before it replaces the one in use (the mean of
-/// the first ticks, as [`REST_FILTER_WEIGHT`] says: 10 s).
+/// Rest ticks a reference at a new shape needs to be whole (the mean of the first ticks, as
+/// [`REST_FILTER_WEIGHT`] says: 10 s).
 const REST_WHOLE_TICKS: u16 = (1.0 / REST_FILTER_WEIGHT) as u16;
 /// Two shapes this close are one, 1/m of curvature (a morph's estimate repeats to far better).
 const SAME_SHAPE_PER_M: f32 = 1e-3;
@@ -171,9 +171,6 @@ pub struct Electrical {
     rest_n: u16,
     /// The link's curvature when the reference was read, 1/m (NaN: unknown).
     rest_shape_per_m: f32,
-    /// The reference at the shape before, while one at a new shape is read (Ω, °C, 1/m): what
-    /// the new one is compared with once whole, for the strain report.
-    prev: Option<(f32, f32, f32)>,
     /// This tick's resistance of each heater, Ω, where it was read within its range.
     raw: [Option<f32>; 2],
 }
@@ -286,48 +283,26 @@ impl Electrical {
     /// at rest: not driven and its thermistor within [`SELF_REST_MAX_K`] of ambient
     /// (`t_tca_c`), with the link at curvature `shape_per_m` (1/m, NaN: unknown). The reference
     /// before every MORPH and TUNE is the last one at rest. At a new shape (a morph has bent the
-    /// link since) the reference is read afresh; once it is whole (the mean of
-    /// `1 / REST_FILTER_WEIGHT` ticks), the old one's own temperature at it (with coefficient
-    /// `tcr_per_k`) says what the bend did to the coil: returned as a strain report, (the change
-    /// of curvature, 1/m; how far the own temperature read below ambient, K), for
-    /// [`crate::calibration::Calibration::fold_strain`].
-    pub fn note_rest(
-        &mut self,
-        tca_driven: bool,
-        t_tca_c: f32,
-        t_amb_c: f32,
-        shape_per_m: f32,
-        tcr_per_k: f32,
-    ) -> Option<(f32, f32)> {
+    /// link since) the reference is read afresh: the mean of its first `1 / REST_FILTER_WEIGHT`
+    /// ticks, then followed with that weight.
+    pub fn note_rest(&mut self, tca_driven: bool, t_tca_c: f32, t_amb_c: f32, shape_per_m: f32) {
         let (Some(r), false) = (self.raw[Heater::Tca.index()], tca_driven) else {
-            return None;
+            return;
         };
         if !((t_tca_c - t_amb_c).abs() <= SELF_REST_MAX_K) {
-            return None;
+            return;
         }
         let shape = self.rest_shape_per_m;
         if !((shape - shape_per_m).abs() <= SAME_SHAPE_PER_M
             || shape.is_nan() && shape_per_m.is_nan())
         {
-            // A new shape: its reference is read afresh, the old one kept to compare it with.
-            self.prev = self.rest.map(|(r0, t0)| (r0, t0, shape));
             self.rest_n = 0;
             self.rest_shape_per_m = shape_per_m;
         }
         self.rest_n = self.rest_n.saturating_add(1);
         let w = (1.0 / self.rest_n as f32).max(REST_FILTER_WEIGHT);
         let (r0, t0) = self.rest.unwrap_or((r, t_amb_c));
-        let (r1, t1) = (r0 + w * (r - r0), t0 + w * (t_amb_c - t0));
-        self.rest = Some((r1, t1));
-        if self.rest_n < REST_WHOLE_TICKS {
-            return None;
-        }
-        let (r0, t0, shape0) = self.prev.take()?;
-        let report = (
-            shape_per_m - shape0,
-            t1 - (t0 + (r1 / r0 - 1.0) / tcr_per_k),
-        );
-        (report.0.is_finite() && report.1.is_finite()).then_some(report)
+        self.rest = Some((r0 + w * (r - r0), t0 + w * (t_amb_c - t0)));
     }
 
     /// The link's shape `from_per_m` turned out to be `to_per_m` (1/m of curvature; a measured
@@ -344,8 +319,7 @@ impl Electrical {
     }
 
     /// The shape of the rest reference once it is whole (the mean of `1 / REST_FILTER_WEIGHT`
-    /// rest ticks at it: a new shape's strain report is given then), 1/m; None while one is
-    /// being read.
+    /// rest ticks at it), 1/m; None while one is being read.
     pub fn whole_rest_shape_per_m(&self) -> Option<f32> {
         (self.rest.is_some() && self.rest_n >= REST_WHOLE_TICKS).then_some(self.rest_shape_per_m)
     }
@@ -407,7 +381,7 @@ mod tests {
 
     /// One rest tick with the TCA at `ohm` (its heater probed, not driven) in 22 °C surroundings
     /// with the link at `shape_per_m`; the strain report it gives, if any.
-    fn rest_tick(e: &mut Electrical, ohm: f32, shape_per_m: f32) -> Option<(f32, f32)> {
+    fn rest_tick(e: &mut Electrical, ohm: f32, shape_per_m: f32) {
         let idle = Drive {
             duty: [0.0; 2],
             supply_on: true,
@@ -418,40 +392,34 @@ mod tests {
         };
         let mut f = Faults::new();
         e.check(Some(c), idle, 12.0, &mut f);
-        e.note_rest(false, 22.2, 22.0, shape_per_m, 1.5e-3)
+        e.note_rest(false, 22.2, 22.0, shape_per_m)
     }
 
     #[test]
-    fn a_new_shapes_rest_reference_replaces_the_old_once_whole_and_reports_the_strain() {
+    fn a_new_shapes_rest_reference_is_read_afresh_and_whole_after_its_first_ticks() {
         let mut e = Electrical::default();
         for _ in 0..150 {
-            assert_eq!(rest_tick(&mut e, 6.5, 20.0), None);
+            rest_tick(&mut e, 6.5, 20.0);
         }
         assert_eq!(e.rest_shape_per_m(), 20.0);
         assert_eq!(e.whole_rest_shape_per_m(), Some(20.0));
-        // Bent 10 /m tighter, the coil reads 0.3 % lower: 2 K of its own temperature's worth.
+        // Bent 10 /m tighter, the coil reads 0.3 % lower: the reference follows it once whole.
         let bent = 6.5 * (1.0 - 0.003);
-        let mut report = None;
         for k in 0..REST_WHOLE_TICKS {
-            assert_eq!(report, None, "tick {k}");
-            report = rest_tick(&mut e, bent, 30.0);
+            rest_tick(&mut e, bent, 30.0);
+            let whole = k + 1 == REST_WHOLE_TICKS;
+            assert_eq!(e.whole_rest_shape_per_m().is_some(), whole, "tick {k}");
         }
-        let (dkappa, miss_k) = report.expect("a whole reference at the new shape reports");
         assert_eq!(e.whole_rest_shape_per_m(), Some(30.0));
-        assert!((dkappa - 10.0).abs() < 1e-4, "{dkappa}");
-        assert!((miss_k - 2.0).abs() < 0.05, "{miss_k}");
-        assert_eq!(e.rest_shape_per_m(), 30.0);
         assert!((e.tca_self_c(1.5e-3).unwrap() - 22.0).abs() < 0.05);
         // A measured shape re-tags it; an unknown shape (NaN) is a shape of its own.
         e.retag_rest_shape(30.0, 31.0);
         assert_eq!(e.rest_shape_per_m(), 31.0);
-        for _ in 0..REST_WHOLE_TICKS {
-            report = rest_tick(&mut e, bent, f32::NAN);
-        }
-        assert_eq!(report, None, "no report from an unknown shape");
+        rest_tick(&mut e, bent, f32::NAN);
         assert!(e.rest_shape_per_m().is_nan());
+        assert_eq!(e.whole_rest_shape_per_m(), None);
         // A warm TCA is not at rest: nothing is read.
-        assert_eq!(e.note_rest(false, 30.0, 22.0, 40.0, 1.5e-3), None);
+        e.note_rest(false, 30.0, 22.0, 40.0);
         assert!(e.rest_shape_per_m().is_nan());
     }
 

@@ -278,8 +278,12 @@ mod firmware {
             reply::boot_panic(&mut boot, f);
         }
 
-        spawner.spawn(control(parts.sensors, parts.heaters, parts.watchdog).expect("spawned once"));
-        spawner.spawn(serial(parts.tx, parts.rx, boot, stores).expect("spawned once"));
+        // Not `expect`: SpawnError's Debug text would be carried in flash for a panic that
+        // cannot happen (each task is spawned once).
+        let control = control(parts.sensors, parts.heaters, parts.watchdog);
+        spawner.spawn(control.unwrap_or_else(|_| panic!("spawned once")));
+        let serial = serial(parts.tx, parts.rx, boot, stores);
+        spawner.spawn(serial.unwrap_or_else(|_| panic!("spawned once")));
     }
 
     #[embassy_executor::task]

@@ -62,8 +62,8 @@ pub const AS_BUILT_SIGMA_SHARE: f32 = 0.03;
 pub struct Rest {
     /// Mean resistance, Ω.
     pub r_ohm: f32,
-    /// Standard error of the mean resistance, Ω (from the ticks' own spread).
-    pub r_sem_ohm: f32,
+    /// Variance of the mean resistance, Ω² (from the ticks' own spread).
+    pub r_var_ohm2: f32,
     /// Mean TCA thermistor reading, °C.
     pub t_c: f32,
     /// What the TCA may still be over its reading's mean, K: its drift times
@@ -71,8 +71,8 @@ pub struct Rest {
     pub excess_k: f32,
     /// The link's curvature, 1/m: known (as built or MEASURED) or the controller's estimate.
     pub shape_per_m: f32,
-    /// Its uncertainty, 1/m.
-    pub shape_sigma_per_m: f32,
+    /// Its variance, (1/m)².
+    pub shape_var: f32,
 }
 
 /// A shape read at rest.
@@ -139,9 +139,8 @@ struct Sums {
     r: f32,
     r2: f32,
     t: f32,
-    /// Sums of the TCA reading over the first and the last third of the ticks, °C.
+    /// Sum of the TCA reading over the first half of the ticks, °C.
     t_first: f32,
-    t_last: f32,
     /// The first tick's resistance, Ω: sums are of the difference, so `f32` keeps the 1e-5
     /// a mean needs.
     r0: f32,
@@ -160,6 +159,8 @@ pub struct RestShape {
     waited_s: f32,
     /// The present shape's outcome has been given.
     told: bool,
+    /// The gauge changed since [`RestShape::take_new_gauge`] last said.
+    gauge_new: bool,
 }
 
 impl RestShape {
@@ -194,93 +195,95 @@ impl RestShape {
             return None;
         }
         self.waited_s += dt_s;
-        let Ok(r_ohm) = r_ohm else {
-            self.told = true;
-            return Some(Outcome::None(NoShape::NoSense));
+        let out = match r_ohm {
+            Err(()) => Some(Outcome::None(NoShape::NoSense)),
+            Ok(r) => match self.sum(r, t_tca_c, t_amb_c, shape, dt_s) {
+                Some(rest) => {
+                    self.last = Some(rest);
+                    let read = self.read(&rest, tcr_per_k);
+                    if shape.2 {
+                        self.learn(rest, tcr_per_k);
+                    }
+                    Some(read)
+                }
+                None if self.waited_s > SHAPE_REST_MAX_S => Some(Outcome::None(NoShape::NoRest)),
+                None => None,
+            },
         };
-        let near = (t_tca_c - t_amb_c).abs() <= crate::electrical::SELF_REST_MAX_K;
-        let (Some(r), true, true) = (r_ohm, near, shape.0.is_finite()) else {
-            self.sums = Sums::default();
-            return self.waited_too_long();
-        };
+        self.told = out.is_some();
+        out
+    }
+
+    /// Adds one tick to the rest being read: the rest once [`SHAPE_REST_TICKS`] in a row were
+    /// near ambient and read, and the TCA's reading drifted less than [`SHAPE_REST_MAX_K_S`]
+    /// between their first and second halves; otherwise the sums start again.
+    fn sum(
+        &mut self,
+        r_ohm: Option<f32>,
+        t_c: f32,
+        t_amb_c: f32,
+        shape: (f32, f32, bool),
+        dt_s: f32,
+    ) -> Option<Rest> {
         let s = &mut self.sums;
+        let near = (t_c - t_amb_c).abs() <= crate::electrical::SELF_REST_MAX_K;
+        let (Some(r), true, true) = (r_ohm, near, shape.0.is_finite()) else {
+            *s = Sums::default();
+            return None;
+        };
         if s.n == 0 {
             s.r0 = r;
         }
-        let third = SHAPE_REST_TICKS / 3;
-        if s.n < third {
-            s.t_first += t_tca_c;
-        } else if s.n >= SHAPE_REST_TICKS - third {
-            s.t_last += t_tca_c;
+        const HALF: u16 = SHAPE_REST_TICKS / 2;
+        if s.n < HALF {
+            s.t_first += t_c;
         }
         s.n += 1;
         s.r += r - s.r0;
         s.r2 += (r - s.r0) * (r - s.r0);
-        s.t += t_tca_c;
+        s.t += t_c;
         if s.n < SHAPE_REST_TICKS {
             return None;
         }
-        let n = s.n as f32;
-        let span_s = (SHAPE_REST_TICKS - third) as f32 * dt_s;
-        let drift = (s.t_last - s.t_first) / third as f32 / span_s;
+        let sums = core::mem::take(s);
+        let n = sums.n as f32;
+        let half = HALF as f32;
+        // The halves' means are half the ticks apart.
+        let drift = (sums.t - 2.0 * sums.t_first) / half / (half * dt_s);
         if !(drift.abs() <= SHAPE_REST_MAX_K_S) {
             // Still cooling (or warming): read the next window.
-            self.sums = Sums::default();
-            return self.waited_too_long();
+            return None;
         }
-        let mean = s.r / n;
-        let var = (s.r2 / n - mean * mean).max(0.0);
-        let rest = Rest {
-            r_ohm: s.r0 + mean,
-            r_sem_ohm: sqrt(var / (n - 1.0)),
-            t_c: s.t / n,
+        let mean = sums.r / n;
+        Some(Rest {
+            r_ohm: sums.r0 + mean,
+            r_var_ohm2: (sums.r2 / n - mean * mean).max(0.0) / (n - 1.0),
+            t_c: sums.t / n,
             excess_k: drift.abs() * REST_SETTLE_S,
             shape_per_m: shape.0,
-            shape_sigma_per_m: shape.1,
-        };
-        self.sums = Sums::default();
-        self.last = Some(rest);
-        self.told = true;
-        let read = self.read(&rest, tcr_per_k);
-        if shape.2 {
-            self.learn(rest, tcr_per_k);
-        }
-        Some(read)
-    }
-
-    /// [`NoShape::NoRest`] once the link has waited [`SHAPE_REST_MAX_S`] at this shape.
-    fn waited_too_long(&mut self) -> Option<Outcome> {
-        if self.waited_s > SHAPE_REST_MAX_S {
-            self.told = true;
-            return Some(Outcome::None(NoShape::NoRest));
-        }
-        None
+            shape_var: shape.1 * shape.1,
+        })
     }
 
     /// The shape of `rest` on the anchor and gauge in hand.
     fn read(&self, rest: &Rest, tcr_per_k: f32) -> Outcome {
-        let (Some(a), Some((g, g_sigma))) = (self.anchor, self.gauge) else {
+        let (Some(a), Some((g, g_var))) = (self.anchor, self.gauge) else {
             return Outcome::None(NoShape::NoGauge);
         };
-        if !(g.abs() >= GAUGE_MIN_SIGMAS * g_sigma) {
+        if !(g * g >= GAUGE_MIN_SIGMAS * GAUGE_MIN_SIGMAS * g_var) {
             return Outcome::None(NoShape::WeakGauge);
         }
-        let (dg, dg_sigma) = strain(&a, rest, tcr_per_k);
-        let kappa = a.shape_per_m + dg / g;
-        let d = kappa - a.shape_per_m;
-        let sigma = sqrt(
-            (dg_sigma / g) * (dg_sigma / g)
-                + (d * g_sigma / g) * (d * g_sigma / g)
-                + a.shape_sigma_per_m * a.shape_sigma_per_m,
-        );
+        let (dg, dg_var) = strain(&a, rest, tcr_per_k);
+        let d = dg / g;
+        let kappa = a.shape_per_m + d;
+        // Variances in (1/m)²: the strain's, the gauge's over the distance, the anchor's.
+        let var = (dg_var + d * d * g_var) / (g * g) + a.shape_var;
         let radius_mm = 1e3 / kappa;
-        let sigma_mm = radius_mm * sigma / kappa;
-        let apart = (kappa - rest.shape_per_m).abs();
-        let both = sqrt(sigma * sigma + rest.shape_sigma_per_m * rest.shape_sigma_per_m);
+        let apart = kappa - rest.shape_per_m;
         Outcome::Shape(Reading {
             radius_mm,
-            sigma_mm,
-            learnable: apart <= AGREE_SIGMAS * both,
+            sigma_mm: radius_mm * sqrt(var) / kappa,
+            learnable: apart * apart <= AGREE_SIGMAS * AGREE_SIGMAS * (var + rest.shape_var),
         })
     }
 
@@ -297,22 +300,20 @@ impl RestShape {
             self.anchor = Some(rest);
             return;
         }
-        let (dg, dg_sigma) = strain(&a, &rest, tcr_per_k);
+        let (dg, dg_var) = strain(&a, &rest, tcr_per_k);
         let g = dg / span;
-        let shapes = sqrt(
-            a.shape_sigma_per_m * a.shape_sigma_per_m
-                + rest.shape_sigma_per_m * rest.shape_sigma_per_m,
-        );
-        let g_sigma = sqrt(dg_sigma * dg_sigma + (g * shapes) * (g * shapes)) / span.abs();
-        if !(g.is_finite() && g_sigma.is_finite()) {
+        let g_var = (dg_var + g * g * (a.shape_var + rest.shape_var)) / (span * span);
+        if !(g.is_finite() && g_var > 0.0 && g_var.is_finite()) {
             return;
         }
+        // Each pair's gauge weighted by its inverse variance.
+        self.gauge_new = true;
         self.gauge = Some(match self.gauge {
-            None => (g, g_sigma),
-            Some((g0, s0)) => {
-                let (w0, w1) = (1.0 / (s0 * s0), 1.0 / (g_sigma * g_sigma));
-                ((w0 * g0 + w1 * g) / (w0 + w1), sqrt(1.0 / (w0 + w1)))
-            }
+            None => (g, g_var),
+            Some((g0, v0)) => (
+                (g0 * g_var + g * v0) / (v0 + g_var),
+                v0 * g_var / (v0 + g_var),
+            ),
         });
         self.anchor = Some(rest);
     }
@@ -323,13 +324,21 @@ impl RestShape {
     pub fn measured(&mut self, shape_per_m: f32, tcr_per_k: f32) {
         if let Some(mut rest) = self.last.take() {
             rest.shape_per_m = shape_per_m;
-            rest.shape_sigma_per_m = known_sigma_per_m(shape_per_m);
+            let sigma = known_sigma_per_m(shape_per_m);
+            rest.shape_var = sigma * sigma;
             self.learn(rest, tcr_per_k);
             self.last = Some(rest);
         }
     }
 
-    /// The gauge learnt (ΔR/R per 1/m) and its uncertainty, if any.
+    /// The gauge (ΔR/R per 1/m), once after each time it is learnt.
+    pub fn take_new_gauge(&mut self) -> Option<f32> {
+        let g = self.gauge.filter(|_| self.gauge_new)?;
+        self.gauge_new = false;
+        Some(g.0)
+    }
+
+    /// The gauge learnt (ΔR/R per 1/m) and its variance, if any.
     pub fn gauge(&self) -> Option<(f32, f32)> {
         self.gauge
     }
@@ -356,13 +365,16 @@ pub fn estimate_sigma_per_m(shape_per_m: f32) -> f32 {
 }
 
 /// The strain term between rests `a` and `b` (`g`, ΔR/R with the temperature's share taken
-/// out) and its uncertainty.
+/// out) and its variance.
 fn strain(a: &Rest, b: &Rest, tcr_per_k: f32) -> (f32, f32) {
     let g = (b.r_ohm / a.r_ohm - 1.0) - tcr_per_k * (b.t_c - a.t_c);
     let temp = |r: &Rest| REST_TEMP_SIGMA_K + EXCESS_SHARE * r.excess_k.abs();
     let (ta, tb) = (tcr_per_k * temp(a), tcr_per_k * temp(b));
-    let (ra, rb) = (a.r_sem_ohm / a.r_ohm, b.r_sem_ohm / b.r_ohm);
-    (g, sqrt(ta * ta + tb * tb + ra * ra + rb * rb))
+    let (ra, rb) = (
+        a.r_var_ohm2 / (a.r_ohm * a.r_ohm),
+        b.r_var_ohm2 / (b.r_ohm * b.r_ohm),
+    );
+    (g, ta * ta + tb * tb + ra + rb)
 }
 
 #[cfg(test)]
@@ -411,8 +423,8 @@ mod tests {
                 rest(&mut s, g, 29.0, (29.0, known_sigma_per_m(29.0), true)),
                 Outcome::None(NoShape::NoGauge)
             );
-            let (learnt, sigma) = s.gauge().unwrap();
-            assert!((learnt - g).abs() <= 3.0 * sigma, "{learnt} {sigma} {g}");
+            let (learnt, var) = s.gauge().unwrap();
+            assert!((learnt - g).abs() <= 3.0 * sqrt(var), "{learnt} {var} {g}");
             // A morph's estimate at 25.0 /m (40 mm), the link truly at 24.0 /m (41.7 mm).
             s.moved();
             let r = read(rest(

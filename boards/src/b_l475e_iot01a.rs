@@ -158,7 +158,8 @@ pub fn init() -> Parts {
         Irqs,
         common::uart_config(),
     )
-    .expect("USART1 accepts 115200 8N1");
+    // Not `expect`: the error's Debug text would be carried in flash for a panic that cannot happen.
+    .unwrap_or_else(|_| panic!("USART1 accepts 115200 8N1"));
 
     common::parts(sensors, heaters, serial, p.IWDG, p.FLASH, reset_flags)
 }

@@ -105,6 +105,7 @@ fn build_elf(
             "--message-format=json-render-diagnostics",
         ])
         .args(["--features", &all])
+        .args(remap_registry())
         .env("CARGO_TARGET_DIR", target_dir)
         .stdout(Stdio::piped())
         .spawn()
@@ -128,6 +129,35 @@ fn build_elf(
         ));
     }
     elf.ok_or_else(|| format!("cargo built the firmware for {board} but named no executable"))
+}
+
+/// `--config` arguments that strip the crates' download directory from the paths the image
+/// carries (its dependencies' panic locations): a panic then reports `embassy-stm32-0.6.0/src/…`
+/// (the reason kept across the reset is short), the image says nothing of the machine it was
+/// built on, and builds on machines whose cargo homes differ are the same size (about 0.8 KiB
+/// smaller). Empty if the cargo home is unknown.
+fn remap_registry() -> Vec<String> {
+    let home = std::env::var_os("CARGO_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cargo")));
+    let Some(home) = home else {
+        return Vec::new();
+    };
+    let src = home.join("registry").join("src");
+    let Ok(dirs) = std::fs::read_dir(&src) else {
+        return Vec::new();
+    };
+    let flags: Vec<String> = dirs
+        .filter_map(Result::ok)
+        .map(|d| format!("\"--remap-path-prefix={}/=\"", d.path().display()))
+        .collect();
+    if flags.is_empty() {
+        return Vec::new();
+    }
+    vec![
+        "--config".into(),
+        format!("target.{TARGET}.rustflags=[{}]", flags.join(",")),
+    ]
 }
 
 /// Builds the emulated image in release into `target_dir`; returns the ELF path.

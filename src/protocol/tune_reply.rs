@@ -428,17 +428,16 @@ mod tests {
 
 /// `event: shape radius_mm=<mm> sigma_mm=<mm> learnt=<0|1>` (a shape read at rest, folded
 /// into the calibration or not) or `event: shape none reason=<why>` (docs/shape.md).
-pub fn shape_event(l: &mut OutLine, outcome: &crate::shape::Outcome, learnt: bool) {
-    use crate::shape::Outcome;
+pub fn shape_event(l: &mut OutLine, e: &crate::controller::ShapeEvent) {
     let _ = write!(l, "{EVENT_TAG} shape ");
-    let _ = match outcome {
-        Outcome::Shape(r) => write!(
+    let _ = match e.none {
+        None => write!(
             l,
             "radius_mm={} sigma_mm={} learnt={}",
-            Fixed(r.radius_mm, 2),
-            Fixed(r.sigma_mm, 2),
-            learnt as u8
+            Fixed(e.radius_mm, 2),
+            Fixed(e.sigma_mm, 2),
+            if e.learnt { "1" } else { "0" }
         ),
-        Outcome::None(why) => write!(l, "none reason={}", why.as_str()),
+        Some(why) => write!(l, "none reason={}", why.as_str()),
     };
 }
