@@ -307,7 +307,7 @@ pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
         "tca_strain_k_m",
         "K m",
         (-STRAIN_MAX_K_M, STRAIN_MAX_K_M),
-        "own temperature's miss per 1/m of bend (learnt at rest after each morph)",
+        "own temperature's miss per 1/m of bend (rest-shape gauge; docs/shape.md)",
     ),
     field_info(
         "version",
@@ -358,8 +358,8 @@ pub struct Calibration {
     /// default): on its thermistor ([`Calibration::self_sensed`]). A choice, not a fit: the
     /// map's reports are of one view, so switching starts the map afresh.
     pub tca_self_bend: f32,
-    /// The own thermometer's strain factor, K·m ([`Calibration::strain_k_m`]), learnt at rest
-    /// after each morph ([`Calibration::fold_strain`]).
+    /// The own thermometer's strain factor, K·m ([`Calibration::strain_k_m`]): the rest-shape
+    /// gauge read as temperature ([`Calibration::set_strain_from_gauge`]).
     pub tca_strain_k_m: f32,
     /// Layout version ([`LAYOUT_VERSION`]): a stored calibration of another layout is not this
     /// one.

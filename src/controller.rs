@@ -253,6 +253,9 @@ pub struct Controller {
     shape_known: bool,
     /// The shape read from the TCA's resistance at rest ([`crate::shape`]).
     rest_shape: RestShape,
+    /// The present shape's rest reading (radius, sigma, mm), which a caliper's MEASURED of the
+    /// same morph must not contradict.
+    reading: Option<(f32, f32)>,
 }
 
 /// What MEASURED needs of the last morph.
@@ -321,6 +324,7 @@ impl Controller {
             shape_per_m: None,
             shape_known: false,
             rest_shape: RestShape::default(),
+            reading: None,
         }
     }
 
@@ -755,7 +759,10 @@ impl Controller {
         // As built (no morph since boot) the rest is the anchor; nobody asked for its shape.
         if self.last.is_some() {
             let (radius_mm, sigma_mm, none) = match outcome {
-                Outcome::Shape(r) => (r.radius_mm, r.sigma_mm, None),
+                Outcome::Shape(r) => {
+                    self.reading = Some((r.radius_mm, r.sigma_mm));
+                    (r.radius_mm, r.sigma_mm, None)
+                }
                 Outcome::None(why) => (f32::NAN, f32::NAN, Some(why)),
             };
             self.push(Event::Shape(ShapeEvent {
@@ -850,6 +857,7 @@ impl Controller {
                 self.shape_per_m = Some(1e3 / radius_mm);
                 self.shape_known = false;
                 self.rest_shape.moved();
+                self.reading = None;
             }
             Event::Seq(SeqEvent::Phase {
                 phase: Phase::Soften,
@@ -1386,6 +1394,13 @@ impl Controller {
         if if caliper { last.counted } else { last.read } {
             tune_reply::measured_twice(l);
             return;
+        }
+        if let (Some((read_mm, sigma_mm)), true) = (self.reading, caliper) {
+            let both = sigma_mm * sigma_mm + shape::MEASURED_SIGMA_MM * shape::MEASURED_SIGMA_MM;
+            let off = radius_mm - read_mm;
+            if off * off > shape::AGREE_SIGMAS * shape::AGREE_SIGMAS * both {
+                return tune_reply::measured_contradicts(l, radius_mm, read_mm, sigma_mm);
+            }
         }
         if last.epoch != self.cal_epoch {
             tune_reply::measured_stale(l);

@@ -29,8 +29,8 @@ pub const REST_SETTLE_S: f32 = 60.0;
 /// to about 0.012 %, 0.2 /m of curvature on a 6e-4 gauge.
 pub const SHAPE_REST_TICKS: u16 = 300;
 /// Seconds after `done` a link may take to rest before it is reported as not resting
-/// (`event: shape none reason=no-rest`): twice the slowest still-air TCA's 10 minutes to come
-/// within [`SHAPE_REST_MAX_K`] of the air.
+/// (`event: shape none reason=no-rest`): about twice the 10 minutes a still-air TCA takes to
+/// settle within [`SHAPE_REST_MAX_K_S`].
 pub const SHAPE_REST_MAX_S: f32 = 1200.0;
 /// Least change of curvature between two known shapes a gauge is learnt from, 1/m: the
 /// table's range spans 9 /m, and a gauge from a smaller step carries the shapes' own

@@ -123,6 +123,23 @@ pub fn measured_out_of_range(l: &mut OutLine, min_mm: f32, max_mm: f32) {
     );
 }
 
+/// MEASURED that contradicts the link's own rest-shape reading of the same morph by more than
+/// both uncertainties allow: `error: out-of-range measured <mm> mm contradicts the rest-shape
+/// reading <mm> ± <mm> mm; calibration unchanged, measure again (see docs/shape.md)`.
+pub fn measured_contradicts(l: &mut OutLine, measured_mm: f32, read_mm: f32, sigma_mm: f32) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!(
+            "measured {} mm contradicts the rest-shape reading {} ± {} mm; calibration \
+             unchanged, measure again (see docs/shape.md)",
+            Fixed(measured_mm, 2),
+            Fixed(read_mm, 2),
+            Fixed(sigma_mm, 2)
+        ),
+    );
+}
+
 /// MEASURED whose correction would leave the calibration's bounds, naming the bound:
 /// `error: out-of-range report refused: <why>; calibration unchanged, check the measurement
 /// (see docs/calibration.md ...)`.
@@ -346,6 +363,22 @@ pub fn tune_event(l: &mut OutLine, e: &TuneEvent) {
     }
 }
 
+/// `event: shape radius_mm=<mm> sigma_mm=<mm> learnt=<0|1>` (a shape read at rest, folded
+/// into the calibration or not) or `event: shape none reason=<why>` (docs/shape.md).
+pub fn shape_event(l: &mut OutLine, e: &crate::controller::ShapeEvent) {
+    let _ = write!(l, "{EVENT_TAG} shape ");
+    let _ = match e.none {
+        None => write!(
+            l,
+            "radius_mm={} sigma_mm={} learnt={}",
+            Fixed(e.radius_mm, 2),
+            Fixed(e.sigma_mm, 2),
+            if e.learnt { "1" } else { "0" }
+        ),
+        Some(why) => write!(l, "none reason={}", why.as_str()),
+    };
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -424,20 +457,4 @@ mod tests {
             assert!(l.ends_with(&tail), "{l}");
         }
     }
-}
-
-/// `event: shape radius_mm=<mm> sigma_mm=<mm> learnt=<0|1>` (a shape read at rest, folded
-/// into the calibration or not) or `event: shape none reason=<why>` (docs/shape.md).
-pub fn shape_event(l: &mut OutLine, e: &crate::controller::ShapeEvent) {
-    let _ = write!(l, "{EVENT_TAG} shape ");
-    let _ = match e.none {
-        None => write!(
-            l,
-            "radius_mm={} sigma_mm={} learnt={}",
-            Fixed(e.radius_mm, 2),
-            Fixed(e.sigma_mm, 2),
-            if e.learnt { "1" } else { "0" }
-        ),
-        Some(why) => write!(l, "none reason={}", why.as_str()),
-    };
 }

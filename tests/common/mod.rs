@@ -232,6 +232,22 @@ impl Bench {
         ((self.rig.now_ms() - t0) as f64 / 1000.0, peak_c)
     }
 
+    /// Runs until the next `event: shape` line (docs/shape.md), at most `max_s`; the line.
+    #[allow(dead_code)]
+    pub fn rest_until_shape(&mut self, max_s: f64) -> String {
+        let from = self.lines.len();
+        let found = |b: &Bench| {
+            b.lines[from..]
+                .iter()
+                .any(|l| l.starts_with("event: shape"))
+        };
+        assert!(self.run_until(max_s, found), "no shape line in {max_s} s");
+        let line = self.lines[from..]
+            .iter()
+            .find(|l| l.starts_with("event: shape"));
+        line.cloned().unwrap_or_default()
+    }
+
     /// Alarm lines written since line `from` of [`Bench::lines`].
     pub fn alarms_since(&self, from: usize) -> Vec<String> {
         self.lines[from..]

@@ -5,10 +5,14 @@
 //! [`CALIBRATION_FRACTIONS`] of the range, the "user" measuring the plant's true radius
 //! [`SETTLE_AFTER_DONE_S`] after `done` with a uniform error of ± [`MEASURE_ERROR_MM`] and
 //! sending `MEASURED`. After TUNE and after each measured morph the targets are morphed again
-//! (each on a fresh copy of the link at rest, with the calibration reached so far). Writes
+//! (each on a fresh copy of the link at rest, with the calibration reached so far). Then the
+//! read chain (docs/shape.md): from TUNE, one link rests as built, makes one measured morph and
+//! four more to [`READ_FRACTIONS`], each read at rest by the link itself; the targets are
+//! morphed again after its measured morph and after the four read ones. Writes
 //! `docs/calibration.csv` (one row per evaluated morph, with the times bend, lock and release
-//! began), the chart of the error reached against the number of measured
-//! morphs (`docs/calibration.svg`, `.png`) and prints the tables of `docs/calibration.md`.
+//! began), `docs/calibration_shape.csv` (one row per rest-shape outcome of the read chain), the
+//! chart of the error reached against the number of measured morphs (`docs/calibration.svg`,
+//! `.png`) and prints the tables of `docs/calibration.md` and `docs/shape.md`.
 
 use morphlink::calibration::Calibration;
 use morphlink::controller::{Event, TICK_MS};
@@ -136,6 +140,8 @@ struct ShapeRow {
     true_mm: f64,
     /// Seconds from `done` (from boot, as built) to the line.
     after_s: f64,
+    /// The gauge the link had learnt then (ΔR/R per 1/m; NaN: none).
+    gauge: f64,
 }
 
 impl ShapeRow {
@@ -308,12 +314,23 @@ fn read_chain(
     let (min, max) = table::range_mm();
     let mut rig = rig(link, cal);
     let mut rows = Vec::new();
-    let (line, true_mm, after_s) = wait_shape(&mut rig, None);
+    // As built the rest says nothing (nobody asked): it is the anchor once read.
+    let t0 = rig.now_ms();
+    while rig.ctrl.rest_shape().anchor().is_none() && rig.now_ms() - t0 < 300_000 {
+        rig.tick();
+        rig.drain_events(&mut |_| {});
+    }
+    let line = match rig.ctrl.rest_shape().anchor() {
+        Some(_) => "(as built: anchor read)".to_string(),
+        None => "(as built: no anchor in 300 s)".to_string(),
+    };
+    let (true_mm, after_s) = (rig.radius_mm(), (rig.now_ms() - t0) as f64 / 1000.0);
     rows.push(ShapeRow {
         step: 0,
         line,
         true_mm,
         after_s,
+        gauge: gauge_of(&rig),
     });
     let fractions = core::iter::once(CALIBRATION_FRACTIONS[0]).chain(READ_FRACTIONS);
     let mut measured_cal = *cal;
@@ -344,9 +361,18 @@ fn read_chain(
             line,
             true_mm,
             after_s: after_s + if step == 0 { SETTLE_AFTER_DONE_S } else { 0.0 },
+            gauge: gauge_of(&rig),
         });
     }
     (measured_cal, rig.ctrl.calibration(), rows)
+}
+
+/// The gauge `rig`'s link has learnt, ΔR/R per 1/m (NaN: none).
+fn gauge_of(rig: &Rig<Box<dyn Plant>>) -> f64 {
+    rig.ctrl
+        .rest_shape()
+        .gauge()
+        .map_or(f64::NAN, |(g, _)| g as f64)
 }
 
 /// Ticks [`SETTLE_AFTER_DONE_S`] past `done`: the plant's true radius then (what a user
@@ -615,6 +641,51 @@ fn shape_tables(sel: &[&LinkResult]) {
     }
 }
 
+/// The reading's error against the gauge's magnitude (hifi, both media): how the sensor
+/// depends on the coil's strain term.
+fn shape_by_gauge(sel: &[&LinkResult]) {
+    println!("\nReading |error| by the learnt gauge's magnitude (ΔR/R per 1/m):\n");
+    println!("| \\|gauge\\| | read | none | \\|error\\| p50 | p95 |");
+    println!("| --- | --- | --- | --- | --- |");
+    for (lo, hi) in [(0.0, 2e-4), (2e-4, 5e-4), (5e-4, 1e-3), (1e-3, 1.0)] {
+        let rows: Vec<&ShapeRow> = sel
+            .iter()
+            .flat_map(|r| r.shapes.iter())
+            .filter(|r| r.step >= 2 && r.gauge.abs() >= lo && r.gauge.abs() < hi)
+            .collect();
+        let mut err: Vec<f64> = rows
+            .iter()
+            .filter_map(|r| {
+                let (mm, _, _) = r.reading()?;
+                Some(((mm - r.true_mm) / r.true_mm * 100.0).abs())
+            })
+            .collect();
+        err.sort_by(f64::total_cmp);
+        println!(
+            "| {lo:.0e}–{hi:.0e} | {} | {} | {:.2} % | {:.2} % |",
+            err.len(),
+            rows.len() - err.len(),
+            percentile(&err, 50.0),
+            percentile(&err, 95.0)
+        );
+    }
+}
+
+/// Writes the read chain's rows: one per rest-shape outcome.
+fn shape_csv(results: &[LinkResult], path: &Path) -> Result<(), String> {
+    let mut csv = String::from("plant,draw,air,step,true_mm,after_s,gauge,line\n");
+    for r in results {
+        for s in &r.shapes {
+            let _ = writeln!(
+                csv,
+                "{},{},{},{},{:.3},{:.1},{:.3e},\"{}\"",
+                r.plant, r.draw, r.air, s.step, s.true_mm, s.after_s, s.gauge, s.line
+            );
+        }
+    }
+    std::fs::write(path, csv).map_err(|e| format!("{}: {e}", path.display()))
+}
+
 /// Runs the task.
 pub fn run(args: &Args, root: &Path) -> Result<(), String> {
     let out = root.join(&args.out);
@@ -662,6 +733,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
     }
     let csv_path = out.join(format!("{}.csv", args.stem()));
     std::fs::write(&csv_path, csv).map_err(|e| format!("{}: {e}", csv_path.display()))?;
+    shape_csv(&results, &out.join(format!("{}_shape.csv", args.stem())))?;
     let mut series = Vec::new();
     for plant in ["hifi", "lumped"] {
         let sel: Vec<&LinkResult> = results.iter().filter(|r| r.plant == plant).collect();
@@ -766,6 +838,9 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                 .join(", ")
         );
         shape_tables(&sel);
+        if plant == "hifi" {
+            shape_by_gauge(&sel);
+        }
         series.push((if plant == "hifi" { "hifi" } else { "lumped" }, pts));
     }
     let chart = Chart { series };
@@ -774,7 +849,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
         plot::write(&out.join(name), (900, 600), &chart).map_err(String::from)?;
     }
     println!(
-        "\nwrote {}, {stem}.svg, {stem}.png",
+        "\nwrote {}, {stem}_shape.csv, {stem}.svg, {stem}.png",
         csv_path.display(),
         stem = args.stem()
     );

@@ -1,0 +1,87 @@
+//! The link's shape read from the TCA at rest (docs/shape.md), on both plants: after the link
+//! as built and one measured morph, the next morph's rest reads its radius within its stated
+//! uncertainty where the TCA's resistance carries its strain (hifi), and says it has no shape
+//! where it does not (lumped), never a wrong one; a MEASURED that contradicts a reading is
+//! refused with both figures; a board without current sense says so; no alarm on the way.
+#[macro_use]
+mod common;
+use common::{Bench, Link};
+
+on_both_links!(
+    after_one_measured_morph_the_next_rest_reads_the_radius_or_says_why_not,
+    a_board_without_current_sense_says_it_has_no_shape_after_a_morph,
+);
+
+/// The number after `key=` in `line`.
+fn number(line: &str, key: &str) -> f64 {
+    Bench::field(line, key)
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no {key} in {line}"))
+}
+
+fn after_one_measured_morph_the_next_rest_reads_the_radius_or_says_why_not(link: Link) {
+    let mut b = Bench::on(link);
+    // As built: the rest is the anchor, and nobody asked for its shape.
+    assert!(b.run_until(120.0, |b| b.rig.ctrl.rest_shape().anchor().is_some()));
+    assert!(!b.lines.iter().any(|l| l.starts_with("event: shape")));
+    b.morph(34.8, "auto");
+    b.run_for(60.0);
+    let measured = format!("MEASURED {:.2}", b.rig.radius_mm());
+    assert!(b.send(&measured)[0].starts_with("ok "));
+    // One known shape besides the as-built one teaches the gauge; this rest has none yet.
+    assert_eq!(
+        b.rest_until_shape(1300.0),
+        "event: shape none reason=no-gauge"
+    );
+    assert!(b.rig.ctrl.rest_shape().gauge().is_some());
+    let from = b.lines.len();
+    b.morph(42.0, "auto");
+    let line = b.rest_until_shape(1300.0);
+    let truth_mm = b.rig.radius_mm();
+    println!("{link:?}: {line} (truth {truth_mm:.2} mm)");
+    match link {
+        Link::Hifi => {
+            let (mm, sigma) = (number(&line, "radius_mm"), number(&line, "sigma_mm"));
+            assert!(
+                (mm - truth_mm).abs() <= 3.0 * sigma,
+                "{line}: truth {truth_mm}"
+            );
+            assert!(sigma < 0.05 * mm, "{line}");
+            // Agreeing with the estimate, it was folded in as a MEASURED would be. A caliper's
+            // MEASURED that contradicts it by more than both uncertainties is refused with both
+            // figures, changing nothing; one that agrees still counts.
+            assert_eq!(Bench::field(&line, "learnt").as_deref(), Some("1"));
+            let cal = b.rig.ctrl.calibration();
+            let wrong = format!("MEASURED {:.2}", truth_mm * 1.12);
+            let reply = b.send(&wrong);
+            assert!(
+                reply[0].starts_with("error: out-of-range measured ")
+                    && reply[0].contains(&format!(
+                        "contradicts the rest-shape reading {mm:.2} ± {sigma:.2} mm"
+                    )),
+                "{reply:?}"
+            );
+            assert_eq!(b.rig.ctrl.calibration(), cal);
+            let measured = format!("MEASURED {truth_mm:.2}");
+            assert!(
+                b.send(&measured)[0].starts_with("ok "),
+                "{:?}",
+                b.lines.last()
+            );
+        }
+        // Its TCA's resistance follows its temperature alone: no shape, not a wrong one.
+        Link::Lumped => assert_eq!(line, "event: shape none reason=weak-gauge"),
+    }
+    assert_eq!(b.alarms_since(from), Vec::<String>::new());
+}
+
+fn a_board_without_current_sense_says_it_has_no_shape_after_a_morph(link: Link) {
+    let mut b = Bench::on(link).thermistors_only();
+    b.run_for(60.0);
+    assert!(!b.lines.iter().any(|l| l.starts_with("event: shape")));
+    b.morph(40.0, "auto");
+    assert_eq!(
+        b.rest_until_shape(5.0),
+        "event: shape none reason=no-current-sense"
+    );
+}
