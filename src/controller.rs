@@ -17,7 +17,7 @@ use crate::sequencer::{SeqEvent, Sequencer};
 use crate::settings::codec::{self, Blob, LoadError};
 use crate::settings::store::{Loaded, SaveReport, StoreError};
 use crate::settings::{SetError, Settings, Spec, CALIBRATION_SPECS};
-use crate::shape::{self, Outcome, RestShape};
+use crate::shape::{self, Outcome, RestShape, ShapeEvent};
 use crate::stats::LoopTiming;
 use crate::strategy::model::MODEL_KEEP_ALIVE_W;
 use crate::supervisor::{Fault, FaultCode, Faults, Frame, Subject, Supervisor};
@@ -161,20 +161,6 @@ pub enum Event {
     Tune(TuneEvent),
     /// What a rest at a new shape gave ([`crate::shape`]).
     Shape(ShapeEvent),
-}
-
-/// What a rest at a new shape gave ([`crate::shape`]): a radius and its sigma, mm, or why
-/// none (kept to 12 bytes, the size of the other events, so the queue does not grow).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ShapeEvent {
-    /// The radius read, mm (NaN with `none`).
-    pub radius_mm: f32,
-    /// Its uncertainty, mm.
-    pub sigma_mm: f32,
-    /// Why no shape was read, if none was.
-    pub none: Option<shape::NoShape>,
-    /// The reading was folded into the calibration as a MEASURED.
-    pub learnt: bool,
 }
 
 /// What the boot did with the stored settings ([`Controller::load_settings`]).

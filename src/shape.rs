@@ -123,6 +123,20 @@ impl NoShape {
     }
 }
 
+/// What a rest at a new shape gave ([`crate::shape`]): a radius and its sigma, mm, or why
+/// none (kept to 12 bytes, the size of the other events, so the queue does not grow).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShapeEvent {
+    /// The radius read, mm (NaN with `none`).
+    pub radius_mm: f32,
+    /// Its uncertainty, mm.
+    pub sigma_mm: f32,
+    /// Why no shape was read, if none was.
+    pub none: Option<NoShape>,
+    /// The reading was folded into the calibration as a MEASURED.
+    pub learnt: bool,
+}
+
 /// What a finished rest gave.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Outcome {

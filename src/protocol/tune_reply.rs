@@ -365,7 +365,7 @@ pub fn tune_event(l: &mut OutLine, e: &TuneEvent) {
 
 /// `event: shape radius_mm=<mm> sigma_mm=<mm> learnt=<0|1>` (a shape read at rest, folded
 /// into the calibration or not) or `event: shape none reason=<why>` (docs/shape.md).
-pub fn shape_event(l: &mut OutLine, e: &crate::controller::ShapeEvent) {
+pub fn shape_event(l: &mut OutLine, e: &crate::shape::ShapeEvent) {
     let _ = write!(l, "{EVENT_TAG} shape ");
     let _ = match e.none {
         None => write!(
