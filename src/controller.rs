@@ -1100,6 +1100,9 @@ impl Controller {
                 .map(|h| self.elec.ohm(h).unwrap_or(f32::NAN)),
             t_tca_self_c: self.tca_self_c().unwrap_or(f32::NAN),
             supply_on: self.outputs.supply_on,
+            shape_mm: self
+                .reading
+                .map_or([f32::NAN; 2], |(mm, sigma)| [mm, sigma]),
         };
         reply::status(l, &status);
     }

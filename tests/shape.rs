@@ -2,7 +2,8 @@
 //! as built and one measured morph, the next morph's rest reads its radius within its stated
 //! uncertainty where the TCA's resistance carries its strain (hifi), and says it has no shape
 //! where it does not (lumped), never a wrong one; a MEASURED that contradicts a reading is
-//! refused with both figures; a board without current sense says so; no alarm on the way.
+//! refused with both figures; STATUS carries the reading; a board without current sense says
+//! so; no alarm on the way.
 #[macro_use]
 mod common;
 use common::{Bench, Link};
@@ -51,6 +52,15 @@ fn after_one_measured_morph_the_next_rest_reads_the_radius_or_says_why_not(link:
             // MEASURED that contradicts it by more than both uncertainties is refused with both
             // figures, changing nothing; one that agrees still counts.
             assert_eq!(Bench::field(&line, "learnt").as_deref(), Some("1"));
+            let status = b.send("STATUS")[0].clone();
+            assert_eq!(
+                Bench::field(&status, "shape_mm"),
+                Bench::field(&line, "radius_mm")
+            );
+            assert_eq!(
+                Bench::field(&status, "shape_sigma_mm"),
+                Bench::field(&line, "sigma_mm")
+            );
             let cal = b.rig.ctrl.calibration();
             let wrong = format!("MEASURED {:.2}", truth_mm * 1.12);
             let reply = b.send(&wrong);

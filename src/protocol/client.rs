@@ -355,6 +355,7 @@ mod tests {
             resistance_ohm: [f32::NAN, 18.61],
             t_tca_self_c: 58.12,
             supply_on: true,
+            shape_mm: [f32::NAN; 2],
         };
         let mut l = OutLine::new();
         status(&mut l, &report);

@@ -470,9 +470,9 @@ pub const ERR_INVALID_LINE: ProtoError = ProtoError {
     text: "The line is not valid text; commands are plain ASCII.",
 };
 
-/// Capacity of an [`OutLine`], bytes: the longest line, STATUS with its current-sense fields,
-/// fits (its test writes the widest values).
-pub const OUT_LINE_BYTES: usize = 288;
+/// Capacity of an [`OutLine`], bytes: the longest line, STATUS with its current-sense and
+/// rest-shape fields, fits (its test writes the widest values).
+pub const OUT_LINE_BYTES: usize = 336;
 
 /// One reply or event line, without its line ending, at most [`OUT_LINE_BYTES`].
 pub type OutLine = heapless::String<OUT_LINE_BYTES>;

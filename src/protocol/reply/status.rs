@@ -63,12 +63,15 @@ pub struct StatusReport {
     pub t_tca_self_c: f32,
     /// The heater supply's cut-off is closed.
     pub supply_on: bool,
+    /// The link's radius read at rest after the last morph and its sigma, mm (NaN while none:
+    /// `-`; docs/shape.md).
+    pub shape_mm: [f32; 2],
 }
 
 /// `STATUS`: `ok phase= target_mm= t_pla_c= t_tca_c= t_amb_c= p_pla_w= p_tca_w= supply_v= fault=
 /// pla_target_c= tca_target_c= mode= i_pla_a= i_tca_a= r_pla_ohm= r_tca_ohm= t_tca_self_c=
-/// cutoff=` (each group appended after the older ones, so a parser of an older line still finds
-/// its fields).
+/// cutoff= shape_mm= shape_sigma_mm=` (each group appended after the older ones, so a parser of
+/// an older line still finds its fields).
 pub fn status(l: &mut OutLine, s: &StatusReport) {
     let _ = write!(
         l,
@@ -105,6 +108,12 @@ pub fn status(l: &mut OutLine, s: &StatusReport) {
         Dashed(r_tca, 2),
         Dashed(s.t_tca_self_c, 2),
         if s.supply_on { "closed" } else { "open" }
+    );
+    let _ = write!(
+        l,
+        " shape_mm={} shape_sigma_mm={}",
+        Dashed(s.shape_mm[0], 2),
+        Dashed(s.shape_mm[1], 2)
     );
 }
 
@@ -342,6 +351,7 @@ mod tests {
             resistance_ohm: [30.0, 6.5],
             t_tca_self_c: 57.25,
             supply_on: true,
+            shape_mm: [38.12, 0.71],
         };
         let l = line(|l| status(l, &report(Phase::Bend, None, (75.0, 62.5))));
         assert_eq!(
@@ -349,7 +359,8 @@ mod tests {
             "ok phase=bend target_mm=38.00 t_pla_c=74.17 t_tca_c=56.88 t_amb_c=21.94 \
              p_pla_w=1.250 p_tca_w=0.700 supply_v=12.00 fault=none \
              pla_target_c=75.00 tca_target_c=62.50 mode=closed \
-             i_pla_a=0.400 i_tca_a=1.846 r_pla_ohm=30.00 r_tca_ohm=6.50 t_tca_self_c=57.25 cutoff=closed"
+             i_pla_a=0.400 i_tca_a=1.846 r_pla_ohm=30.00 r_tca_ohm=6.50 t_tca_self_c=57.25 cutoff=closed \
+             shape_mm=38.12 shape_sigma_mm=0.71"
         );
         let idle = StatusReport {
             target_mm: f32::NAN,
@@ -358,13 +369,14 @@ mod tests {
             resistance_ohm: [f32::NAN; 2],
             t_tca_self_c: f32::NAN,
             supply_on: false,
+            shape_mm: [f32::NAN; 2],
             ..report(Phase::Idle, None, (f32::NAN, f32::NAN))
         };
         let l = line(|l| status(l, &idle));
         assert!(
             l.ends_with(
                 "fault=none pla_target_c=- tca_target_c=- mode=- i_pla_a=- i_tca_a=- \
-                 r_pla_ohm=- r_tca_ohm=- t_tca_self_c=- cutoff=open"
+                 r_pla_ohm=- r_tca_ohm=- t_tca_self_c=- cutoff=open shape_mm=- shape_sigma_mm=-"
             ),
             "{l}"
         );
@@ -395,10 +407,11 @@ mod tests {
                 resistance_ohm: [-999.99, -999.99],
                 t_tca_self_c: -999.99,
                 supply_on: false,
+                shape_mm: [-999.99, -999.99],
                 ..report(phase, fault, targets)
             };
             let l = line(|l| status(l, &wide));
-            assert!(l.ends_with(" cutoff=open"), "truncated: {l}");
+            assert!(l.ends_with(" shape_sigma_mm=-999.99"), "truncated: {l}");
             assert!(l.len() < l.capacity(), "{} bytes: {l}", l.len());
         }
     }
