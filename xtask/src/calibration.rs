@@ -8,7 +8,8 @@
 //! (each on a fresh copy of the link at rest, with the calibration reached so far). Then the
 //! read chain (docs/shape.md): from TUNE, one link rests as built, makes one measured morph and
 //! four more to [`READ_FRACTIONS`], each read at rest by the link itself; the targets are
-//! morphed again after its measured morph and after the four read ones. Writes
+//! morphed again after its measured morph and after the four read ones; a second chain, whose
+//! user measures two morphs first, gives its readings' table only. Writes
 //! `docs/calibration.csv` (one row per evaluated morph, with the times bend, lock and release
 //! began), `docs/calibration_shape.csv` (one row per rest-shape outcome of the read chain), the
 //! chart of the error reached against the number of measured morphs (`docs/calibration.svg`,
@@ -43,6 +44,9 @@ pub const CALIBRATION_FRACTIONS: [f32; 3] = [0.15, 0.5, 0.85];
 /// `CALIBRATION_FRACTIONS[0]`): four other places in the range, each read at rest and folded
 /// in by the link itself (docs/shape.md).
 pub const READ_FRACTIONS: [f32; 4] = [0.5, 0.85, 0.3, 0.7];
+/// Where the read chain's second caliper measurement aims, when it has two (its readings'
+/// table only): far from the first, so the gauge rests on two measured shapes.
+pub const SECOND_CALIPER_FRACTION: f32 = 0.95;
 /// The stage of the evaluations after the read chain's one measured morph (its baseline: the
 /// same link, morph and MEASURED the readings then build on).
 pub const CHAIN_STAGE: usize = 4;
@@ -178,6 +182,8 @@ struct LinkResult {
     evals: Vec<Eval>,
     /// The read chain's rest-shape outcomes.
     shapes: Vec<ShapeRow>,
+    /// The same with two caliper measurements before the read morphs.
+    shapes2: Vec<ShapeRow>,
 }
 
 /// What one morph gave: MORPH to done, s, the true radius `SETTLE_AFTER_DONE_S` later, mm
@@ -310,6 +316,7 @@ fn read_chain(
     link: &Link,
     cal: &Calibration,
     s: &mut u64,
+    calipers: usize,
 ) -> (Calibration, Calibration, Vec<ShapeRow>) {
     let (min, max) = table::range_mm();
     let mut rig = rig(link, cal);
@@ -332,7 +339,11 @@ fn read_chain(
         after_s,
         gauge: gauge_of(&rig),
     });
-    let fractions = core::iter::once(CALIBRATION_FRACTIONS[0]).chain(READ_FRACTIONS);
+    let measured_at = [CALIBRATION_FRACTIONS[0], SECOND_CALIPER_FRACTION];
+    let fractions = measured_at[..calipers]
+        .iter()
+        .copied()
+        .chain(READ_FRACTIONS);
     let mut measured_cal = *cal;
     for (step, f) in fractions.enumerate() {
         let target = min + (max - min) * f;
@@ -347,20 +358,25 @@ fn read_chain(
             rig.handle_line("ABORT", &mut |_| {});
             break;
         }
-        // The first is measured 60 s after done, by the user.
-        let measured = (step == 0).then(|| {
+        // The first `calipers` are measured 60 s after done, by the user.
+        let measured = (step < calipers).then(|| {
             let settled = wait_settled(&mut rig);
             settled + uniform(s, (-MEASURE_ERROR_MM, MEASURE_ERROR_MM))
         });
         let (line, true_mm, after_s) = wait_shape(&mut rig, measured);
-        if step == 0 {
+        if step + 1 == calipers {
             measured_cal = rig.ctrl.calibration();
         }
         rows.push(ShapeRow {
             step: step + 1,
             line,
             true_mm,
-            after_s: after_s + if step == 0 { SETTLE_AFTER_DONE_S } else { 0.0 },
+            after_s: after_s
+                + if step < calipers {
+                    SETTLE_AFTER_DONE_S
+                } else {
+                    0.0
+                },
             gauge: gauge_of(&rig),
         });
     }
@@ -460,7 +476,8 @@ fn run_link(link: &Link, targets: &[f32], args: &Args) -> LinkResult {
         }
         evals.extend(evaluate(link, &cal, Some(k + 1), targets));
     }
-    let (chain_cal, read_cal, shapes) = read_chain(link, &tuned, &mut s);
+    let (chain_cal, read_cal, shapes) = read_chain(link, &tuned, &mut s, 1);
+    let (_, _, shapes2) = read_chain(link, &tuned, &mut s, 2);
     evals.extend(evaluate(link, &chain_cal, Some(CHAIN_STAGE), targets));
     evals.extend(evaluate(link, &read_cal, Some(READ_STAGE), targets));
     LinkResult {
@@ -470,6 +487,7 @@ fn run_link(link: &Link, targets: &[f32], args: &Args) -> LinkResult {
         tune_line,
         evals,
         shapes,
+        shapes2,
     }
 }
 
@@ -586,8 +604,8 @@ impl Figure for Chart {
 
 /// The read chain's tables: the rest-shape readings' own error against the plant's true
 /// radius, what gave none and why, and the time from `done` to the reading.
-fn shape_tables(sel: &[&LinkResult]) {
-    println!("\nRest-shape readings of the read chain (docs/shape.md):\n");
+fn shape_tables(sel: &[&LinkResult], calipers: usize) {
+    println!("\nRest-shape readings of the read chain, {calipers} caliper measurement(s) first (docs/shape.md):\n");
     println!(
         "| medium | steps | read | learnt | none (reasons) | reading \\|error\\| p50 | p95 | sigma p50 | \\|error\\|/sigma p95 | after done p50 | p95 |"
     );
@@ -596,8 +614,8 @@ fn shape_tables(sel: &[&LinkResult]) {
         let rows: Vec<&ShapeRow> = sel
             .iter()
             .filter(|r| r.air == air)
-            .flat_map(|r| r.shapes.iter())
-            .filter(|r| r.step >= 2)
+            .flat_map(|r| if calipers == 1 { &r.shapes } else { &r.shapes2 })
+            .filter(|r| r.step > calipers)
             .collect();
         if rows.is_empty() {
             continue;
@@ -671,16 +689,19 @@ fn shape_by_gauge(sel: &[&LinkResult]) {
     }
 }
 
-/// Writes the read chain's rows: one per rest-shape outcome.
+/// Writes the read chains' rows: one per rest-shape outcome, of the chain with one caliper
+/// measurement and of the one with two.
 fn shape_csv(results: &[LinkResult], path: &Path) -> Result<(), String> {
-    let mut csv = String::from("plant,draw,air,step,true_mm,after_s,gauge,line\n");
+    let mut csv = String::from("plant,draw,air,calipers,step,true_mm,after_s,gauge,line\n");
     for r in results {
-        for s in &r.shapes {
-            let _ = writeln!(
-                csv,
-                "{},{},{},{},{:.3},{:.1},{:.3e},\"{}\"",
-                r.plant, r.draw, r.air, s.step, s.true_mm, s.after_s, s.gauge, s.line
-            );
+        for (calipers, rows) in [(1, &r.shapes), (2, &r.shapes2)] {
+            for s in rows {
+                let _ = writeln!(
+                    csv,
+                    "{},{},{},{calipers},{},{:.3},{:.1},{:.3e},\"{}\"",
+                    r.plant, r.draw, r.air, s.step, s.true_mm, s.after_s, s.gauge, s.line
+                );
+            }
         }
     }
     std::fs::write(path, csv).map_err(|e| format!("{}: {e}", path.display()))
@@ -837,7 +858,8 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                 .collect::<Vec<_>>()
                 .join(", ")
         );
-        shape_tables(&sel);
+        shape_tables(&sel, 1);
+        shape_tables(&sel, 2);
         if plant == "hifi" {
             shape_by_gauge(&sel);
         }
