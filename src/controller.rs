@@ -231,17 +231,14 @@ pub struct Controller {
     heat_budget: crate::pulse::HeatBudget,
     /// The link's shape as the controller knows it, 1/m of curvature: as built until the first
     /// frame says the ambient (`None`), the last `done`'s estimate after a morph, NaN (unknown)
-    /// while one heats and after one that did not finish. The TCA's rest reference is tagged
-    /// with it, so the strain term is learnt from the change of shape between two rests.
+    /// while one heats and after one that did not finish. The TCA's rest reference and the
+    /// rest-shape sensor's rests are tagged with it.
     shape_per_m: Option<f32>,
     /// `shape_per_m` is known, not a morph's estimate: the link as built (no morph since
     /// boot) or a MEASURED radius.
     shape_known: bool,
     /// The shape read from the TCA's resistance at rest ([`crate::shape`]).
     rest_shape: RestShape,
-    /// The present shape's rest reading (radius, sigma, mm), which a caliper's MEASURED of the
-    /// same morph must not contradict.
-    reading: Option<(f32, f32)>,
 }
 
 /// What MEASURED needs of the last morph.
@@ -310,7 +307,6 @@ impl Controller {
             shape_per_m: None,
             shape_known: false,
             rest_shape: RestShape::default(),
-            reading: None,
         }
     }
 
@@ -700,7 +696,7 @@ impl Controller {
 
     /// Feeds the rest-shape sensor ([`crate::shape`]) a tick at rest after a morph's `done`
     /// (or as built), queues what a finished rest gave, and, where the reading agrees with the
-    /// estimate and is tight enough, folds it into the calibration as a MEASURED would.
+    /// estimate, folds it into the calibration as a MEASURED would, weighted by its sigma.
     #[cfg_attr(feature = "board-b-l475e-iot01a", allow(dead_code))]
     fn note_shape(&mut self, tca_driven: bool, m: &Measurements) {
         let Some(k) = self.shape_per_m else {
@@ -745,10 +741,7 @@ impl Controller {
         // As built (no morph since boot) the rest is the anchor; nobody asked for its shape.
         if self.last.is_some() {
             let (radius_mm, sigma_mm, none) = match outcome {
-                Outcome::Shape(r) => {
-                    self.reading = Some((r.radius_mm, r.sigma_mm));
-                    (r.radius_mm, r.sigma_mm, None)
-                }
+                Outcome::Shape(r) => (r.radius_mm, r.sigma_mm, None),
                 Outcome::None(why) => (f32::NAN, f32::NAN, Some(why)),
             };
             self.push(Event::Shape(ShapeEvent {
@@ -843,7 +836,6 @@ impl Controller {
                 self.shape_per_m = Some(1e3 / radius_mm);
                 self.shape_known = false;
                 self.rest_shape.moved();
-                self.reading = None;
             }
             Event::Seq(SeqEvent::Phase {
                 phase: Phase::Soften,
@@ -1101,8 +1093,9 @@ impl Controller {
             t_tca_self_c: self.tca_self_c().unwrap_or(f32::NAN),
             supply_on: self.outputs.supply_on,
             shape_mm: self
-                .reading
-                .map_or([f32::NAN; 2], |(mm, sigma)| [mm, sigma]),
+                .rest_shape
+                .reading()
+                .map_or([f32::NAN; 2], |r| [r.radius_mm, r.sigma_mm]),
         };
         reply::status(l, &status);
     }
@@ -1365,8 +1358,8 @@ impl Controller {
     /// against a caliper's ([`crate::shape::Reading::weight`]). A caliper's radius is then the
     /// link's known shape.
     fn fold_measured(&mut self, radius_mm: f32, read: Option<f32>, l: &mut OutLine) {
-        let caliper = read.is_none();
         use crate::strategy::model::target;
+        let caliper = read.is_none();
         let (min_mm, max_mm) = table::range_mm();
         let (lo, hi) = (
             min_mm * (1.0 - MEASURED_RANGE_MARGIN),
@@ -1384,11 +1377,12 @@ impl Controller {
             tune_reply::measured_twice(l);
             return;
         }
-        if let (Some((read_mm, sigma_mm)), true) = (self.reading, caliper) {
-            let both = sigma_mm * sigma_mm + shape::MEASURED_SIGMA_MM * shape::MEASURED_SIGMA_MM;
-            let off = radius_mm - read_mm;
+        if let (Some(r), true) = (self.rest_shape.reading(), caliper) {
+            let both =
+                r.sigma_mm * r.sigma_mm + shape::MEASURED_SIGMA_MM * shape::MEASURED_SIGMA_MM;
+            let off = radius_mm - r.radius_mm;
             if off * off > shape::AGREE_SIGMAS * shape::AGREE_SIGMAS * both {
-                return tune_reply::measured_contradicts(l, radius_mm, read_mm, sigma_mm);
+                return tune_reply::measured_contradicts(l, radius_mm, r.radius_mm, r.sigma_mm);
             }
         }
         if last.epoch != self.cal_epoch {

@@ -175,6 +175,9 @@ pub struct RestShape {
     told: bool,
     /// The gauge changed since [`RestShape::take_new_gauge`] last said.
     gauge_new: bool,
+    /// The present shape's reading, once read: what STATUS shows and a caliper's MEASURED of
+    /// the same morph must not contradict.
+    reading: Option<Reading>,
 }
 
 impl RestShape {
@@ -182,6 +185,7 @@ impl RestShape {
     pub fn moved(&mut self) {
         self.sums = Sums::default();
         self.last = None;
+        self.reading = None;
         self.waited_s = 0.0;
         self.told = false;
     }
@@ -215,6 +219,9 @@ impl RestShape {
                 Some(rest) => {
                     self.last = Some(rest);
                     let read = self.read(&rest, tcr_per_k);
+                    if let Outcome::Shape(r) = read {
+                        self.reading = Some(r);
+                    }
                     if shape.2 {
                         self.learn(rest, tcr_per_k);
                     }
@@ -350,6 +357,12 @@ impl RestShape {
         let g = self.gauge.filter(|_| self.gauge_new)?;
         self.gauge_new = false;
         Some(g.0)
+    }
+
+    /// The present shape's reading, if its rest has given one (none from the next morph's
+    /// soften on).
+    pub fn reading(&self) -> Option<Reading> {
+        self.reading
     }
 
     /// The gauge learnt (ΔR/R per 1/m) and its variance, if any.

@@ -236,11 +236,7 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> MorphRun {
     }
     let time_s = (rig.now_ms() - t0) as f64 / 1000.0;
     if !rig.ctrl.busy() && rig.ctrl.fault().is_none() {
-        let settle = (SETTLE_AFTER_DONE_S * 1000.0) as u64 / TICK_MS;
-        for _ in 0..settle {
-            rig.tick();
-            while rig.ctrl.pop_event().is_some() {}
-        }
+        wait_settled(rig);
     }
     // Unfinished, faulted, or an alarm in the minute after `done` (still this morph's).
     let end = match rig.ctrl.fault() {
@@ -254,28 +250,6 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> MorphRun {
         final_mm: if done { rig.radius_mm() } else { f64::NAN },
         phase_s,
         end,
-    }
-}
-
-/// Longest rest after a measured morph, s: the hifi links' TCA beads take two to four minutes in
-/// water to come within `SELF_REST_MAX_K` of the bath.
-const REST_MAX_S: f64 = 600.0;
-
-/// Lets the link rest after a measured morph, as a lab does between morphs by hand, until the
-/// TCA's rest reference is read at the new shape (on a board that senses current: what teaches
-/// the own thermometer's strain term) or [`REST_MAX_S`] have passed.
-fn rest_after(rig: &mut Rig<Box<dyn Plant>>) {
-    let stop = rig.now_ms() + (REST_MAX_S * 1000.0) as u64;
-    let whole = |rig: &Rig<Box<dyn Plant>>| {
-        rig.ctrl
-            .electrical()
-            .whole_rest_shape_per_m()
-            .map(f32::to_bits)
-    };
-    let before = whole(rig);
-    while rig.now_ms() < stop && whole(rig).is_none_or(|w| Some(w) == before) {
-        rig.tick();
-        while rig.ctrl.pop_event().is_some() {}
     }
 }
 
@@ -471,7 +445,6 @@ fn run_link(link: &Link, targets: &[f32], args: &Args) -> LinkResult {
                 },
                 &mut |_| {},
             );
-            rest_after(&mut rig);
             cal = rig.ctrl.calibration();
         }
         evals.extend(evaluate(link, &cal, Some(k + 1), targets));
