@@ -785,12 +785,16 @@ impl Controller {
                     let _ = events.push(Event::Seq(e));
                 });
                 ended = !self.seq.busy();
-                let reading = if self.seq.gave_up() {
-                    m.t_pla_c
-                } else {
-                    f32::NAN
-                };
-                r.map_err(|t| t.fault(reading))
+                // A lock ends only on a PLA cool enough to hold the shape, so a lock timeout,
+                // judged or by the clock, says how warm the rod stayed.
+                r.map_err(|t| {
+                    let reading = if t.0 == Phase::Lock {
+                        m.t_pla_c
+                    } else {
+                        f32::NAN
+                    };
+                    t.fault(reading)
+                })
             }
             Activity::Tune(t) => {
                 let ratio = self.elec.tca_ratio();

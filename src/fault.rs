@@ -130,9 +130,10 @@ impl Fault {
             (FaultCode::SupplyOutOfRange, _) => {
                 "SUPPLY_MIN_V, SUPPLY_MAX_V, SUPPLY_READ_TOLERANCE_V"
             }
-            // A lock `closed` judged too warm to finish (it carries the PLA's reading).
+            // A lock carries the PLA's reading: it stayed too warm, by `closed`'s judgment or
+            // until the clock.
             (FaultCode::PhaseTimeout, Subject::Phase(Phase::Lock)) if self.value.is_finite() => {
-                "CLOSED_LOCK_SETTLE_TAU_S"
+                "LOCK_TIMEOUT_S, CLOSED_LOCK_SETTLE_TAU_S"
             }
             (FaultCode::PhaseTimeout, Subject::Phase(phase)) => match phase {
                 Phase::Soften => "SOFTEN_TIMEOUT_S",

@@ -91,9 +91,9 @@ pub const DONE_MISS_SHARE: f32 = 0.01;
 pub struct PhaseTimeout(pub Phase);
 
 impl PhaseTimeout {
-    /// The fault it latches: `phase-timeout <phase>`, carrying `value` (the PLA's reading, °C,
-    /// where the strategy judged its lock too warm to finish: [`Sequencer::gave_up`]; else
-    /// NaN).
+    /// The fault it latches: `phase-timeout <phase>`, carrying `value` (a lock's PLA reading,
+    /// °C: a lock ends only on a PLA cool enough, so its timeout says how warm the rod stayed;
+    /// else NaN).
     pub fn fault(self, value: f32) -> crate::fault::Fault {
         crate::fault::Fault {
             code: crate::fault::FaultCode::PhaseTimeout,
@@ -178,8 +178,6 @@ pub struct Sequencer {
     rest_shape_per_m: f32,
     thresholds: Thresholds,
     timeouts: PhaseTimeouts,
-    /// The last phase timeout was the strategy's judgment, not the clock ([`Sequencer::gave_up`]).
-    gave_up: bool,
 }
 
 impl Default for Sequencer {
@@ -213,7 +211,6 @@ impl Sequencer {
             rest_shape_per_m: f32::NAN,
             thresholds: Thresholds::DEFAULT,
             timeouts: PhaseTimeouts::DEFAULT,
-            gave_up: false,
         }
     }
 
@@ -360,18 +357,10 @@ impl Sequencer {
         let timeout_s = self.timeout_s();
         if self.busy() && since_s(now_ms, self.at.phase_ms) > timeout_s {
             let p = self.at.phase;
-            // A strategy whose own timeout is now has judged the phase cannot finish.
-            self.gave_up = timeout_s <= 0.0;
             self.abort();
             return Err(PhaseTimeout(p));
         }
         Ok(())
-    }
-
-    /// True if the last phase timeout was the strategy's judgment that its phase cannot finish
-    /// (a lock too warm to end, `strategy::closed::CLOSED_LOCK_SETTLE_TAU_S`), not the clock.
-    pub fn gave_up(&self) -> bool {
-        self.gave_up
     }
 
     /// One control tick: advances the phase from the measurements and returns the powers.

@@ -235,6 +235,46 @@ fn a_lock_too_warm_to_finish_ends_early_and_says_why() {
     assert_eq!(b.rig.ctrl.powers().pla_w + b.rig.ctrl.powers().tca_w, 0.0);
 }
 
+/// A lock the clock ends (here a 60 s `lock_timeout_s`, before `closed` can judge the same
+/// too-warm lock) says the same: how warm the PLA stayed and what to do, naming the timeout.
+#[test]
+fn a_lock_the_clock_ends_names_how_warm_the_pla_stayed() {
+    let mut b = Bench::new();
+    assert!(b.send("SIM MEDIUM air")[0].starts_with("ok"));
+    assert!(b.send("SIM AMBIENT 27")[0].starts_with("ok"));
+    assert!(b.send("CONFIG SET lock_timeout_s 60")[0].starts_with("ok"));
+    b.run_for(1500.0);
+    let from = b.lines.len();
+    b.morph(32.92, "auto");
+    let alarms = b.alarms_since(from);
+    assert_eq!(alarms.len(), 1, "{alarms:?}");
+    let reading: f32 = alarms[0]
+        .strip_prefix("alarm: phase-timeout phase lock did not finish: pla stays at ")
+        .and_then(|r| r.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{alarms:?}"));
+    assert!(reading > 58.0, "{reading}");
+    assert!(alarms[0].contains("(LOCK_TIMEOUT_S, "), "{alarms:?}");
+    assert_eq!(b.rig.ctrl.powers().pla_w + b.rig.ctrl.powers().tca_w, 0.0);
+}
+
+/// A TCA that its 2 W cap holds short of its target ends bend there, and the morph finishes:
+/// hifi draw 3 (water, 10.95 V supply) at 32.92 mm, whose TCA thermistor rose 0.05 K/s for the
+/// whole bend (the silicone warming) 1.5 K short of its target, once timed out in bend with the
+/// rod long settled (docs/strategies.md, "Morphs in a row").
+#[test]
+fn a_tca_its_cap_holds_short_of_target_ends_bend_and_the_morph_finishes() {
+    let mut b = Bench::hifi_draw(20261122, 3);
+    let t = b.morph(32.92, "auto");
+    assert!(b.alarms().is_empty(), "{:?}", b.alarms());
+    assert!(
+        b.lines.iter().any(|l| l.starts_with("event: done")),
+        "{:?}",
+        b.lines
+    );
+    assert!(t < 100.0, "{t} s");
+}
+
 /// A morph sent the moment the last one reports `done` (a warm link) rests, heaters off, until
 /// the link has cooled to the rest its model starts from, says so (`event: phase rest`), and
 /// then lands within 0.5 percentage points of the same morph from rest, on both plants. Before:

@@ -155,8 +155,8 @@ mod tests {
             (FaultCode::HeaterResistance, &heaters),
             (FaultCode::CutoffFailed, &[Subject::Supply]),
         ];
-        // Each with a value, and each phase timeout also as the clock's (no value: a lock's
-        // carries the PLA's reading only where `closed` judged it too warm to finish).
+        // Each with a value, and each phase timeout also without one (a lock's carries the
+        // PLA's reading; the others none).
         let clock = phases.map(|subject| Fault {
             code: FaultCode::PhaseTimeout,
             subject,
@@ -189,17 +189,17 @@ mod tests {
             );
             l
         };
-        let lock = text(Phase::Lock, f32::NAN);
+        let bend = text(Phase::Bend, f32::NAN);
         assert!(
-            lock.starts_with("alarm: phase-timeout phase lock did not finish in time; ")
-                && lock.contains("(LOCK_TIMEOUT_S; "),
-            "{lock}"
+            bend.starts_with("alarm: phase-timeout phase bend did not finish in time; ")
+                && bend.contains("(BEND_TIMEOUT_S; "),
+            "{bend}"
         );
         let warm = text(Phase::Lock, 60.04);
         assert!(
             warm.starts_with(
                 "alarm: phase-timeout phase lock did not finish: pla stays at 60.0 C, too warm"
-            ) && warm.contains("(CLOSED_LOCK_SETTLE_TAU_S; "),
+            ) && warm.contains("(LOCK_TIMEOUT_S, CLOSED_LOCK_SETTLE_TAU_S; "),
             "{warm}"
         );
     }

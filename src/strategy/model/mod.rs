@@ -67,11 +67,18 @@ const _: () = assert!(
 pub const MODEL_KEEP_ALIVE_W: f32 = 0.05;
 const _: () = assert!(MODEL_KEEP_ALIVE_W > 0.0 && MODEL_KEEP_ALIVE_W * R_TT_K_PER_W < 2.0);
 
-/// A TCA at full power whose thermistor rises slower than this has reached as close to its
-/// target as the 2 W cap allows, K/s (strong convection in cold water, a low supply): the model
-/// strategies lock there instead of waiting for the bend timeout. The bulk's 17 s time constant
-/// makes 0.05 K/s about 1 K short of where it would end.
-pub const MODEL_STALL_RATE_K_PER_S: f32 = 0.05;
+/// A TCA at full power has reached as close to its target as the 2 W cap allows (strong
+/// convection in cold water, a low supply) once its thermistor's rate times this, s, no longer
+/// covers what it lacks of the target band: a first-order approach at the bulk's 17 s time
+/// constant ends `rate × 17 s` above where it is, so the TCA will not get there within a bend,
+/// and the model strategies lock there instead of waiting for the bend timeout. The TCA's slower
+/// modes (the silicone's, minutes) rise further, too slowly to matter before the rod locks, and
+/// lock keeps heating the TCA towards its target. 1.15 K short of the target this asks under
+/// 0.05 K/s, as the fixed rate it replaces did; a TCA far short and still rising slowly (a bead
+/// lagging its TCA by 20 K on a high-fidelity link at 10.95 V) stalls too, where the fixed rate
+/// waited out the bend timeout (`cargo xtask strategies`; docs/strategies.md, "Morphs in a
+/// row").
+pub const MODEL_STALL_TAU_S: f32 = 17.0;
 /// A stall counts only this long after MORPH, s: after the supervisor's heater-not-heating check
 /// has judged the TCA (on from MORPH, judged within `HEATER_VERDICT_S`), so a dead TCA, which does not rise at
 /// all, trips instead of passing for a stalled one.
@@ -238,7 +245,8 @@ impl ModelDrive {
             || (tca_c < self.tca_target_c
                 && self.applied.tca_w
                     >= deliverable_w(&HeaterConfig::TCA, tca_most_w(t), t.supply_v) - 1e-3
-                && self.observer.measured_rate_k_per_s(HeatedNode::Tca) < MODEL_STALL_RATE_K_PER_S
+                && self.observer.measured_rate_k_per_s(HeatedNode::Tca) * MODEL_STALL_TAU_S
+                    < self.tca_target_c - MODEL_SETTLE_BAND_C - tca_c
                 && t.since_start_s > STALL_AFTER_S);
         let overshooting = tca_c > self.tca_target_c + MODEL_PASSIVE_OVERSHOOT_K;
         let pla_ready = pla.learnt || (passive && (!pla.cold || overshooting));
