@@ -109,13 +109,21 @@ const _: () = assert!(POWER_SCALE_RANGE.1 > 1.0 && POWER_SCALE_RANGE.1 <= 2.0);
 
 /// The calibration's layout version: 2 added [`Calibration::convection_w_m2k`], against
 /// which the rises are read; 3 [`Calibration::tca_tcr_ppm_per_k`], the TCA's own thermometer;
-/// 4 [`Calibration::tca_self_bend`] and [`Calibration::tca_strain_k_m`].
+/// 4 [`Calibration::tca_self_bend`] and [`Calibration::tca_strain_k_m`]. Fields after those
+/// are appended before the version (a stored calibration from before one was appended loads
+/// it at its default: [`crate::settings::codec`]); [`Calibration::tca_strain_sd_share`] is.
 pub const LAYOUT_VERSION: f32 = 4.0;
 
 /// Largest strain factor the own thermometer takes, K·m (see [`Calibration::strain_k_m`]): its
 /// correction over the table's whole bend (some 12 /m of curvature from the cast shape) stays
 /// under [`MAP_MAX_CORRECTION_K`]'s 25 K; the high-fidelity links' estimates reach 2.4 K·m.
 pub const STRAIN_MAX_K_M: f32 = 3.0;
+/// Largest uncertainty of the strain factor kept, a share of it (see
+/// [`Calibration::tca_strain_sd_share`]): a gauge looser than a quarter of itself reads no shape
+/// (`shape::GAUGE_MIN_SIGMAS`) but is kept, so the link says `weak-gauge` (a TCA whose
+/// resistance does not follow its strain: the lumped links' gauges are 10–1000 times their
+/// sigma's reciprocal), not `no-gauge` after every MEASURED.
+pub const STRAIN_SD_SHARE_MAX: f32 = 1.0e4;
 
 /// The TCA's temperature coefficient of resistance an untuned controller takes, ppm/K: the
 /// silver-coated thread's 1.5e-3/K, an estimate (docs/plant.md); `TUNE` fits the link's own.
@@ -188,7 +196,7 @@ const fn field_info(
 }
 
 /// Number of fields.
-pub const FIELD_COUNT: usize = 18;
+pub const FIELD_COUNT: usize = 19;
 
 /// Every field, in index order (the order of [`Calibration::get`] / [`Calibration::set`]).
 pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
@@ -310,6 +318,12 @@ pub const FIELDS: [FieldInfo; FIELD_COUNT] = [
         "own temperature's miss per 1/m of bend (rest-shape gauge; docs/shape.md)",
     ),
     field_info(
+        "tca_strain_sd_share",
+        "1",
+        (0.0, STRAIN_SD_SHARE_MAX),
+        "the strain factor's uncertainty, a share of it (0: no gauge learnt; docs/shape.md)",
+    ),
+    field_info(
         "version",
         "1",
         (LAYOUT_VERSION, LAYOUT_VERSION),
@@ -359,8 +373,12 @@ pub struct Calibration {
     /// map's reports are of one view, so switching starts the map afresh.
     pub tca_self_bend: f32,
     /// The own thermometer's strain factor, K·m ([`Calibration::strain_k_m`]): the rest-shape
-    /// gauge read as temperature ([`Calibration::set_strain_from_gauge`]).
+    /// gauge read as temperature ([`Calibration::set_gauge`]).
     pub tca_strain_k_m: f32,
+    /// The strain factor's uncertainty (one sigma) as a share of it, 1: the rest-shape gauge's
+    /// ([`Calibration::gauge`]), kept so a link that was reset reads its shape again after one
+    /// MEASURED instead of two; 0 (the default) where no gauge was learnt.
+    pub tca_strain_sd_share: f32,
     /// Layout version ([`LAYOUT_VERSION`]): a stored calibration of another layout is not this
     /// one.
     pub version: f32,
@@ -448,6 +466,7 @@ impl Calibration {
         tca_tcr_ppm_per_k: TCA_TCR_NOMINAL_PPM_PER_K,
         tca_self_bend: 0.0,
         tca_strain_k_m: 0.0,
+        tca_strain_sd_share: 0.0,
         version: LAYOUT_VERSION,
     };
 
@@ -470,7 +489,8 @@ impl Calibration {
             14 => &mut self.tca_tcr_ppm_per_k,
             15 => &mut self.tca_self_bend,
             16 => &mut self.tca_strain_k_m,
-            17 => &mut self.version,
+            17 => &mut self.tca_strain_sd_share,
+            18 => &mut self.version,
             _ => return None,
         })
     }
@@ -501,7 +521,8 @@ impl Calibration {
             14 => self.tca_tcr_ppm_per_k,
             15 => self.tca_self_bend,
             16 => self.tca_strain_k_m,
-            17 => self.version,
+            17 => self.tca_strain_sd_share,
+            18 => self.version,
             _ => f32::NAN,
         }
     }
@@ -730,25 +751,40 @@ impl Calibration {
     /// it and shifts its resistance; the sign is the link's own). The true temperature is the
     /// own reading plus this times the change of curvature; 0 (the default: no source gives the
     /// term, sign included) until the rest-shape gauge has been learnt from two known shapes
-    /// ([`Calibration::set_strain_from_gauge`]). Within ±[`STRAIN_MAX_K_M`]: the field's range,
+    /// ([`Calibration::set_gauge`]). Within ±[`STRAIN_MAX_K_M`]: the field's range,
     /// which `set`, a stored load, the gauge and `rescale_own` keep.
     pub fn strain_k_m(&self) -> f32 {
         self.tca_strain_k_m
     }
 
-    /// Sets the strain factor from the rest-shape gauge ([`crate::shape`]): the coil's
-    /// `ΔR/R` per 1/m of bend, `gauge_per_m`, read as temperature through the coefficient is
-    /// what the own thermometer misses, `−gauge / α`; returns it. Refused, changing nothing, if
-    /// that is past ±[`STRAIN_MAX_K_M`] or not a number.
-    pub fn set_strain_from_gauge(&mut self, gauge_per_m: f32) -> Result<f32, ReportRejection> {
+    /// The rest-shape gauge ([`crate::shape`]): the coil's `ΔR/R` per 1/m of bend and its
+    /// variance, from the strain factor through the coefficient (`−factor × α`) and
+    /// [`Calibration::tca_strain_sd_share`]; `None` until one was learnt (or set).
+    pub fn gauge(&self) -> Option<(f32, f32)> {
+        let g = -self.tca_strain_k_m * self.tca_tcr_ppm_per_k * 1e-6;
+        let sd = self.tca_strain_sd_share * g;
+        (g != 0.0 && sd != 0.0 && g.is_finite()).then_some((g, sd * sd))
+    }
+
+    /// Sets the strain factor and its uncertainty from the rest-shape gauge `gauge_per_m`
+    /// (`ΔR/R` per 1/m of bend) and its variance: read as temperature through the coefficient
+    /// the gauge is what the own thermometer misses, `−gauge / α`; returns that factor.
+    /// Refused, changing nothing, if it is past ±[`STRAIN_MAX_K_M`], its uncertainty past
+    /// [`STRAIN_SD_SHARE_MAX`] of it, or either not a number.
+    pub fn set_gauge(&mut self, gauge_per_m: f32, var: f32) -> Result<f32, ReportRejection> {
         let s = -gauge_per_m / (self.tca_tcr_ppm_per_k * 1e-6);
-        if !s.is_finite() {
+        let share = crate::mathf::sqrt(var) / gauge_per_m.abs();
+        if !(s.is_finite() && share.is_finite()) {
             return Err(ReportRejection::NotFinite);
         }
         if !(s.abs() <= STRAIN_MAX_K_M) {
             return Err(ReportRejection::Correction(s.abs()));
         }
+        if !(share > 0.0 && share <= STRAIN_SD_SHARE_MAX) {
+            return Err(ReportRejection::Correction(share));
+        }
         self.tca_strain_k_m = s;
+        self.tca_strain_sd_share = share;
         Ok(s)
     }
 
@@ -837,21 +873,37 @@ mod tests {
     fn the_strain_factor_follows_the_gauge_bounded_and_rescaled_with_the_coefficient() {
         let mut c = Calibration::DEFAULT;
         assert_eq!(c.strain_k_m(), 0.0);
+        assert_eq!(c.gauge(), None);
         // A gauge of 3e-4 per 1/m at 1.5e-3/K reads 0.2 K low per 1/m of bend.
-        let s = c.set_strain_from_gauge(-3e-4).unwrap();
+        let var = (0.1f32 * 3e-4) * (0.1 * 3e-4);
+        let s = c.set_gauge(-3e-4, var).unwrap();
         assert!((s - 0.2).abs() < 1e-5, "{s}");
         assert_eq!(c.strain_k_m(), s);
-        // Past the bound or not a number: nothing changes.
-        for g in [0.01, -0.01, f32::NAN, f32::INFINITY] {
+        let (g, v) = c.gauge().unwrap();
+        assert!(
+            (g + 3e-4).abs() < 1e-9 && (v / var - 1.0).abs() < 1e-3,
+            "{g} {v}"
+        );
+        // Past the bounds or not a number: nothing changes.
+        for (g, v) in [
+            (0.01, var),
+            (-0.01, var),
+            (f32::NAN, var),
+            (f32::INFINITY, var),
+            (-3e-4, 1.0e4),
+            (-3e-4, f32::NAN),
+        ] {
             let before = c;
-            assert!(c.set_strain_from_gauge(g).is_err(), "{g}");
+            assert!(c.set_gauge(g, v).is_err(), "{g} {v}");
             assert_eq!(c, before);
         }
-        // A coefficient twice as large reads every rise half as large: so does the factor.
-        let before = c.strain_k_m();
+        // A coefficient twice as large reads every rise half as large: so does the factor,
+        // while the gauge, the coil's own, stays.
+        let (before, g) = (c.strain_k_m(), c.gauge().unwrap().0);
         c.tca_tcr_ppm_per_k = 3000.0;
         c.rescale_own(1500.0);
         assert!((c.strain_k_m() - before / 2.0).abs() < 1e-4);
+        assert!((c.gauge().unwrap().0 / g - 1.0).abs() < 1e-4);
         assert!(!c.self_sensed());
         c.tca_self_bend = 1.0;
         assert!(c.self_sensed());

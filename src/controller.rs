@@ -181,10 +181,11 @@ pub const EVENT_QUEUE: usize = 16;
 
 /// Longest reply to one command line, bytes: its `data:` lines and final line, each with a
 /// `\n`. A bound for a shell that collects a reply before sending it; CONFIG, the longest, is
-/// about 1540 with its 24 settings and HELP about 1000 (checked in `tests/protocol.rs`). The
-/// session's buffers are this and twice this, and the serial task's longest pass under a
-/// flood grows with them (docs/emulation.md): 1600, not more.
-pub const MAX_REPLY_BYTES: usize = 1600;
+/// 1647 bytes with its 25 settings at their defaults and 1658 with every number at its
+/// longest end (checked in `tests/protocol.rs`), HELP about 1000. The session's buffers are this
+/// and twice this (static RAM, docs/firmware.md), and the serial task's longest pass under a
+/// flood grows with them (docs/emulation.md): no more than CONFIG needs and some 70 bytes.
+pub const MAX_REPLY_BYTES: usize = 1728;
 
 /// The controller state.
 pub struct Controller {
@@ -711,6 +712,10 @@ impl Controller {
             (true, false) => shape::as_built_sigma_per_m(k),
             (true, true) => shape::known_sigma_per_m(k),
         };
+        // With a gauge kept from before a reset, the link at boot is not known to be as built:
+        // it may have been left bent, and only a MEASURED anchors it.
+        let gauge = self.settings.cal.gauge();
+        let known = self.shape_known && (self.last.is_some() || gauge.is_none());
         let tcr_per_k = self.settings.cal.tca_tcr_ppm_per_k * 1e-6;
         let dt_s = TICK_MS as f32 * 1e-3;
         let r_ohm = match self.elec.on_a() {
@@ -721,10 +726,10 @@ impl Controller {
         let outcome = self.rest_shape.note(
             dt_s,
             r_ohm,
-            t_tca,
-            t_amb,
-            (k, sigma, self.shape_known),
+            (t_tca, t_amb),
+            (k, sigma, known),
             tcr_per_k,
+            gauge,
         );
         self.strain_from_gauge();
         let Some(outcome) = outcome else {
@@ -753,11 +758,12 @@ impl Controller {
         }
     }
 
-    /// A gauge just learnt is the own thermometer's strain factor too (one quantity: the
-    /// coil's resistance per 1/m of bend); one past the factor's bound is not.
+    /// A gauge just learnt goes into the calibration, which keeps it (SAVE stores it): it is
+    /// the own thermometer's strain factor too (one quantity, the coil's resistance per 1/m of
+    /// bend); one past the factor's bounds is not kept.
     fn strain_from_gauge(&mut self) {
-        if let Some(g) = self.rest_shape.take_new_gauge() {
-            let _ = self.settings.cal.set_strain_from_gauge(g);
+        if let Some((g, var)) = self.rest_shape.take_new_gauge() {
+            let _ = self.settings.cal.set_gauge(g, var);
         }
     }
 
@@ -1439,7 +1445,8 @@ impl Controller {
                 if caliper {
                     self.shape_known = true;
                     let tcr_per_k = self.settings.cal.tca_tcr_ppm_per_k * 1e-6;
-                    self.rest_shape.measured(measured, tcr_per_k);
+                    let gauge = self.settings.cal.gauge();
+                    self.rest_shape.measured(measured, tcr_per_k, gauge);
                     self.strain_from_gauge();
                 }
             }

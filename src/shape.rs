@@ -104,6 +104,9 @@ pub enum NoShape {
     NoSense,
     /// No gauge yet: a second known shape (a MEASURED) is needed.
     NoGauge,
+    /// A gauge, but no rest at a known shape since boot: after a reset the link may be bent,
+    /// not as built, so a MEASURED of a morph anchors it.
+    NoAnchor,
     /// The gauge learnt is too weak against its uncertainty ([`GAUGE_MIN_SIGMAS`]): this TCA's
     /// resistance does not follow its strain.
     WeakGauge,
@@ -118,6 +121,7 @@ impl NoShape {
             NoShape::NoSense => "no-current-sense",
             NoShape::NoGauge => "no-gauge",
             NoShape::WeakGauge => "weak-gauge",
+            NoShape::NoAnchor => "no-anchor",
             NoShape::NoRest => "no-rest",
         }
     }
@@ -164,8 +168,6 @@ struct Sums {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RestShape {
     anchor: Option<Rest>,
-    /// Gauge `G` (ΔR/R per 1/m) and its uncertainty.
-    gauge: Option<(f32, f32)>,
     sums: Sums,
     /// The finished rest at the present shape, once read.
     last: Option<Rest>,
@@ -173,8 +175,10 @@ pub struct RestShape {
     waited_s: f32,
     /// The present shape's outcome has been given.
     told: bool,
-    /// The gauge changed since [`RestShape::take_new_gauge`] last said.
-    gauge_new: bool,
+    /// A gauge learnt and not yet taken ([`RestShape::take_new_gauge`]): `G` (ΔR/R per 1/m)
+    /// and its variance. The calibration keeps the gauge (`Calibration::gauge`); this sensor
+    /// is handed it.
+    gauge_new: Option<(f32, f32)>,
     /// The present shape's reading, once read: what STATUS shows and a caliper's MEASURED of
     /// the same morph must not contradict.
     reading: Option<Reading>,
@@ -199,15 +203,15 @@ impl RestShape {
     /// current; `Ok(None)`: not read this tick), its
     /// thermistor `t_tca_c` and the ambient `t_amb_c`, the link at `shape_per_m ± sigma`
     /// (1/m; `known`: as built or MEASURED, not a morph's estimate), temperature coefficient
-    /// `tcr_per_k`. Returns an outcome once per shape.
+    /// `tcr_per_k`, the gauge learnt so far and its variance. Returns an outcome once per shape.
     pub fn note(
         &mut self,
         dt_s: f32,
         r_ohm: Result<Option<f32>, ()>,
-        t_tca_c: f32,
-        t_amb_c: f32,
+        (t_tca_c, t_amb_c): (f32, f32),
         shape: (f32, f32, bool),
         tcr_per_k: f32,
+        gauge: Option<(f32, f32)>,
     ) -> Option<Outcome> {
         if self.told {
             return None;
@@ -218,12 +222,12 @@ impl RestShape {
             Ok(r) => match self.sum(r, t_tca_c, t_amb_c, shape, dt_s) {
                 Some(rest) => {
                     self.last = Some(rest);
-                    let read = self.read(&rest, tcr_per_k);
+                    let read = self.read(&rest, tcr_per_k, gauge);
                     if let Outcome::Shape(r) = read {
                         self.reading = Some(r);
                     }
                     if shape.2 {
-                        self.learn(rest, tcr_per_k);
+                        self.learn(rest, tcr_per_k, gauge);
                     }
                     Some(read)
                 }
@@ -286,10 +290,13 @@ impl RestShape {
         })
     }
 
-    /// The shape of `rest` on the anchor and gauge in hand.
-    fn read(&self, rest: &Rest, tcr_per_k: f32) -> Outcome {
-        let (Some(a), Some((g, g_var))) = (self.anchor, self.gauge) else {
+    /// The shape of `rest` on the anchor in hand and `gauge`.
+    fn read(&self, rest: &Rest, tcr_per_k: f32, gauge: Option<(f32, f32)>) -> Outcome {
+        let Some((g, g_var)) = self.gauge_new.or(gauge) else {
             return Outcome::None(NoShape::NoGauge);
+        };
+        let Some(a) = self.anchor else {
+            return Outcome::None(NoShape::NoAnchor);
         };
         if !(g * g >= GAUGE_MIN_SIGMAS * GAUGE_MIN_SIGMAS * g_var) {
             return Outcome::None(NoShape::WeakGauge);
@@ -309,8 +316,9 @@ impl RestShape {
     }
 
     /// A rest at a known shape: the first is the anchor; each next one far enough from it
-    /// teaches the gauge (weighted by its uncertainty) and becomes the anchor.
-    fn learn(&mut self, rest: Rest, tcr_per_k: f32) {
+    /// teaches the gauge (weighted by its uncertainty, with `gauge` before it) and becomes the
+    /// anchor.
+    fn learn(&mut self, rest: Rest, tcr_per_k: f32, gauge: Option<(f32, f32)>) {
         let Some(a) = self.anchor else {
             self.anchor = Some(rest);
             return;
@@ -328,8 +336,7 @@ impl RestShape {
             return;
         }
         // Each pair's gauge weighted by its inverse variance.
-        self.gauge_new = true;
-        self.gauge = Some(match self.gauge {
+        self.gauge_new = Some(match self.gauge_new.or(gauge) {
             None => (g, g_var),
             Some((g0, v0)) => (
                 (g0 * g_var + g * v0) / (v0 + g_var),
@@ -342,32 +349,25 @@ impl RestShape {
     /// The shape the present rest was read at turned out to be `shape_per_m` (a MEASURED):
     /// if that rest is finished it is learnt from now; if not, the caller's shape for the
     /// ticks to come says it.
-    pub fn measured(&mut self, shape_per_m: f32, tcr_per_k: f32) {
+    pub fn measured(&mut self, shape_per_m: f32, tcr_per_k: f32, gauge: Option<(f32, f32)>) {
         if let Some(mut rest) = self.last.take() {
             rest.shape_per_m = shape_per_m;
             let sigma = known_sigma_per_m(shape_per_m);
             rest.shape_var = sigma * sigma;
-            self.learn(rest, tcr_per_k);
+            self.learn(rest, tcr_per_k, gauge);
             self.last = Some(rest);
         }
     }
 
-    /// The gauge (ΔR/R per 1/m), once after each time it is learnt.
-    pub fn take_new_gauge(&mut self) -> Option<f32> {
-        let g = self.gauge.filter(|_| self.gauge_new)?;
-        self.gauge_new = false;
-        Some(g.0)
+    /// The gauge (ΔR/R per 1/m) and its variance, once after each time it is learnt.
+    pub fn take_new_gauge(&mut self) -> Option<(f32, f32)> {
+        self.gauge_new.take()
     }
 
     /// The present shape's reading, if its rest has given one (none from the next morph's
     /// soften on).
     pub fn reading(&self) -> Option<Reading> {
         self.reading
-    }
-
-    /// The gauge learnt (ΔR/R per 1/m) and its variance, if any.
-    pub fn gauge(&self) -> Option<(f32, f32)> {
-        self.gauge
     }
 
     /// The last rest at a known shape.
@@ -417,12 +417,21 @@ mod tests {
         6.5 * (1.0 + TCR * (t_c - 22.0) + g * (kappa - 18.9)) * (1.0 + noise)
     }
 
-    /// Rests `s` at `kappa` (told as `shape`) until it gives an outcome.
-    fn rest(s: &mut RestShape, g: f32, kappa: f32, shape: (f32, f32, bool)) -> Outcome {
+    /// A sensor and the gauge its calibration keeps.
+    #[derive(Default)]
+    struct Link {
+        s: RestShape,
+        gauge: Option<(f32, f32)>,
+    }
+
+    /// Rests `l` at `kappa` (told as `shape`) until it gives an outcome; a gauge it learns
+    /// is kept, as the calibration keeps it.
+    fn rest(l: &mut Link, g: f32, kappa: f32, shape: (f32, f32, bool)) -> Outcome {
         for k in 0..20_000 {
             let t = 22.0 + 0.2 * (kappa - 18.9) / 10.0;
             let r = ohm(g, kappa, t, k);
-            if let Some(o) = s.note(DT, Ok(Some(r)), t, 22.0, shape, TCR) {
+            if let Some(o) = l.s.note(DT, Ok(Some(r)), (t, 22.0), shape, TCR, l.gauge) {
+                l.gauge = l.s.take_new_gauge().or(l.gauge);
                 return o;
             }
         }
@@ -439,21 +448,21 @@ mod tests {
     #[test]
     fn a_gauge_from_two_known_shapes_reads_a_third_within_its_sigma() {
         for g in [6e-4, -4e-4, 2e-3] {
-            let mut s = RestShape::default();
+            let mut s = Link::default();
             let built = (18.9, as_built_sigma_per_m(18.9), true);
             assert_eq!(
                 rest(&mut s, g, 18.9, built),
                 Outcome::None(NoShape::NoGauge)
             );
-            s.moved();
+            s.s.moved();
             assert_eq!(
                 rest(&mut s, g, 29.0, (29.0, known_sigma_per_m(29.0), true)),
                 Outcome::None(NoShape::NoGauge)
             );
-            let (learnt, var) = s.gauge().unwrap();
+            let (learnt, var) = s.gauge.unwrap();
             assert!((learnt - g).abs() <= 3.0 * sqrt(var), "{learnt} {var} {g}");
             // A morph's estimate at 25.0 /m (40 mm), the link truly at 24.0 /m (41.7 mm).
-            s.moved();
+            s.s.moved();
             let r = read(rest(
                 &mut s,
                 g,
@@ -468,17 +477,42 @@ mod tests {
                 "{r:?}"
             );
             // The reading is not a known shape: the gauge stays as it was.
-            assert_eq!(s.gauge().unwrap().0, learnt);
+            assert_eq!(s.s.take_new_gauge(), None);
+            // After a reset the sensor starts empty, the gauge kept: the link may be bent, so
+            // its first rest, told as built, is not taken as the anchor; a MEASURED one is, and
+            // the next rest reads.
+            let mut after = Link {
+                gauge: s.gauge,
+                ..Link::default()
+            };
+            let unknown = (18.9, as_built_sigma_per_m(18.9), false);
+            assert_eq!(
+                rest(&mut after, g, 24.0, unknown),
+                Outcome::None(NoShape::NoAnchor)
+            );
+            after.s.moved();
+            rest(&mut after, g, 24.0, (24.0, known_sigma_per_m(24.0), true));
+            after.s.moved();
+            let r = read(rest(
+                &mut after,
+                g,
+                30.0,
+                (30.5, estimate_sigma_per_m(30.5), false),
+            ));
+            assert!(
+                (r.radius_mm - 1e3 / 30.0).abs() <= 3.0 * r.sigma_mm,
+                "{r:?}"
+            );
         }
     }
 
     #[test]
     fn a_tca_without_a_strain_term_gives_no_shape_not_a_wrong_one() {
-        let mut s = RestShape::default();
+        let mut s = Link::default();
         rest(&mut s, 0.0, 18.9, (18.9, as_built_sigma_per_m(18.9), true));
-        s.moved();
+        s.s.moved();
         rest(&mut s, 0.0, 29.0, (29.0, known_sigma_per_m(29.0), true));
-        s.moved();
+        s.s.moved();
         let o = rest(&mut s, 0.0, 24.0, (25.0, estimate_sigma_per_m(25.0), false));
         assert_eq!(o, Outcome::None(NoShape::WeakGauge));
     }
@@ -488,16 +522,16 @@ mod tests {
         let mut s = RestShape::default();
         let shape = (25.0, estimate_sigma_per_m(25.0), false);
         assert_eq!(
-            s.note(DT, Err(()), 22.0, 22.0, shape, TCR),
+            s.note(DT, Err(()), (22.0, 22.0), shape, TCR, None),
             Some(Outcome::None(NoShape::NoSense))
         );
-        assert_eq!(s.note(DT, Err(()), 22.0, 22.0, shape, TCR), None);
+        assert_eq!(s.note(DT, Err(()), (22.0, 22.0), shape, TCR, None), None);
         // A TCA that keeps drifting 0.009 K/s (within the beads' kelvin of ambient) never rests.
         s.moved();
         let mut got = None;
         for k in 0..((SHAPE_REST_MAX_S / DT) as u32 + 2 * SHAPE_REST_TICKS as u32) {
             let t = 21.5 + 0.009 * (k % 1000) as f32 * DT;
-            if let Some(o) = s.note(DT, Ok(Some(6.5)), t, 22.0, shape, TCR) {
+            if let Some(o) = s.note(DT, Ok(Some(6.5)), (t, 22.0), shape, TCR, None) {
                 got = Some((k, o));
                 break;
             }
@@ -507,11 +541,11 @@ mod tests {
         assert!(k as f32 * DT >= SHAPE_REST_MAX_S, "{k}");
         // With a gauge, a reading five sigmas from the estimate is reported, not learnt.
         let g = 6e-4;
-        let mut s = RestShape::default();
+        let mut s = Link::default();
         rest(&mut s, g, 18.9, (18.9, as_built_sigma_per_m(18.9), true));
-        s.moved();
+        s.s.moved();
         rest(&mut s, g, 29.0, (29.0, known_sigma_per_m(29.0), true));
-        s.moved();
+        s.s.moved();
         let r = read(rest(&mut s, g, 21.0, (28.0, 0.1, false)));
         assert!(!r.learnable, "{r:?}");
     }

@@ -207,6 +207,25 @@ fn every_reply_fits_the_shell_reply_buffer() {
             "{cmd}: {bytes} bytes"
         );
     }
+    // CONFIG at its longest: every number at whichever end of its range prints longer (a set
+    // the rises' share rule refuses keeps its value), on a link at rest.
+    let mut b = Bench::new();
+    let mut ends = Vec::new();
+    morphlink::settings::Settings::DEFAULT.for_each(|spec, _| {
+        if spec.choices.is_empty() {
+            let text = |v: f32| format!("{v:.*}", spec.decimals as usize);
+            let (lo, hi) = (text(spec.min), text(spec.max));
+            ends.push((spec.name, if lo.len() > hi.len() { lo } else { hi }));
+        }
+    });
+    for (name, v) in ends {
+        b.send(&format!("CONFIG SET {name} {v}"));
+    }
+    let bytes: usize = b.send("CONFIG").iter().map(|l| l.len() + 1).sum();
+    assert!(
+        bytes <= morphlink::controller::MAX_REPLY_BYTES,
+        "CONFIG at its longest: {bytes} bytes"
+    );
 }
 
 #[test]

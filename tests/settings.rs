@@ -25,7 +25,7 @@ fn listing(b: &mut Bench) -> Vec<String> {
     let r = b.send("CONFIG");
     assert_eq!(
         r.last().map(String::as_str),
-        Some("ok settings=24"),
+        Some("ok settings=25"),
         "{r:?}"
     );
     r[..r.len() - 1].to_vec()
@@ -42,7 +42,7 @@ fn flash_holding(bytes: &[u8]) -> SimFlash {
 fn config_lists_every_setting_with_unit_value_and_range() {
     let mut b = Bench::new();
     let rows = listing(&mut b);
-    assert_eq!(rows.len(), 24);
+    assert_eq!(rows.len(), 25);
     for r in &rows {
         assert!(r.starts_with("data: "), "{r}");
         assert!(r.contains("default="), "{r}");
@@ -166,7 +166,7 @@ fn settings_cannot_change_or_be_saved_while_a_morph_runs() {
     assert_eq!(b.rig.saves(), 0);
     assert_eq!(*b.rig.ctrl.settings(), Settings::DEFAULT);
     // CONFIG (read-only) still answers.
-    assert_eq!(listing(&mut b).len(), 24);
+    assert_eq!(listing(&mut b).len(), 25);
     assert_eq!(b.send("ABORT"), ["ok"]);
     assert_eq!(
         b.send("CONFIG SET lock_timeout_s 300"),
@@ -222,7 +222,7 @@ fn saved_settings_survive_a_reboot_and_unsaved_ones_do_not() {
     b.send("CONFIG SET soften_timeout_s 45");
     b.send("CONFIG SET auto_mode boost");
     let r = b.send("SAVE");
-    assert_eq!(r, ["ok saved bytes=102 erases=0"]);
+    assert_eq!(r, ["ok saved bytes=106 erases=0"]);
     b.send("CONFIG SET bend_timeout_s 200");
     let flash = b.rig.flash().unwrap().clone();
 
@@ -230,7 +230,7 @@ fn saved_settings_survive_a_reboot_and_unsaved_ones_do_not() {
     assert!(
         again
             .lines
-            .contains(&"event: config loaded settings=24".to_string()),
+            .contains(&"event: config loaded settings=25".to_string()),
         "{:?}",
         again.lines
     );
@@ -320,7 +320,7 @@ fn bad_stored_settings_boot_as_the_defaults_with_the_reason_and_never_heat() {
         assert!(
             again
                 .lines
-                .contains(&"event: config loaded settings=24".to_string()),
+                .contains(&"event: config loaded settings=25".to_string()),
             "{what}: {:?}",
             again.lines
         );
@@ -391,11 +391,11 @@ fn a_damaged_newest_save_never_boots_the_older_values_silently() {
             let (event, settings) = boot_event(SimFlash::from_image(&image).unwrap());
             if settings == newer {
                 // The flip missed what the map checks (word padding, the record): newest.
-                assert_eq!(event, "event: config loaded settings=24", "byte {at}");
+                assert_eq!(event, "event: config loaded settings=25", "byte {at}");
             } else {
                 assert_eq!(settings, older, "byte {at} ^ {flip:#x}: {event}");
                 assert_eq!(
-                    event, "event: config loaded settings=24 save=previous reason=crc-mismatch",
+                    event, "event: config loaded settings=25 save=previous reason=crc-mismatch",
                     "byte {at} ^ {flip:#x}"
                 );
                 previous += 1;
@@ -431,7 +431,7 @@ fn a_damaged_only_save_boots_the_defaults_as_crc_mismatch_not_absent() {
                     "byte {at} ^ {flip:#x}"
                 );
             } else {
-                assert_eq!(event, "event: config loaded settings=24", "byte {at}");
+                assert_eq!(event, "event: config loaded settings=25", "byte {at}");
             }
         }
     }

@@ -7,6 +7,8 @@
 #[macro_use]
 mod common;
 use common::{Bench, Link};
+use morphlink::controller::{Config, Controller};
+use morphlink_sim::rig::SimFlash;
 
 on_both_links!(
     after_one_measured_morph_the_next_rest_reads_the_radius_or_says_why_not,
@@ -34,7 +36,7 @@ fn after_one_measured_morph_the_next_rest_reads_the_radius_or_says_why_not(link:
         b.rest_until_shape(1300.0),
         "event: shape none reason=no-gauge"
     );
-    assert!(b.rig.ctrl.rest_shape().gauge().is_some());
+    assert!(b.rig.ctrl.calibration().gauge().is_some());
     let from = b.lines.len();
     b.morph(42.0, "auto");
     let line = b.rest_until_shape(1300.0);
@@ -94,4 +96,61 @@ fn a_board_without_current_sense_says_it_has_no_shape_after_a_morph(link: Link) 
         b.rest_until_shape(5.0),
         "event: shape none reason=no-current-sense"
     );
+}
+
+/// `MEASURED` the link's true radius now, as a user with a caliper would, a minute after `done`.
+fn measure(b: &mut Bench) -> f64 {
+    b.run_for(60.0);
+    let truth_mm = b.rig.radius_mm();
+    let r = b.send(&format!("MEASURED {truth_mm:.2}"));
+    assert!(r[0].starts_with("ok "), "{r:?}");
+    truth_mm
+}
+
+/// SAVE keeps the gauge (the calibration's `tca_strain_k_m` and `tca_strain_sd_share`): after a
+/// reset with the link left bent, its first rest is not taken as built, the next morph's rest
+/// says `no-anchor` rather than a shape read against a wrong anchor, and once that morph is
+/// measured the one after it reads its radius within three sigmas: one caliper after a reset,
+/// not two (hifi: its TCA carries a strain term).
+#[test]
+fn a_saved_gauge_reads_again_after_a_reset_once_one_measured_morph_anchors_it() {
+    let mut b = Bench::on(Link::Hifi);
+    b.rig.boot_storage(Some(SimFlash::new()));
+    assert!(b.run_until(120.0, |b| b.rig.ctrl.rest_shape().anchor().is_some()));
+    b.morph(34.8, "auto");
+    measure(&mut b);
+    assert_eq!(
+        b.rest_until_shape(1300.0),
+        "event: shape none reason=no-gauge"
+    );
+    let gauge = b.rig.ctrl.calibration().gauge().expect("a gauge learnt");
+    assert!(b.send("SAVE")[0].starts_with("ok saved"));
+    // Left bent at 42 mm, the board resets: a new controller on the same link, the settings
+    // from flash.
+    b.morph(42.0, "auto");
+    let flash = b.rig.flash().cloned();
+    b.rig.ctrl = Controller::new(Config::DEFAULT);
+    b.rig.boot_storage(flash);
+    let g = b.rig.ctrl.calibration().gauge().expect("the gauge saved");
+    assert!((g.0 / gauge.0 - 1.0).abs() < 1e-6 && (g.1 / gauge.1 - 1.0).abs() < 1e-3);
+    let from = b.lines.len();
+    b.run_for(400.0);
+    assert!(b.rig.ctrl.rest_shape().anchor().is_none());
+    b.morph(38.0, "auto");
+    assert_eq!(
+        b.rest_until_shape(1300.0),
+        "event: shape none reason=no-anchor"
+    );
+    measure(&mut b);
+    assert!(b.rig.ctrl.rest_shape().anchor().is_some());
+    b.morph(45.0, "auto");
+    let line = b.rest_until_shape(1300.0);
+    let truth_mm = b.rig.radius_mm();
+    let (mm, sigma) = (number(&line, "radius_mm"), number(&line, "sigma_mm"));
+    println!("after a reset: {line} (truth {truth_mm:.2} mm)");
+    assert!(
+        (mm - truth_mm).abs() <= 3.0 * sigma,
+        "{line}: truth {truth_mm}"
+    );
+    assert_eq!(b.alarms_since(from), Vec::<String>::new());
 }

@@ -826,7 +826,7 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
     let save_wall = t0.elapsed();
     check!(
         emu,
-        saved.last().unwrap().starts_with("ok saved bytes=102 "),
+        saved.last().unwrap().starts_with("ok saved bytes=106 "),
         "{saved:?}"
     );
     println!("emulated SAVE round trip: {save_wall:?} wall time");
@@ -837,7 +837,7 @@ fn a_saved_setting_survives_a_reset_and_an_unsaved_one_does_not() {
     let again = emu.wait_for("event: config ", REPLY).unwrap();
     check!(
         emu,
-        again.last().unwrap() == "event: config loaded settings=24",
+        again.last().unwrap() == "event: config loaded settings=25",
         "{again:?}"
     );
     emu.wait_ready(REPLY).unwrap();
@@ -1002,8 +1002,8 @@ fn two_links_share_one_budget_and_a_fault_on_one_stops_only_it() {
     let has = |l: &str| seen.iter().any(|s| s == l);
     check!(
         emu,
-        has("@1 event: config loaded settings=24")
-            && has("@2 event: config loaded settings=24")
+        has("@1 event: config loaded settings=25")
+            && has("@2 event: config loaded settings=25")
             && has("event: config supply loaded supply_budget_w=6.00 supply_limit_a=20.00"),
         "{seen:?}"
     );

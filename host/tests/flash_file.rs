@@ -38,13 +38,13 @@ fn a_saved_setting_survives_a_restart_and_an_unsaved_one_does_not() {
         "{first:?}"
     );
     assert!(
-        first.contains(&"ok saved bytes=102 erases=0".to_string()),
+        first.contains(&"ok saved bytes=106 erases=0".to_string()),
         "{first:?}"
     );
     assert_eq!(std::fs::metadata(&path).unwrap().len(), 4096);
 
     let second = run(&path, "CONFIG\n");
-    assert_eq!(second[0], "event: config loaded settings=24", "{second:?}");
+    assert_eq!(second[0], "event: config loaded settings=25", "{second:?}");
     assert!(
         second
             .iter()
@@ -71,7 +71,7 @@ fn a_saved_setting_survives_a_restart_and_an_unsaved_one_does_not() {
     );
     assert!(third.iter().any(|l| l.starts_with("ok saved")), "{third:?}");
     let fourth = run(&path, "STATUS\n");
-    assert_eq!(fourth[0], "event: config loaded settings=24", "{fourth:?}");
+    assert_eq!(fourth[0], "event: config loaded settings=25", "{fourth:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

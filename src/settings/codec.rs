@@ -9,8 +9,15 @@ use super::Settings;
 
 /// The stored layout's version. Raise it whenever the registry's groups, order or meaning of a
 /// value change: an older blob then loads as the defaults (`reason=old-format`), never as
-/// values shifted into the wrong settings.
+/// values shifted into the wrong settings. Settings appended at the registry's end need no new
+/// version: a blob from before them holds every value before them, in place, and loads with
+/// the appended ones at their defaults (down to [`FORMAT_BASE_COUNT`] values).
 pub const FORMAT_VERSION: u8 = 5;
+
+/// How many values the registry held when [`FORMAT_VERSION`] was last raised: a blob of this
+/// version holds at least these (`calibration::Calibration::tca_strain_sd_share` was appended
+/// after them).
+pub const FORMAT_BASE_COUNT: usize = 24;
 
 /// Largest blob, bytes: room for 32 settings (the morph group has 7, the calibration 17).
 pub const BLOB_MAX: usize = 2 + 4 * 32 + 4;
@@ -109,16 +116,19 @@ pub fn decode(bytes: &[u8]) -> Result<Settings, LoadError> {
     }
     let mut s = Settings::DEFAULT;
     let count = body[1] as usize;
-    if count != s.count() {
+    if !(FORMAT_BASE_COUNT..=s.count()).contains(&count) {
         return Err(LoadError::WrongCount(body[1]));
     }
     if body.len() != 2 + 4 * count {
         return Err(LoadError::Truncated);
     }
+    // Values past the blob's end were appended after it was written: their defaults stay.
     let mut values = body[2..].chunks_exact(4);
     for g in s.groups_mut() {
         for (i, spec) in g.specs().iter().enumerate() {
-            let w = values.next().ok_or(LoadError::Truncated)?;
+            let Some(w) = values.next() else {
+                break;
+            };
             let v = f32::from_le_bytes([w[0], w[1], w[2], w[3]]);
             if !spec.allows(v) {
                 return Err(LoadError::OutOfRange(spec.name));
@@ -155,7 +165,7 @@ mod tests {
         let s = changed();
         let b = encode(&s);
         assert_eq!(b.as_bytes().len(), 2 + 4 * s.count() + 4);
-        assert_eq!(b.as_bytes().len(), 102, "docs/settings.md gives 102 bytes");
+        assert_eq!(b.as_bytes().len(), 106, "docs/settings.md gives 106 bytes");
         assert_eq!(decode(b.as_bytes()), Ok(s));
         assert_eq!(
             decode(encode(&Settings::DEFAULT).as_bytes()),
@@ -196,9 +206,31 @@ mod tests {
         let mut old = body.to_vec();
         old[0] = 0;
         assert_eq!(decode(&sealed(&old)), Err(LoadError::OldFormat(0)));
-        let mut short = body[..body.len() - 4].to_vec();
-        short[1] -= 1;
-        assert_eq!(decode(&sealed(&short)), Err(LoadError::WrongCount(23)));
+        let base = 2 + 4 * FORMAT_BASE_COUNT;
+        let mut short = body[..base - 4].to_vec();
+        short[1] = FORMAT_BASE_COUNT as u8 - 1;
+        assert_eq!(
+            decode(&sealed(&short)),
+            Err(LoadError::WrongCount(FORMAT_BASE_COUNT as u8 - 1))
+        );
+        let mut long = body.to_vec();
+        long.extend_from_slice(&0f32.to_le_bytes());
+        long[1] += 1;
+        assert_eq!(decode(&sealed(&long)), Err(LoadError::WrongCount(long[1])));
+    }
+
+    #[test]
+    fn a_blob_from_before_settings_were_appended_loads_them_at_their_defaults() {
+        let mut c = changed();
+        c.cal.tca_strain_sd_share = 0.5;
+        let b = encode(&c);
+        let body = &b.as_bytes()[..b.as_bytes().len() - 4];
+        let mut before = body[..2 + 4 * FORMAT_BASE_COUNT].to_vec();
+        before[1] = FORMAT_BASE_COUNT as u8;
+        let s = decode(&sealed(&before)).unwrap();
+        assert_eq!(s.morph, c.morph);
+        assert_eq!(s.cal.tca_strain_sd_share, 0.0);
+        assert_eq!(s.cal.version, c.cal.version);
     }
 
     #[test]

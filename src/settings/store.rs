@@ -369,7 +369,7 @@ mod tests {
         assert_eq!(block_on_ready(st.load()), Err(LoadError::Absent));
         let s = with("lock_timeout_s", "300");
         let r = block_on_ready(st.save(&codec::encode(&s))).unwrap();
-        assert_eq!(r.bytes, 102);
+        assert_eq!(r.bytes, 106);
         assert_eq!(block_on_ready(st.load()), newest(s));
         // A second SAVE replaces the first.
         let s2 = with("bend_timeout_s", "200");

@@ -360,7 +360,7 @@ fn read_chain(
 /// The gauge `rig`'s link has learnt, ΔR/R per 1/m (NaN: none).
 fn gauge_of(rig: &Rig<Box<dyn Plant>>) -> f64 {
     rig.ctrl
-        .rest_shape()
+        .calibration()
         .gauge()
         .map_or(f64::NAN, |(g, _)| g as f64)
 }
