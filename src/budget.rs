@@ -342,6 +342,22 @@ fn heater(h: Heater, ohm: f32) -> HeaterConfig {
     }
 }
 
+/// The stray current of `demands`, A, if the budget cannot hold it beside the reserves of the
+/// links that run (their reserves and it over `budget`'s power at `supply_v`, or it alone over
+/// the current limit): a load no gate governs has taken what the scheduler promised them, so
+/// they can no longer be kept safe where they are (a softened rod, a held bend) and must stop.
+/// `None` where no current strays or the budget holds it.
+pub fn overrun_a(budget: &SupplyBudget, supply_v: f32, demands: &[Demand]) -> Option<f32> {
+    let (stray_a, stray_w) = stray(demands, supply_v);
+    let held: f32 = demands
+        .iter()
+        .filter(|d| d.class != Class::Idle)
+        .map(|d| d.reserve_w.pla_w + d.reserve_w.tca_w)
+        .sum();
+    let over = held + stray_w > budget.budget_w || stray_a >= budget.limit_a;
+    (stray_a > 0.0 && over).then_some(stray_a)
+}
+
 /// The least budget that lets a morph whose soften reserves `reserve_w` start on an idle
 /// board, W.
 pub fn least_budget_w(reserve_w: Powers, links: usize) -> f32 {

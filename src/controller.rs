@@ -530,6 +530,20 @@ impl Controller {
         ran
     }
 
+    /// True while this link's cut-off has failed: current flows with it open
+    /// ([`Electrical::cutoff_failed`]).
+    pub fn cutoff_failed(&self) -> bool {
+        self.elec.cutoff_failed()
+    }
+
+    /// Latches `fault`, found outside this link (the board's supply, [`crate::links`]), unless
+    /// one is latched already: what runs stops, heaters off, and the alarm says why.
+    pub fn trip_shared(&mut self, fault: Fault) {
+        if self.fault().is_none() {
+            self.trip(fault);
+        }
+    }
+
     /// Latches `fault`: what runs stops, its alarm is raised, then (for a TUNE) the tune's end.
     fn trip(&mut self, fault: Fault) {
         self.fault = Some(fault);

@@ -198,6 +198,13 @@ fn persists(count: &mut u8, wrong: bool, n: u8) -> bool {
 }
 
 impl Electrical {
+    /// True while current flows with the cut-off open, past its settling ticks, for
+    /// [`ELECTRICAL_TICKS`] in a row: the cut-off failed (`cutoff-failed`), and what flows no
+    /// gate and no cut-off of this link stops.
+    pub fn cutoff_failed(&self) -> bool {
+        self.cutoff >= ELECTRICAL_TICKS
+    }
+
     /// Judges one frame's currents, sampled under `drive` from a supply of `supply_v` volts,
     /// pushing what is wrong to `out`; `None` (no current sense) judges nothing.
     pub fn check(

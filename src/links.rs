@@ -13,6 +13,7 @@
 use crate::budget::{self, Class, Demand, LinkShare, Share, SupplyBudget, MAX_LINKS};
 use crate::controller::{Config, Controller, Inputs, Outputs};
 use crate::electrical::{Currents, ShuntSense, SHORT_MIN_A};
+use crate::fault::{Fault, FaultCode, Subject};
 use crate::heater::HeaterConfig;
 use crate::protocol::links::{self as wire, Address, LinksCommand, SupplySetting};
 use crate::protocol::{self, Command, ConfigCommand, Mode, OutLine, SimCommand};
@@ -202,8 +203,26 @@ impl<const N: usize> Links<N> {
         }
         let n = self.count();
         if self.budget.binding() {
-            let demands = self.demands();
             let v = self.supply_v();
+            // A current no gate governs that the budget cannot hold beside the running links
+            // (a shorted heater behind a cut-off that did not open, which that link has named):
+            // their reserves are gone, so they stop and say what flows; the supply must be cut
+            // by hand. A short that its cut-off ends within its settling ticks is no such load.
+            let cut_failed = self.ctrl[..n].iter().any(Controller::cutoff_failed);
+            let overrun = budget::overrun_a(&self.budget, v, &self.demands());
+            if let (true, Some(a)) = (cut_failed, overrun) {
+                // The running links and the queued ones (whose morph the queue then drops).
+                for k in 0..n {
+                    if self.ctrl[k].busy() || self.queued[k].is_some() {
+                        self.ctrl[k].trip_shared(Fault {
+                            code: FaultCode::CutoffFailed,
+                            subject: Subject::Supply,
+                            value: a,
+                        });
+                    }
+                }
+            }
+            let demands = self.demands();
             budget::allocate(&self.budget, v, &demands, &mut self.shares[..n]);
         } else {
             for s in self.shares[..n].iter_mut() {

@@ -253,6 +253,43 @@ fn a_short_behind_a_stuck_cut_off_is_a_load_the_others_are_scheduled_around() {
     run(on_supply(plants, noise.unwrap(), 3.0), "hifi draws");
 }
 
+/// The same short under an 8 W budget: its 1.8 A (some 22 W) is more than the budget holds
+/// beside the running links' reserves, so once link 2 has named its cut-off failed every other
+/// link stops at once with the same alarm, heaters off, the queued one too; none starves into a
+/// bare phase timeout.
+#[test]
+fn a_stray_the_budget_cannot_hold_stops_every_link_and_each_says_why() {
+    let mut rig = four(3.0);
+    say(&mut rig, "CONFIG SET supply_limit_a 3");
+    say(&mut rig, "CONFIG SET supply_budget_w 8");
+    assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
+    for _ in 0..20 {
+        rig.tick();
+    }
+    assert!(say(&mut rig, "@2 SIM FAULT cutoff-stuck")[0].starts_with("ok"));
+    assert!(say(&mut rig, "@2 SIM FAULT heater-stuck tca")[0].starts_with("ok"));
+    let events = run_until_idle(&mut rig, 60, |_| {});
+    assert!(
+        events
+            .iter()
+            .any(|a| a.starts_with("@2 alarm: heater-short tca")),
+        "{events:?}"
+    );
+    for k in [1, 3, 4] {
+        let alarms: Vec<&String> = events
+            .iter()
+            .filter(|e| e.starts_with(&format!("@{k} alarm:")))
+            .collect();
+        assert!(
+            alarms.len() == 1 && alarms[0].contains("alarm: cutoff-failed "),
+            "link {k}: {events:?}"
+        );
+        assert_eq!(rig.links.link(k - 1).phase(), Phase::Fault, "link {k}");
+        let p = rig.links.link(k - 1).powers();
+        assert_eq!(p.pla_w + p.tca_w, 0.0, "link {k}");
+    }
+}
+
 #[test]
 fn a_shared_fault_stops_every_link_and_each_says_why() {
     let mut rig = four(10.0);

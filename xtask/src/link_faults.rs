@@ -196,8 +196,21 @@ pub fn run(a: &Args) -> Result<(), String> {
     };
     for (&(c, p), (alone, shared)) in jobs.iter().zip(&rows) {
         let what = format!("{} in {}", cases[c].name, p.as_str());
+        // A stuck cut-off whose current the budget cannot hold beside the others stops them
+        // all, each saying what flows (docs/multilink.md); nothing else may stop them.
+        let stopped_by_the_stray = cases[c].line == "SIM FAULT cutoff-stuck"
+            && !shared.others_alarmed.is_empty()
+            && shared
+                .others_alarmed
+                .iter()
+                .all(|l| l.contains("alarm: cutoff-failed "));
         let others = if shared.others_alarmed.is_empty() && shared.others_unfinished.is_empty() {
             "all done, no alarm".to_string()
+        } else if stopped_by_the_stray {
+            format!(
+                "links {:?} stopped: cutoff-failed (the stray over the budget)",
+                shared.others_unfinished
+            )
         } else {
             failures.push(format!(
                 "{what}: other links alarmed {:?}, did not finish {:?}",
