@@ -211,6 +211,35 @@ fn four_hifi(limit_a: f64) -> MultiRig<Hifi> {
     )
 }
 
+/// On a 3 A supply with `budget_w` (W; `None`: no budget), `GAIT 34 38 42 46`; two seconds in,
+/// link 2's TCA MOSFET shorts and its cut-off does not open: 1.8 A flow through it for good.
+/// Runs until every link is idle (at most `max_s`) and holds that link 2 named its short; the
+/// event lines.
+fn short_behind_a_stuck_cut_off<P: morphlink_plant::Plant>(
+    rig: &mut MultiRig<P>,
+    budget_w: Option<u32>,
+    max_s: u64,
+) -> Vec<String> {
+    say(rig, "CONFIG SET supply_limit_a 3");
+    if let Some(w) = budget_w {
+        assert!(say(rig, &format!("CONFIG SET supply_budget_w {w}"))[0].starts_with("ok"));
+    }
+    assert_eq!(say(rig, "GAIT 34 38 42 46"), ["ok"]);
+    for _ in 0..20 {
+        rig.tick();
+    }
+    assert!(say(rig, "@2 SIM FAULT cutoff-stuck")[0].starts_with("ok"));
+    assert!(say(rig, "@2 SIM FAULT heater-stuck tca")[0].starts_with("ok"));
+    let events = run_until_idle(rig, max_s, |_| {});
+    assert!(
+        events
+            .iter()
+            .any(|a| a.starts_with("@2 alarm: heater-short tca")),
+        "{events:?}"
+    );
+    events
+}
+
 #[test]
 fn a_short_behind_a_stuck_cut_off_is_a_load_the_others_are_scheduled_around() {
     // Link 2's TCA MOSFET shorts in soften and its cut-off does not open: 1.8 A flow through
@@ -218,20 +247,7 @@ fn a_short_behind_a_stuck_cut_off_is_a_load_the_others_are_scheduled_around() {
     // (docs/multilink.md, "A fault on one link"), so none of them reads less heat than it
     // asked and alarms for it.
     fn run<P: morphlink_plant::Plant>(mut rig: MultiRig<P>, plant: &str) {
-        say(&mut rig, "CONFIG SET supply_limit_a 3");
-        assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
-        for _ in 0..20 {
-            rig.tick();
-        }
-        assert!(say(&mut rig, "@2 SIM FAULT cutoff-stuck")[0].starts_with("ok"));
-        assert!(say(&mut rig, "@2 SIM FAULT heater-stuck tca")[0].starts_with("ok"));
-        let events = run_until_idle(&mut rig, 1500, |_| {});
-        assert!(
-            events
-                .iter()
-                .any(|a| a.starts_with("@2 alarm: heater-short tca")),
-            "{plant}: {events:?}"
-        );
+        let events = short_behind_a_stuck_cut_off(&mut rig, None, 1500);
         only_link_2_stopped(&events, plant);
     }
     run(four(3.0), "lumped");
@@ -260,21 +276,7 @@ fn a_short_behind_a_stuck_cut_off_is_a_load_the_others_are_scheduled_around() {
 #[test]
 fn a_stray_the_budget_cannot_hold_stops_every_link_and_each_says_why() {
     let mut rig = four(3.0);
-    say(&mut rig, "CONFIG SET supply_limit_a 3");
-    say(&mut rig, "CONFIG SET supply_budget_w 8");
-    assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
-    for _ in 0..20 {
-        rig.tick();
-    }
-    assert!(say(&mut rig, "@2 SIM FAULT cutoff-stuck")[0].starts_with("ok"));
-    assert!(say(&mut rig, "@2 SIM FAULT heater-stuck tca")[0].starts_with("ok"));
-    let events = run_until_idle(&mut rig, 60, |_| {});
-    assert!(
-        events
-            .iter()
-            .any(|a| a.starts_with("@2 alarm: heater-short tca")),
-        "{events:?}"
-    );
+    let events = short_behind_a_stuck_cut_off(&mut rig, Some(8), 60);
     for k in [1, 3, 4] {
         let alarms: Vec<&String> = events
             .iter()

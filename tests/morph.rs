@@ -203,6 +203,17 @@ fn auto_morphs_to_34_mm_in_still_air_on_both_links() {
     }
 }
 
+/// The lumped link in still air at 27 °C, `lines` sent, settled there for 25 minutes: the
+/// TCA holding 32.92 mm keeps its PLA over the 58 °C it must cool under.
+fn in_still_air_at_27(lines: &[&str]) -> Bench {
+    let mut b = Bench::new();
+    for l in ["SIM MEDIUM air", "SIM AMBIENT 27"].iter().chain(lines) {
+        assert!(b.send(l)[0].starts_with("ok"), "{l}");
+    }
+    b.run_for(1500.0);
+    b
+}
+
 /// A lock the link cannot finish (still air at 27 °C: the TCA holding 32.92 mm keeps the PLA
 /// at 59 °C, over the 58 °C the rod must cool under to hold the shape) ends within five minutes
 /// of lock, not at the ten-minute lock timeout, with both heaters off and an alarm that names
@@ -210,10 +221,7 @@ fn auto_morphs_to_34_mm_in_still_air_on_both_links() {
 /// under the line, locks and ends `done` as before (`auto_morphs_to_34_mm_in_still_air_on_both_links`).
 #[test]
 fn a_lock_too_warm_to_finish_ends_early_and_says_why() {
-    let mut b = Bench::new();
-    assert!(b.send("SIM MEDIUM air")[0].starts_with("ok"));
-    assert!(b.send("SIM AMBIENT 27")[0].starts_with("ok"));
-    b.run_for(1500.0);
+    let mut b = in_still_air_at_27(&[]);
     let from = b.lines.len();
     let t = b.morph(32.92, "auto");
     let alarms = b.alarms_since(from);
@@ -239,11 +247,7 @@ fn a_lock_too_warm_to_finish_ends_early_and_says_why() {
 /// too-warm lock) says the same: how warm the PLA stayed and what to do, naming the timeout.
 #[test]
 fn a_lock_the_clock_ends_names_how_warm_the_pla_stayed() {
-    let mut b = Bench::new();
-    assert!(b.send("SIM MEDIUM air")[0].starts_with("ok"));
-    assert!(b.send("SIM AMBIENT 27")[0].starts_with("ok"));
-    assert!(b.send("CONFIG SET lock_timeout_s 60")[0].starts_with("ok"));
-    b.run_for(1500.0);
+    let mut b = in_still_air_at_27(&["CONFIG SET lock_timeout_s 60"]);
     let from = b.lines.len();
     b.morph(32.92, "auto");
     let alarms = b.alarms_since(from);
