@@ -719,6 +719,29 @@ mod tests {
     }
 
     #[test]
+    fn a_stray_current_overruns_the_budget_only_past_the_running_reserves_or_the_limit() {
+        let mut stuck = busy(Class::Idle, 0, (0.0, 0.0), (0.0, 0.0));
+        stuck.stray_a = [0.0, 1.8];
+        let holding = busy(Class::Holding, 1, (2.0, 1.0), (2.0, 1.0));
+        let at = |budget_w, limit_a| SupplyBudget { budget_w, limit_a };
+        // 21.6 W at 12 V beside a 3 W reserve: over 24 W, not over 25 W.
+        assert_eq!(
+            overrun_a(&at(24.0, 3.0), 12.0, &[stuck, holding]),
+            Some(1.8)
+        );
+        assert_eq!(overrun_a(&at(25.0, 3.0), 12.0, &[stuck, holding]), None);
+        // The stray alone at the current limit.
+        assert_eq!(
+            overrun_a(&at(40.0, 1.8), 12.0, &[stuck, holding]),
+            Some(1.8)
+        );
+        // No stray, or nothing running beside one the budget holds: nothing to stop.
+        assert_eq!(overrun_a(&at(1.0, 3.0), 12.0, &[holding]), None);
+        let idle = busy(Class::Idle, 1, (0.0, 0.0), (0.0, 0.0));
+        assert_eq!(overrun_a(&at(22.0, 3.0), 12.0, &[stuck, idle]), None);
+    }
+
+    #[test]
     fn a_current_no_gate_governs_is_counted_before_every_allowance() {
         // Link 1 faulted with its TCA MOSFET shorted behind a stuck cut-off: 1.8 A flow, its
         // gate off. Link 2 asks for its TCA's whole power on a 3 A supply.
