@@ -722,6 +722,12 @@ impl Calibration {
         self.map_sum_xy_k2 = 0.0;
     }
 
+    /// The TCA's temperature coefficient of resistance, 1/K ([`Calibration::tca_tcr_ppm_per_k`]
+    /// is kept in ppm/K so the settings' three decimals hold it whole).
+    pub fn tcr_per_k(&self) -> f32 {
+        self.tca_tcr_ppm_per_k * 1e-6
+    }
+
     /// Whether `closed` bends on the TCA's own temperature where the board senses current
     /// ([`Calibration::tca_self_bend`]; docs/strategies.md, "Bending on the TCA's own
     /// temperature").
@@ -761,7 +767,7 @@ impl Calibration {
     /// variance, from the strain factor through the coefficient (`−factor × α`) and
     /// [`Calibration::tca_strain_sd_share`]; `None` until one was learnt (or set).
     pub fn gauge(&self) -> Option<(f32, f32)> {
-        let g = -self.tca_strain_k_m * self.tca_tcr_ppm_per_k * 1e-6;
+        let g = -self.tca_strain_k_m * self.tcr_per_k();
         let sd = self.tca_strain_sd_share * g;
         (g != 0.0 && sd != 0.0 && g.is_finite()).then_some((g, sd * sd))
     }
@@ -772,7 +778,7 @@ impl Calibration {
     /// Refused, changing nothing, if it is past ±[`STRAIN_MAX_K_M`], its uncertainty past
     /// [`STRAIN_SD_SHARE_MAX`] of it, or either not a number.
     pub fn set_gauge(&mut self, gauge_per_m: f32, var: f32) -> Result<f32, ReportRejection> {
-        let s = -gauge_per_m / (self.tca_tcr_ppm_per_k * 1e-6);
+        let s = -gauge_per_m / self.tcr_per_k();
         let share = crate::mathf::sqrt(var) / gauge_per_m.abs();
         if !(s.is_finite() && share.is_finite()) {
             return Err(ReportRejection::NotFinite);

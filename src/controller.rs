@@ -353,8 +353,7 @@ impl Controller {
     /// once it has a reference at rest ([`Electrical::tca_self_c`], with the calibration's
     /// coefficient).
     pub fn tca_self_c(&self) -> Option<f32> {
-        self.elec
-            .tca_self_c(self.settings.cal.tca_tcr_ppm_per_k * 1e-6)
+        self.elec.tca_self_c(self.settings.cal.tcr_per_k())
     }
 
     /// The heaters seen electrically (currents, resistances, the TCA's rest reference).
@@ -730,7 +729,7 @@ impl Controller {
         // it may have been left bent, and only a MEASURED anchors it.
         let gauge = self.settings.cal.gauge();
         let known = self.shape_known && (self.last.is_some() || gauge.is_none());
-        let tcr_per_k = self.settings.cal.tca_tcr_ppm_per_k * 1e-6;
+        let tcr_per_k = self.settings.cal.tcr_per_k();
         let dt_s = TICK_MS as f32 * 1e-3;
         let r_ohm = match self.elec.on_a() {
             Some(_) => Ok(self.elec.raw_ohm(Heater::Tca)),
@@ -745,10 +744,11 @@ impl Controller {
             tcr_per_k,
             gauge,
         );
-        self.strain_from_gauge();
+        // A gauge is learnt only by a finished rest, which gives an outcome.
         let Some(outcome) = outcome else {
             return;
         };
+        self.strain_from_gauge();
         let mut learnt = false;
         if let Outcome::Shape(r) = outcome {
             if r.learnable && !self.shape_known {
@@ -1458,8 +1458,8 @@ impl Controller {
                 self.elec.retag_rest_shape(done, measured);
                 if caliper {
                     self.shape_known = true;
-                    let tcr_per_k = self.settings.cal.tca_tcr_ppm_per_k * 1e-6;
-                    let gauge = self.settings.cal.gauge();
+                    let (tcr_per_k, gauge) =
+                        (self.settings.cal.tcr_per_k(), self.settings.cal.gauge());
                     self.rest_shape.measured(measured, tcr_per_k, gauge);
                     self.strain_from_gauge();
                 }
