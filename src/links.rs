@@ -598,7 +598,8 @@ impl<const N: usize> Links<N> {
                         return out(&l);
                     }
                 }
-                for (k, &r) in radii_mm[..count].iter().enumerate() {
+                for k in self.longest_first(&radii_mm[..count]) {
+                    let r = radii_mm[k];
                     let mut first = OutLine::new();
                     self.morph(now_ms, k, r, mode, &mut |line: &str| {
                         if first.is_empty() {
@@ -609,6 +610,30 @@ impl<const N: usize> Links<N> {
                 out(protocol::OK);
             }
         }
+    }
+
+    /// The links of a GAIT to `radii_mm` in the order their morphs are started or queued: the
+    /// longest first (the most TCA power its table gives, link order among equals). A morph's
+    /// length grows with its bend (a tighter radius heats the TCA further and the rod flows
+    /// further), and a queue that starts the longest jobs first (list scheduling's
+    /// longest-processing-time rule) keeps the short ones for the room the long ones leave,
+    /// instead of a long morph starting last (docs/multilink.md, "The order of a gait").
+    fn longest_first(&self, radii_mm: &[f32]) -> Vec<usize, N> {
+        let tca_w = |k: usize| {
+            self.ctrl[k]
+                .soften_reserve_w(radii_mm[k])
+                .map_or(0.0, |r| r.tca_w)
+        };
+        let mut order: Vec<usize, N> = (0..radii_mm.len().min(N)).collect();
+        // Insertion sort: stable, and N is at most four.
+        for i in 1..order.len() {
+            let mut j = i;
+            while j > 0 && tca_w(order[j - 1]) < tca_w(order[j]) {
+                order.swap(j - 1, j);
+                j -= 1;
+            }
+        }
+        order
     }
 
     /// What link `k` answers a MORPH it refuses (busy, faulted, no reading, out of range),

@@ -420,6 +420,38 @@ fn an_unaddressed_abort_stops_every_link_and_empties_the_queue() {
     assert!(rig.links.idle());
 }
 
+/// A GAIT under a budget that cannot start every link starts the tightest bend (the longest
+/// morph) first and queues the loosest, wherever each stands in the line; links asking the
+/// same keep their order.
+#[test]
+fn a_gait_starts_its_longest_morph_first_and_queues_the_shortest() {
+    for (gait, first, last) in [
+        ("GAIT 46 42 38 34", 4, 1),
+        ("GAIT 34 38 42 46", 1, 4),
+        ("GAIT 42 34 46 38", 2, 3),
+    ] {
+        let mut rig = four(3.0);
+        say(&mut rig, "CONFIG SET supply_budget_w 5");
+        assert_eq!(say(&mut rig, gait), ["ok"], "{gait}");
+        let mut events = Vec::new();
+        rig.drain_events(&mut |l: &str| events.push(l.to_string()));
+        let softens: Vec<_> = events
+            .iter()
+            .filter(|e| e.contains("event: phase soften"))
+            .collect();
+        assert!(
+            softens[0].starts_with(&format!("@{first} ")),
+            "{gait}: {events:?}"
+        );
+        assert!(rig.links.queued(last - 1), "{gait}: {events:?}");
+    }
+    // Equal asks keep the link order.
+    let mut rig = four(3.0);
+    say(&mut rig, "CONFIG SET supply_budget_w 5");
+    assert_eq!(say(&mut rig, "GAIT 40 40 40 40"), ["ok"]);
+    assert!(!rig.links.queued(0) && rig.links.queued(3));
+}
+
 #[test]
 fn four_hifi_links_under_8_w_finish_within_the_budget() {
     let mut rig = four_hifi(3.0);
