@@ -99,6 +99,9 @@ pub struct Bench<P> {
     /// The supply at the board's terminals, V, where a shared supply sags under the load of
     /// several links ([`Bench::set_terminal_v`]); `None`: the plant's own supply.
     terminal_v: Option<f64>,
+    /// The supply inside each heater's own pulse where its on-current is sampled, V, on a
+    /// supply shared by several links ([`Bench::set_pulse_v`]); `None`: the terminal voltage.
+    pulse_v: Option<[f64; 2]>,
 }
 
 /// Approximately standard normal noise from `rng` (xorshift; the sum of four uniforms).
@@ -132,6 +135,7 @@ impl<P: Plant> Bench<P> {
             rng: noise.seed | 1,
             current_rng: (noise.seed ^ 0xc0ff_ee00_1234_5678) | 1,
             terminal_v: None,
+            pulse_v: None,
         }
     }
 
@@ -240,6 +244,13 @@ impl<P: Plant> Bench<P> {
         self.terminal_v = v;
     }
 
+    /// The supply inside each heater's pulse where the board samples its on-current (PLA,
+    /// TCA), V: on a shared supply other heaters' pulses, or its constant-current mode, may
+    /// pull it under the period's mean. `None`: the terminal voltage.
+    pub fn set_pulse_v(&mut self, v: Option<[f64; 2]>) {
+        self.pulse_v = v;
+    }
+
     /// The supply at the board's terminals, V.
     fn supply_at_terminals(&self, s: &morphlink_plant::Sample) -> f64 {
         self.terminal_v.unwrap_or(s.supply_v)
@@ -268,9 +279,22 @@ impl<P: Plant> Bench<P> {
         };
         let mut c = CurrentCounts::default();
         for i in 0..2 {
-            let amps = if self.heater_open[i] { 0.0 } else { v / ohm[i] };
+            let on_v = if v > 0.0 {
+                self.pulse_v.map_or(v, |p| p[i])
+            } else {
+                0.0
+            };
+            let amps = if self.heater_open[i] {
+                0.0
+            } else {
+                on_v / ohm[i]
+            };
             c.on[i] = self.sensed_counts(i, amps);
-            let stuck = if self.heater_stuck[i] { amps } else { 0.0 };
+            let stuck = if self.heater_stuck[i] && !self.heater_open[i] {
+                v / ohm[i]
+            } else {
+                0.0
+            };
             c.off[i] = self.sensed_counts(i, stuck);
         }
         Some(c)

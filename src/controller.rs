@@ -535,6 +535,28 @@ impl Controller {
         self.elec.cutoff_failed()
     }
 
+    /// The supply inside each heater's pulse as `inputs`' currents give it, V
+    /// ([`Electrical::pulse_v`]); `None` where current is not sensed.
+    pub fn pulse_v(&self, inputs: &Inputs) -> Option<[f32; 2]> {
+        let c = Currents::of(&inputs.current?, &self.cfg.shunt);
+        Some(self.elec.pulse_v(&c, self.drive(), self.supply_v))
+    }
+
+    /// The next step's on-samples of the heaters `sag` marks were taken in a sagging supply
+    /// ([`Electrical::note_sag`]).
+    pub fn note_sag(&mut self, sag: [bool; 2]) {
+        self.elec.note_sag(sag);
+    }
+
+    /// What drove the heaters since the last tick: the currents of this tick's frame were
+    /// sampled under it.
+    fn drive(&self) -> Drive {
+        Drive {
+            duty: [self.outputs.pla_duty, self.outputs.tca_duty],
+            supply_on: self.outputs.supply_on,
+        }
+    }
+
     /// Latches `fault`, found outside this link (the board's supply, [`crate::links`]), unless
     /// one is latched already: what runs stops, heaters off, and the alarm says why.
     pub fn trip_shared(&mut self, fault: Fault) {
@@ -640,14 +662,9 @@ impl Controller {
         self.frame = Some(frame);
         self.supply_v = frame.supply_v;
         let mut faults = Faults::new();
-        // The currents were sampled under the outputs applied since the last tick.
-        let drive = Drive {
-            duty: [self.outputs.pla_duty, self.outputs.tca_duty],
-            supply_on: self.outputs.supply_on,
-        };
         let currents = inputs.current.map(|c| Currents::of(&c, &self.cfg.shunt));
         self.elec
-            .check(currents, drive, frame.supply_v, &mut faults);
+            .check(currents, self.drive(), frame.supply_v, &mut faults);
         if self.fault().is_some() {
             self.powers = Powers::default();
             self.outputs = Outputs::default();

@@ -152,6 +152,18 @@ const REST_WHOLE_TICKS: u16 = (1.0 / REST_FILTER_WEIGHT) as u16;
 /// Two shapes this close are one, 1/m of curvature (a morph's estimate repeats to far better).
 const SAME_SHAPE_PER_M: f32 = 1e-3;
 
+/// A heater's on-current reads a supply sagging inside its pulse once it gives, at the
+/// resistance read before, a voltage this share under the supply's reading: a supply shared by
+/// several links whose own current limit is under what their pulses draw together falls into
+/// constant-current mode there (a TCA's pulse beside another's on a supply at its limit drops
+/// 40 % or more). 0.15 is four times the drop a healthy bench supply's 0.1 Ω gives under the
+/// heaters' largest current together (4.5 A: 4 %) and twenty times the PLA channel's noise
+/// (3 mA on its 0.4 A; the chain's gain error cancels against the resistance read through it);
+/// a heater's resistance moves under 0.2 % a tick. [`crate::links`] judges it; such a sample
+/// says nothing of the heater's resistance.
+pub const PULSE_SAG_SHARE: f32 = 0.15;
+const _: () = assert!(PULSE_SAG_SHARE > 0.05 && PULSE_SAG_SHARE < 1.0 - OPEN_MAX_SHARE);
+
 /// The electrical checks' state: per heater, how long each reading has been wrong, and the
 /// filtered resistance; the TCA's resistance at rest.
 #[derive(Clone, Copy, Debug, Default)]
@@ -173,6 +185,9 @@ pub struct Electrical {
     rest_shape_per_m: f32,
     /// This tick's resistance of each heater, Ω, where it was read within its range.
     raw: [Option<f32>; 2],
+    /// The next frame's on-sample of each heater was taken in a sagging supply
+    /// ([`Electrical::note_sag`]).
+    sag: [bool; 2],
 }
 
 /// What drove the heaters while a frame's currents were sampled: the last tick's outputs.
@@ -216,6 +231,7 @@ impl Electrical {
     ) {
         self.now = currents;
         self.raw = [None; 2];
+        let sag = core::mem::take(&mut self.sag);
         let Some(c) = currents else {
             return;
         };
@@ -258,7 +274,8 @@ impl Electrical {
             if persists(&mut self.short[i], short, ELECTRICAL_TICKS) {
                 let _ = out.push(heater_fault(FaultCode::HeaterShort, h, off_a));
             }
-            if open {
+            // A sagging supply is the supply's fault, judged once for every link.
+            if open || sag[i] {
                 continue;
             }
             let r = supply_v / on_a;
@@ -274,6 +291,26 @@ impl Electrical {
                 });
             }
         }
+    }
+
+    /// The supply inside each heater's pulse as the frame's currents `c` give it under `drive`
+    /// from a supply reading `supply_v`, V: the on-current times the resistance read before
+    /// (NaN for a heater not yet read, one that reads open, or a supply cut). Under
+    /// [`PULSE_SAG_SHARE`] below the supply's reading, the supply sags there.
+    pub fn pulse_v(&self, c: &Currents, drive: Drive, supply_v: f32) -> [f32; 2] {
+        [Heater::Pla, Heater::Tca].map(|h| {
+            let (i, on_a) = (h.index(), c.on_a[h.index()]);
+            match (drive.supply_on, self.ohm[i]) {
+                (true, Some(r)) if on_a >= OPEN_MAX_SHARE * supply_v / range(h).1 => on_a * r,
+                _ => f32::NAN,
+            }
+        })
+    }
+
+    /// The next frame's on-samples of the heaters `sag` marks were taken in a sagging supply:
+    /// that frame judges neither their resistance nor takes it in.
+    pub fn note_sag(&mut self, sag: [bool; 2]) {
+        self.sag = sag;
     }
 
     /// Heater `h`'s filtered resistance, Ω, where current is sensed and it has been read.

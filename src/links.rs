@@ -12,7 +12,7 @@
 
 use crate::budget::{self, Class, Demand, LinkShare, Share, SupplyBudget, MAX_LINKS};
 use crate::controller::{Config, Controller, Inputs, Outputs};
-use crate::electrical::{Currents, ShuntSense, SHORT_MIN_A};
+use crate::electrical::{Currents, ShuntSense, ELECTRICAL_TICKS, PULSE_SAG_SHARE, SHORT_MIN_A};
 use crate::fault::{Fault, FaultCode, Subject};
 use crate::heater::HeaterConfig;
 use crate::protocol::links::{self as wire, Address, LinksCommand, SupplySetting};
@@ -61,6 +61,9 @@ pub struct Links<const N: usize> {
     /// Each link's heaters' current while their gates are off, last tick, A: see
     /// [`Demand::stray_a`].
     stray_a: [[f32; 2]; N],
+    /// Ticks in a row some heater's on-current read a sagging supply
+    /// ([`Links::judge_sag`]).
+    sag_ticks: u8,
     /// The link whose SAVE the shell is writing.
     saving: usize,
 }
@@ -85,6 +88,7 @@ impl<const N: usize> Links<N> {
             next_event: 0,
             shunt: cfg.shunt,
             stray_a: [[0.0; 2]; N],
+            sag_ticks: 0,
             saving: 0,
         }
     }
@@ -192,6 +196,7 @@ impl<const N: usize> Links<N> {
                     .map(|a| if a > SHORT_MIN_A { a } else { 0.0 })
             });
         }
+        self.judge_sag(inputs);
         self.start_queued(now_ms);
         for k in 0..self.count() {
             let busy = self.ctrl[k].busy();
@@ -237,6 +242,57 @@ impl<const N: usize> Links<N> {
             });
             self.ctrl[k].step(now_ms, &inputs[k]);
             out[k] = self.outputs(k);
+        }
+    }
+
+    /// A supply that cannot give what the heaters' pulses draw together (its own current limit
+    /// under `supply_limit_a`, which the scheduler lays the pulses out under) falls into
+    /// constant-current mode inside them: the on-currents then read, at the resistances read
+    /// before, a voltage [`PULSE_SAG_SHARE`] or more under the supply's reading. Those samples
+    /// say nothing of the heaters (each link is told not to judge or learn a resistance from
+    /// them); once it holds [`ELECTRICAL_TICKS`] ticks in a row every link stops with
+    /// `supply-out-of-range` at the lowest voltage read, and an event says what to set. The
+    /// sagging morphs would otherwise run on heat they do not get and land off their targets.
+    fn judge_sag(&mut self, inputs: &[Inputs]) {
+        let v = self.supply_v();
+        let mut lowest: Option<(usize, f32)> = None;
+        for (k, i) in inputs.iter().enumerate().take(self.count()) {
+            let pulse_v = self.ctrl[k].pulse_v(i).unwrap_or([f32::NAN; 2]);
+            let sag = pulse_v.map(|p| p < (1.0 - PULSE_SAG_SHARE) * v);
+            self.ctrl[k].note_sag(sag);
+            for (p, s) in pulse_v.into_iter().zip(sag) {
+                if s && lowest.is_none_or(|(_, low)| p < low) {
+                    lowest = Some((k, p));
+                }
+            }
+        }
+        self.sag_ticks = match lowest {
+            Some(_) => self.sag_ticks.saturating_add(1),
+            None => 0,
+        };
+        // A current no gate governs (a shorted heater) loads the supply unscheduled: its sag is
+        // that fault's, which the link names and the stray's own rule judges.
+        let stray = self.stray_a[..self.count()]
+            .iter()
+            .flatten()
+            .any(|&a| a > 0.0);
+        let Some((k, pulse_v)) = lowest.filter(|_| self.sag_ticks >= ELECTRICAL_TICKS && !stray)
+        else {
+            return;
+        };
+        if (0..self.count()).all(|j| self.ctrl[j].fault().is_some()) {
+            return;
+        }
+        let mut e = OutLine::new();
+        wire::supply_sag_event(&mut e, pulse_v, self.budget.limit_a);
+        self.push_event(k, &e);
+        // Every link, the queued ones too (the queue then drops their morphs).
+        for j in 0..self.count() {
+            self.ctrl[j].trip_shared(Fault {
+                code: FaultCode::SupplyOutOfRange,
+                subject: Subject::Supply,
+                value: pulse_v,
+            });
         }
     }
 

@@ -405,6 +405,7 @@ fn bad_input_is_refused_with_a_clear_error_and_changes_nothing() {
 #[test]
 fn an_unaddressed_abort_stops_every_link_and_empties_the_queue() {
     let mut rig = four(3.0);
+    say(&mut rig, "CONFIG SET supply_limit_a 3");
     say(&mut rig, "CONFIG SET supply_budget_w 5");
     assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
     for _ in 0..30 {
@@ -418,6 +419,54 @@ fn an_unaddressed_abort_stops_every_link_and_empties_the_queue() {
         assert_eq!((o.pla_duty, o.tca_duty), (0.0, 0.0));
     }
     assert!(rig.links.idle());
+}
+
+/// A bench supply whose own current limit is under `supply_limit_a` (the default, which never
+/// binds) sags inside the pulses the scheduler lets overlap: the links see it in their
+/// on-currents, every link stops with `supply-out-of-range` and an event names the setting, and
+/// no link ends `done` at a radius the sag made. With the setting at the supply's limit the same
+/// gait finishes with no alarm.
+#[test]
+fn a_supply_weaker_than_its_setting_stops_every_link_and_says_what_to_set() {
+    let mut rig = four(2.0);
+    say(&mut rig, "CONFIG SET supply_budget_w 8");
+    assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
+    let events = run_until_idle(&mut rig, 600, |_| {});
+    assert!(
+        events.iter().any(|e| e.contains("event: supply sags to",)
+            && e.contains("supply_limit_a=20.00; set supply_limit_a to it (docs/multilink.md)")),
+        "{events:?}"
+    );
+    for k in 1..=4 {
+        assert!(
+            events
+                .iter()
+                .any(|e| e.starts_with(&format!("@{k} alarm: supply-out-of-range"))),
+            "link {k}: {events:?}"
+        );
+        let o = rig.links.outputs(k - 1).out;
+        assert_eq!((o.pla_duty, o.tca_duty, o.supply_on), (0.0, 0.0, false));
+    }
+    assert!(
+        !events.iter().any(|e| e.contains("event: done")),
+        "{events:?}"
+    );
+    assert!(
+        !events.iter().any(|e| e.contains("heater-resistance")),
+        "{events:?}"
+    );
+
+    let mut rig = four(2.0);
+    say(&mut rig, "CONFIG SET supply_limit_a 2");
+    say(&mut rig, "CONFIG SET supply_budget_w 8");
+    assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
+    let events = run_until_idle(&mut rig, 1500, |_| {});
+    assert!(!events.iter().any(|e| e.contains("alarm:")), "{events:?}");
+    assert_eq!(
+        events.iter().filter(|e| e.contains("event: done")).count(),
+        4,
+        "{events:?}"
+    );
 }
 
 /// A GAIT under a budget that cannot start every link starts the tightest bend (the longest

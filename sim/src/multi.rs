@@ -18,6 +18,9 @@ use morphlink_plant::{Duties, Plant, Setting};
 
 /// Most heater windows of one period.
 const WINDOWS: usize = 2 * MAX_LINKS;
+/// Where in its window a board samples a heater's on-current, share of the PWM period: 5 µs
+/// in, inside the current-sense probe's 10 µs pulse (`morphlink::electrical::MIN_SENSED_ON_US`).
+const SAMPLE_INSIDE: f64 = 0.005;
 
 /// `x` wrapped into [0, 1).
 fn wrap(x: f64) -> f64 {
@@ -229,8 +232,21 @@ impl<P: Plant> MultiRig<P> {
                 got[w.0][w.1] += len * (v / v_open) * (v / v_open);
             }
         }
+        // Each heater's on-current is sampled just inside its own window (a probe pulse where
+        // its duty is below one): the supply there, with every window on at that instant.
+        let mut pulse_v = [[v_open; 2]; MAX_LINKS];
+        for w in &windows {
+            let t = wrap(w.2 + SAMPLE_INSIDE);
+            let g: f64 = windows
+                .iter()
+                .filter(|o| on(o, t) || (o.0 == w.0 && o.1 == w.1))
+                .map(|o| o.4)
+                .sum();
+            pulse_v[w.0][w.1] = self.supply.volts(g);
+        }
         for k in 0..n {
             self.benches[k].set_terminal_v(Some(tick.mean_v));
+            self.benches[k].set_pulse_v(Some(pulse_v[k]));
             let d = Duties {
                 pla: got[k][0].min(1.0),
                 tca: got[k][1].min(1.0),

@@ -274,6 +274,19 @@ pub fn queued_event(l: &mut OutLine, needs_w: f32, free_w: f32) {
     );
 }
 
+/// The shared supply sagged to `pulse_v` (V) inside the heaters' pulses while `limit_a` (A) is
+/// the limit the scheduler lays them out under: `event: supply sags to <V> V inside the heaters'
+/// pulses: its own current limit is under supply_limit_a=<A>; set supply_limit_a to it
+/// (docs/multilink.md)`. Every link then stops with `supply-out-of-range`.
+pub fn supply_sag_event(l: &mut OutLine, pulse_v: f32, limit_a: f32) {
+    let _ = write!(
+        l,
+        "event: supply sags to {} V inside the heaters' pulses: its own current limit is under supply_limit_a={}; set supply_limit_a to it ({LINKS_DOC})",
+        Fixed(pulse_v, 1),
+        Fixed(limit_a, 2)
+    );
+}
+
 /// A queued morph that could not start once the budget had room (a fault latched meanwhile):
 /// `event: queued-morph dropped (<its refusal>)`.
 pub fn queued_dropped_event(l: &mut OutLine, refusal: &str) {
