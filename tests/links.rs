@@ -302,14 +302,26 @@ fn a_shared_fault_stops_every_link_and_each_says_why() {
     // The shared supply falls below what the heaters are rated for.
     assert!(say(&mut rig, "@1 SIM SUPPLY 7")[0].starts_with("ok"));
     let events = run_until_idle(&mut rig, 60, |_| {});
+    every_link_stopped_by(&rig, &events, "supply-out-of-range");
+}
+
+/// Holds that every one of four links raised `code`'s alarm and stands faulted, heaters off
+/// and its supply cut.
+fn every_link_stopped_by<P: morphlink_plant::Plant>(
+    rig: &MultiRig<P>,
+    events: &[String],
+    code: &str,
+) {
     for k in 1..=4 {
         assert!(
             events
                 .iter()
-                .any(|e| e.starts_with(&format!("@{k} alarm: supply-out-of-range"))),
+                .any(|e| e.starts_with(&format!("@{k} alarm: {code}"))),
             "link {k}: {events:?}"
         );
         assert_eq!(rig.links.link(k - 1).phase(), Phase::Fault);
+        let o = rig.links.outputs(k - 1).out;
+        assert_eq!((o.pla_duty, o.tca_duty, o.supply_on), (0.0, 0.0, false));
     }
 }
 
@@ -437,16 +449,7 @@ fn a_supply_weaker_than_its_setting_stops_every_link_and_says_what_to_set() {
             && e.contains("supply_limit_a=20.00; set supply_limit_a to it (docs/multilink.md)")),
         "{events:?}"
     );
-    for k in 1..=4 {
-        assert!(
-            events
-                .iter()
-                .any(|e| e.starts_with(&format!("@{k} alarm: supply-out-of-range"))),
-            "link {k}: {events:?}"
-        );
-        let o = rig.links.outputs(k - 1).out;
-        assert_eq!((o.pla_duty, o.tca_duty, o.supply_on), (0.0, 0.0, false));
-    }
+    every_link_stopped_by(&rig, &events, "supply-out-of-range");
     assert!(
         !events.iter().any(|e| e.contains("event: done")),
         "{events:?}"
@@ -456,17 +459,7 @@ fn a_supply_weaker_than_its_setting_stops_every_link_and_says_what_to_set() {
         "{events:?}"
     );
 
-    let mut rig = four(2.0);
-    say(&mut rig, "CONFIG SET supply_limit_a 2");
-    say(&mut rig, "CONFIG SET supply_budget_w 8");
-    assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
-    let events = run_until_idle(&mut rig, 1500, |_| {});
-    assert!(!events.iter().any(|e| e.contains("alarm:")), "{events:?}");
-    assert_eq!(
-        events.iter().filter(|e| e.contains("event: done")).count(),
-        4,
-        "{events:?}"
-    );
+    gait_finishes(&mut four(2.0), 2.0, 8.0);
 }
 
 /// A GAIT under a budget that cannot start every link starts the tightest bend (the longest
@@ -503,19 +496,29 @@ fn a_gait_starts_its_longest_morph_first_and_queues_the_shortest() {
 
 #[test]
 fn four_hifi_links_under_8_w_finish_within_the_budget() {
-    let mut rig = four_hifi(3.0);
-    say(&mut rig, "CONFIG SET supply_limit_a 3");
-    say(&mut rig, "CONFIG SET supply_budget_w 8");
-    assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
-    let mut max_w = 0.0f64;
-    let events = run_until_idle(&mut rig, 1500, |r| max_w = max_w.max(r.last.reckoned_w));
+    let max_w = gait_finishes(&mut four_hifi(3.0), 3.0, 8.0);
     assert!(max_w <= 8.0 + 1e-3, "{max_w}");
+}
+
+/// Sets `supply_limit_a` and `supply_budget_w`, runs `GAIT 34 38 42 46` and holds that every
+/// link ends `done` with no alarm; returns the highest summed power any tick reckoned, W.
+fn gait_finishes<P: morphlink_plant::Plant>(
+    rig: &mut MultiRig<P>,
+    limit_a: f64,
+    budget_w: f64,
+) -> f64 {
+    say(rig, &format!("CONFIG SET supply_limit_a {limit_a}"));
+    say(rig, &format!("CONFIG SET supply_budget_w {budget_w}"));
+    assert_eq!(say(rig, "GAIT 34 38 42 46"), ["ok"]);
+    let mut max_w = 0.0f64;
+    let events = run_until_idle(rig, 1500, |r| max_w = max_w.max(r.last.reckoned_w));
     assert!(!events.iter().any(|e| e.contains("alarm:")), "{events:?}");
     assert_eq!(
         events.iter().filter(|e| e.contains("event: done")).count(),
         4,
         "{events:?}"
     );
+    max_w
 }
 
 /// The supply's settings a SAVE kept come back at boot when `CONFIG SET` would take them; a
