@@ -20,6 +20,10 @@ use std::fmt::Write as _;
 pub const SETTLE_S: u64 = 60;
 /// Longest a gait may run, s.
 pub const GAIT_MAX_S: u64 = 3_000;
+/// Longest the links' TUNE may run (`--tune`), s, and then longest they may take to cool.
+pub const TUNE_MAX_S: u64 = 600;
+/// After TUNE the gait waits until every thermistor reads within this of ambient, K.
+pub const COOL_K: f32 = 1.0;
 
 /// Options of the task.
 #[derive(clap::Args, Debug)]
@@ -49,6 +53,13 @@ pub struct Args {
     /// link's true radius against its target) into this SVG or PNG.
     #[arg(long)]
     pub plot: Option<std::path::PathBuf>,
+    /// TUNE every link first (alone and together alike), as a user does before morphing.
+    #[arg(long)]
+    pub tune: bool,
+    /// Also morph each link alone on this many other noise seeds: how far its |error| moves
+    /// from run to run alone, beside which its error under a budget is judged.
+    #[arg(long, default_value_t = 0)]
+    pub seeds: u64,
     /// Worker threads.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
@@ -122,6 +133,7 @@ pub fn run(
     limit_a: f32,
     cmd: &str,
     trace: bool,
+    tune: bool,
 ) -> Run {
     let n = plants.len();
     let supply = SharedSupply {
@@ -135,6 +147,37 @@ pub fn run(
         rig.handle_line(l, &mut |r: &str| lines.push(r.to_string()));
     };
     say(&mut rig, &format!("CONFIG SET supply_limit_a {limit_a}"));
+    let mut tune_alarms = Vec::new();
+    if tune {
+        say(&mut rig, if n == 1 { "TUNE" } else { "@* TUNE" });
+        for _ in 0..TUNE_MAX_S * TICKS_PER_S {
+            rig.tick();
+            if rig.links.idle() {
+                break;
+            }
+        }
+        // Then the link cools, as a user lets it, so no MORPH begins with a rest.
+        let cool = |r: &MultiRig<Hifi>| {
+            (0..n).all(|k| {
+                let m = r.links.link(k).measurements();
+                m.t_pla_c - m.t_amb_c <= COOL_K && m.t_tca_c - m.t_amb_c <= COOL_K
+            })
+        };
+        for _ in 0..TUNE_MAX_S * TICKS_PER_S {
+            if cool(&rig) {
+                break;
+            }
+            rig.tick();
+        }
+        let mut events = Vec::new();
+        rig.drain_events(&mut |l: &str| events.push(l.to_string()));
+        for e in events
+            .iter()
+            .filter(|e| e.contains("alarm:") || e.contains("tune failed"))
+        {
+            tune_alarms.push(format!("TUNE: {e}"));
+        }
+    }
     if budget_w > 0.0 {
         say(&mut rig, &format!("CONFIG SET supply_budget_w {budget_w}"));
     }
@@ -150,6 +193,7 @@ pub fn run(
             r.alarms.push(l.clone());
         }
     }
+    r.alarms.extend(tune_alarms);
     let dt_s = 1.0 / TICKS_PER_S as f64;
     let mut last_done_ms = None;
     loop {
@@ -288,9 +332,18 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
     let alone: Vec<Run> = parallel(&alone_jobs, a.threads, "links alone", |&k| {
         let cmd = format!("MORPH {}", a.targets_mm[k]);
         let plant: Vec<Hifi> = vec![plants[k].clone()];
-        run(plant, noise_of(noise, k), 0.0, a.limit_a, &cmd, false)
+        run(
+            plant,
+            noise_of(noise, k),
+            0.0,
+            a.limit_a,
+            &cmd,
+            false,
+            a.tune,
+        )
     })?;
     let alone_s: Vec<f64> = alone.iter().map(|r| r.done_s[0]).collect();
+    let spread = alone_spread(a, &plants, noise, &alone)?;
     let alone_err: Vec<f64> = (0..n)
         .map(|k| error_pct(alone[k].radius_mm[0], a.targets_mm[k]))
         .collect();
@@ -304,7 +357,7 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         .fold(f32::INFINITY, f32::min);
     let runs: Vec<Run> = parallel(&a.budgets_w, a.threads, "budgets", |&b| {
         let trace = (a.trace.is_some() || a.plot.is_some()) && b == tightest;
-        run(plants.clone(), noise, b, a.limit_a, &gait, trace)
+        run(plants.clone(), noise, b, a.limit_a, &gait, trace, a.tune)
     })?;
     let mut out = String::new();
     let _ = writeln!(
@@ -319,6 +372,14 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         fmt_list(&alone_err.iter().map(|e| e.abs()).collect::<Vec<_>>(), 2),
         energy_j
     );
+    if let Some(pp) = &spread {
+        let _ = writeln!(
+            out,
+            "alone on {} noise seeds: |error| spread {} pp",
+            a.seeds + 1,
+            fmt_list(pp, 2)
+        );
+    }
     let _ = writeln!(
         out,
         "| budget W | makespan s | lower bound s | ratio | max power W (reckoned / true) | peak A | min V | queued | worst |error| vs alone pp | alarms |"
@@ -433,6 +494,53 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
 }
 
 /// The noise a rig gives its link `k` (so a link alone reads as it does among the others).
+/// With `--seeds`, each link's |error| spread (largest less smallest, pp) over its morph alone
+/// on `a.seeds` other noise seeds and on the first (`alone`).
+fn alone_spread(
+    a: &Args,
+    plants: &[Hifi],
+    noise: morphlink::bench::Noise,
+    alone: &[Run],
+) -> Result<Option<Vec<f64>>, String> {
+    if a.seeds == 0 {
+        return Ok(None);
+    }
+    let n = plants.len();
+    let jobs: Vec<(usize, u64)> = (0..n)
+        .flat_map(|k| (1..=a.seeds).map(move |s| (k, s)))
+        .collect();
+    let runs = parallel(&jobs, a.threads, "links alone, other seeds", |&(k, s)| {
+        let cmd = format!("MORPH {}", a.targets_mm[k]);
+        let mut nz = noise_of(noise, k);
+        nz.seed = nz.seed.wrapping_add(0x2545_f491 * s);
+        run(
+            vec![plants[k].clone()],
+            nz,
+            0.0,
+            a.limit_a,
+            &cmd,
+            false,
+            a.tune,
+        )
+    })?;
+    let pp = (0..n)
+        .map(|k| {
+            let errs = jobs
+                .iter()
+                .zip(&runs)
+                .filter(|(j, _)| j.0 == k)
+                .map(|(_, r)| &r.radius_mm[0])
+                .chain([&alone[k].radius_mm[0]])
+                .map(|&r| error_pct(r, a.targets_mm[k]).abs());
+            let (lo, hi) = errs.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), e| {
+                (lo.min(e), hi.max(e))
+            });
+            hi - lo
+        })
+        .collect();
+    Ok(Some(pp))
+}
+
 fn noise_of(noise: morphlink::bench::Noise, k: usize) -> morphlink::bench::Noise {
     morphlink::bench::Noise {
         seed: noise.seed.wrapping_add(0x9e37_79b9 * k as u64),
