@@ -535,11 +535,12 @@ impl Controller {
         self.elec.cutoff_failed()
     }
 
-    /// The supply inside each heater's pulse as `inputs`' currents give it, V
-    /// ([`Electrical::pulse_v`]); `None` where current is not sensed.
-    pub fn pulse_v(&self, inputs: &Inputs) -> Option<[f32; 2]> {
+    /// The supply inside each heater's pulse as `inputs`' currents give it, and the supply the
+    /// same frame reads, V ([`Electrical::pulse_v`]); `None` where current is not sensed.
+    pub fn pulse_v(&self, inputs: &Inputs) -> Option<([f32; 2], f32)> {
         let c = Currents::of(&inputs.current?, &self.cfg.shunt);
-        Some(self.elec.pulse_v(&c, self.drive(), self.supply_v))
+        let supply_v = self.frame_of(inputs).supply_v;
+        Some((self.elec.pulse_v(&c, self.drive(), supply_v), supply_v))
     }
 
     /// The next step's on-samples of the heaters `sag` marks were taken in a sagging supply

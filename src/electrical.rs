@@ -153,14 +153,15 @@ const REST_WHOLE_TICKS: u16 = (1.0 / REST_FILTER_WEIGHT) as u16;
 const SAME_SHAPE_PER_M: f32 = 1e-3;
 
 /// A heater's on-current reads a supply sagging inside its pulse once it gives, at the
-/// resistance read before, a voltage this share under the supply's reading: a supply shared by
-/// several links whose own current limit is under what their pulses draw together falls into
-/// constant-current mode there (a TCA's pulse beside another's on a supply at its limit drops
-/// 40 % or more). 0.15 is four times the drop a healthy bench supply's 0.1 Ω gives under the
-/// heaters' largest current together (4.5 A: 4 %) and twenty times the PLA channel's noise
+/// resistance read before, a voltage this share under the same frame's supply reading: a supply
+/// shared by several links whose own current limit is under what their pulses draw together
+/// falls into constant-current mode there (a TCA's pulse beside another's on a supply at its
+/// limit drops 40 % or more). 0.15 is twice the drop a healthy bench supply's 0.1 Ω gives with
+/// every heater of four links on at once (9 A: 7.5 %) and twenty times the PLA channel's noise
 /// (3 mA on its 0.4 A; the chain's gain error cancels against the resistance read through it);
-/// a heater's resistance moves under 0.2 % a tick. [`crate::links`] judges it; such a sample
-/// says nothing of the heater's resistance.
+/// a heater's resistance moves under 0.2 % a tick. [`crate::links`] judges it, and only two
+/// heaters or more at once are the supply's (one alone is its own resistance); such samples say
+/// nothing of the heaters' resistance.
 pub const PULSE_SAG_SHARE: f32 = 0.15;
 const _: () = assert!(PULSE_SAG_SHARE > 0.05 && PULSE_SAG_SHARE < 1.0 - OPEN_MAX_SHARE);
 
@@ -274,7 +275,11 @@ impl Electrical {
             if persists(&mut self.short[i], short, ELECTRICAL_TICKS) {
                 let _ = out.push(heater_fault(FaultCode::HeaterShort, h, off_a));
             }
-            // A sagging supply is the supply's fault, judged once for every link.
+            // A sagging supply is the supply's fault, judged once for every link; the tick
+            // breaks this heater's run of out-of-range readings.
+            if sag[i] {
+                self.range[i] = 0;
+            }
             if open || sag[i] {
                 continue;
             }

@@ -199,12 +199,7 @@ impl<const N: usize> Links<N> {
         self.judge_sag(inputs);
         self.start_queued(now_ms);
         for k in 0..self.count() {
-            let busy = self.ctrl[k].busy();
-            if busy && !self.was_busy[k] {
-                self.since[k] = self.next_order;
-                self.next_order = self.next_order.wrapping_add(1);
-            }
-            self.was_busy[k] = busy;
+            self.note_started(k);
         }
         let n = self.count();
         if self.budget.binding() {
@@ -248,27 +243,40 @@ impl<const N: usize> Links<N> {
     /// A supply that cannot give what the heaters' pulses draw together (its own current limit
     /// under `supply_limit_a`, which the scheduler lays the pulses out under) falls into
     /// constant-current mode inside them: the on-currents then read, at the resistances read
-    /// before, a voltage [`PULSE_SAG_SHARE`] or more under the supply's reading. Those samples
-    /// say nothing of the heaters (each link is told not to judge or learn a resistance from
-    /// them); once it holds [`ELECTRICAL_TICKS`] ticks in a row every link stops with
+    /// before, a voltage [`PULSE_SAG_SHARE`] or more under the same frame's supply reading. Two
+    /// heaters or more reading it in one tick are the supply's (one heater alone is its own
+    /// resistance, which its link judges): those samples teach no link a resistance nor judge
+    /// one, and once it holds [`ELECTRICAL_TICKS`] ticks in a row every link stops with
     /// `supply-out-of-range` at the lowest voltage read, and an event says what to set. The
     /// sagging morphs would otherwise run on heat they do not get and land off their targets.
+    /// One link is judged as the controller alone judges it (`Links` of one is exactly it).
     fn judge_sag(&mut self, inputs: &[Inputs]) {
-        let v = self.supply_v();
+        let n = self.count().min(inputs.len());
+        let mut sag = [[false; 2]; N];
         let mut lowest: Option<(usize, f32)> = None;
-        for (k, i) in inputs.iter().enumerate().take(self.count()) {
-            let pulse_v = self.ctrl[k].pulse_v(i).unwrap_or([f32::NAN; 2]);
-            let sag = pulse_v.map(|p| p < (1.0 - PULSE_SAG_SHARE) * v);
-            self.ctrl[k].note_sag(sag);
-            for (p, s) in pulse_v.into_iter().zip(sag) {
-                if s && lowest.is_none_or(|(_, low)| p < low) {
-                    lowest = Some((k, p));
+        let mut sagging = 0;
+        for k in (0..n).filter(|_| n > 1) {
+            let Some((pulse_v, supply_v)) = self.ctrl[k].pulse_v(&inputs[k]) else {
+                continue;
+            };
+            for (i, p) in pulse_v.into_iter().enumerate() {
+                if p < (1.0 - PULSE_SAG_SHARE) * supply_v {
+                    sag[k][i] = true;
+                    sagging += 1;
+                    if lowest.is_none_or(|(_, low)| p < low) {
+                        lowest = Some((k, p));
+                    }
                 }
             }
         }
-        self.sag_ticks = match lowest {
-            Some(_) => self.sag_ticks.saturating_add(1),
-            None => 0,
+        let supply_sags = sagging >= 2;
+        for (k, s) in sag.iter().enumerate().take(n) {
+            self.ctrl[k].note_sag(if supply_sags { *s } else { [false; 2] });
+        }
+        self.sag_ticks = if supply_sags {
+            self.sag_ticks.saturating_add(1)
+        } else {
+            0
         };
         // A current no gate governs (a shorted heater) loads the supply unscheduled: its sag is
         // that fault's, which the link names and the stray's own rule judges.
@@ -294,6 +302,18 @@ impl<const N: usize> Links<N> {
                 value: pulse_v,
             });
         }
+    }
+
+    /// Takes link `k`'s activity into the scheduler's order (oldest first) when it has just
+    /// started: at once for a morph this board started (a GAIT's in the order it starts them),
+    /// at the next tick for anything else.
+    fn note_started(&mut self, k: usize) {
+        let busy = self.ctrl[k].busy();
+        if busy && !self.was_busy[k] {
+            self.since[k] = self.next_order;
+            self.next_order = self.next_order.wrapping_add(1);
+        }
+        self.was_busy[k] = busy;
     }
 
     /// Starts the queued morphs the budget now has room for, oldest first; one that does not
@@ -326,6 +346,7 @@ impl<const N: usize> Links<N> {
                     let _ = refusal.push_str(l);
                 }
             });
+            self.note_started(k);
             if !refusal.is_empty() {
                 let mut e = OutLine::new();
                 wire::queued_dropped_event(&mut e, &refusal);
@@ -578,6 +599,7 @@ impl<const N: usize> Links<N> {
         );
         if !self.budget.binding() || (!ahead && fits) {
             self.ctrl[k].handle(now_ms, cmd, out);
+            self.note_started(k);
             return;
         }
         self.queued[k] = Some(Queued {

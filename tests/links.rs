@@ -592,3 +592,66 @@ fn save_waits_for_every_link_and_is_not_sent_to_all_at_once() {
     let idle = say(&mut rig, "@3 SAVE");
     assert!(!idle[0].contains("waits until every link"), "{idle:?}");
 }
+
+/// Four idle links read by hand (their probe pulses' currents at `scale` of what each heater's
+/// resistance draws, per link and heater) for `ticks` ticks from `*now_ms`.
+fn idle_frames(links: &mut Links<4>, now_ms: &mut u64, ticks: u32, scale: [[f32; 2]; 4]) {
+    use morphlink::controller::{Inputs, OVERSAMPLE};
+    use morphlink::electrical::{CurrentCounts, ShuntSense};
+    let cfg = Config::DEFAULT;
+    let one = ShuntSense {
+        full_scale_counts: 4095,
+        ..cfg.shunt
+    };
+    let ohm = [cfg.pla_heater.resistance_ohm, cfg.tca_heater.resistance_ohm];
+    let mut out = [LinkOutputs::default(); 4];
+    for _ in 0..ticks {
+        // A live reading moves by its noise: a few hundredths of a kelvin.
+        let jitter = 0.02 * (*now_ms / TICK_MS % 3) as f32;
+        let inputs = scale.map(|s| Inputs {
+            thermistor_counts: [22.0, 22.0, 22.0]
+                .map(|t| cfg.thermistor.counts_for_temp(t + jitter)),
+            supply_counts: cfg.supply.counts(12.0),
+            sample_ms: *now_ms,
+            current: Some(CurrentCounts {
+                on: [0, 1].map(|i| one.counts(s[i] * 12.0 / ohm[i]) * OVERSAMPLE),
+                off: [0, 0],
+            }),
+        });
+        links.step(*now_ms, &inputs, &mut out);
+        *now_ms += TICK_MS;
+    }
+}
+
+/// One heater whose current falls is that heater's resistance, judged on its own link; only two
+/// or more falling at once are the supply's, and then every link stops.
+#[test]
+fn one_heater_reading_low_is_its_own_and_two_at_once_are_the_supplys() {
+    let fine = [[1.0; 2]; 4];
+    let mut links: Links<4> = Links::new(Config::DEFAULT, 4);
+    let mut now_ms = 0;
+    idle_frames(&mut links, &mut now_ms, 30, fine);
+    // Link 2's PLA heater reads 25 % high, still in its range: nobody alarms.
+    let mut one_high = fine;
+    one_high[1][0] = 0.8;
+    idle_frames(&mut links, &mut now_ms, 10, one_high);
+    assert!((0..4).all(|k| links.link(k).fault().is_none()));
+    // ...then 67 % high, out of range: its own link names it, the others go on.
+    one_high[1][0] = 0.6;
+    idle_frames(&mut links, &mut now_ms, 5, one_high);
+    let f = links.link(1).fault().expect("link 2 faulted");
+    assert_eq!(f.code.as_str(), "heater-resistance");
+    assert!([0, 2, 3].iter().all(|&k| links.link(k).fault().is_none()));
+    // Two heaters on other links reading low at once: the supply sags, every link stops.
+    let mut two_low = fine;
+    two_low[0][1] = 0.6;
+    two_low[2][1] = 0.6;
+    idle_frames(&mut links, &mut now_ms, 1, two_low);
+    assert!([0, 2, 3].iter().all(|&k| links.link(k).fault().is_none()));
+    idle_frames(&mut links, &mut now_ms, 1, two_low);
+    for k in [0, 2, 3] {
+        let f = links.link(k).fault().expect("stopped");
+        assert_eq!(f.code.as_str(), "supply-out-of-range", "link {}", k + 1);
+        assert!((f.value - 7.2).abs() < 0.3, "{}", f.value);
+    }
+}

@@ -7,7 +7,8 @@
 //! the supply's voltage is worked out piece by piece over the period (every piece has its own
 //! set of heaters on), and each plant is stepped with the duty that gives it the energy it
 //! really got: `Σ piece · (V_piece / V_open)²` of each heater's window, at the open-circuit
-//! voltage the plant is set to. The boards read the period's mean terminal voltage.
+//! voltage the plant is set to. The boards read the period's mean terminal voltage, and each
+//! heater's on-current just inside its own window, at the voltage there.
 
 use morphlink::bench::{Bench, Noise, SIM_WAIT_MAX_S};
 use morphlink::budget::MAX_LINKS;

@@ -124,8 +124,9 @@ pub struct Run {
     pub trace: Vec<(f64, Vec<f64>, f64, Vec<f64>)>,
 }
 
-/// Runs `plants` on one supply with `budget_w` (0: none): the command `cmd`, then until every
-/// link is done (or [`GAIT_MAX_S`]), then [`SETTLE_S`].
+/// Runs `plants` on one supply with `budget_w` (0: none): with `tune`, TUNE on every link and
+/// a wait until each has cooled to [`COOL_K`] of ambient; then the command `cmd`, then until
+/// every link is done (or [`GAIT_MAX_S`]), then [`SETTLE_S`].
 pub fn run(
     plants: Vec<Hifi>,
     noise: morphlink::bench::Noise,
@@ -493,7 +494,6 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
     }
 }
 
-/// The noise a rig gives its link `k` (so a link alone reads as it does among the others).
 /// With `--seeds`, each link's |error| spread (largest less smallest, pp) over its morph alone
 /// on `a.seeds` other noise seeds and on the first (`alone`).
 fn alone_spread(
@@ -541,6 +541,7 @@ fn alone_spread(
     Ok(Some(pp))
 }
 
+/// The noise a rig gives its link `k` (so a link alone reads as it does among the others).
 fn noise_of(noise: morphlink::bench::Noise, k: usize) -> morphlink::bench::Noise {
     morphlink::bench::Noise {
         seed: noise.seed.wrapping_add(0x9e37_79b9 * k as u64),
