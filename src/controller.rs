@@ -539,7 +539,7 @@ impl Controller {
     /// same frame reads, V ([`Electrical::pulse_v`]); `None` where current is not sensed.
     pub fn pulse_v(&self, inputs: &Inputs) -> Option<([f32; 2], f32)> {
         let c = Currents::of(&inputs.current?, &self.cfg.shunt);
-        let supply_v = self.frame_of(inputs).supply_v;
+        let supply_v = self.cfg.supply.volts(inputs.supply_counts);
         Some((self.elec.pulse_v(&c, self.drive(), supply_v), supply_v))
     }
 
