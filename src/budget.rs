@@ -342,6 +342,15 @@ fn heater(h: Heater, ohm: f32) -> HeaterConfig {
     }
 }
 
+/// What the running links of `demands` hold, W: their reserves summed.
+pub fn held_w(demands: &[Demand]) -> f32 {
+    demands
+        .iter()
+        .filter(|d| d.class != Class::Idle)
+        .map(|d| d.reserve_w.pla_w + d.reserve_w.tca_w)
+        .sum()
+}
+
 /// The stray current of `demands`, A, if the budget cannot hold it beside the reserves of the
 /// links that run (their reserves and it over `budget`'s power at `supply_v`, or it alone over
 /// the current limit): a load no gate governs has taken what the scheduler promised them, so
@@ -349,11 +358,7 @@ fn heater(h: Heater, ohm: f32) -> HeaterConfig {
 /// `None` where no current strays or the budget holds it.
 pub fn overrun_a(budget: &SupplyBudget, supply_v: f32, demands: &[Demand]) -> Option<f32> {
     let (stray_a, stray_w) = stray(demands, supply_v);
-    let held: f32 = demands
-        .iter()
-        .filter(|d| d.class != Class::Idle)
-        .map(|d| d.reserve_w.pla_w + d.reserve_w.tca_w)
-        .sum();
+    let held = held_w(demands);
     let over = held + stray_w > budget.budget_w || stray_a >= budget.limit_a;
     (stray_a > 0.0 && over).then_some(stray_a)
 }
@@ -375,12 +380,8 @@ pub fn admits(
     reserve_w: Powers,
     ohm: [f32; 2],
 ) -> bool {
-    let running = || demands.iter().filter(|d| d.class != Class::Idle);
-    let held: f32 = running()
-        .map(|d| d.reserve_w.pla_w + d.reserve_w.tca_w)
-        .sum();
     let (stray_a, stray_w) = stray(demands, supply_v);
-    if held + stray_w + least_budget_w(reserve_w, demands.len()) > budget.budget_w {
+    if held_w(demands) + stray_w + least_budget_w(reserve_w, demands.len()) > budget.budget_w {
         return false;
     }
     let v = usable_v(supply_v);

@@ -535,12 +535,11 @@ impl Controller {
         self.elec.cutoff_failed()
     }
 
-    /// The supply inside each heater's pulse as `inputs`' currents give it, and the supply the
-    /// same frame reads, V ([`Electrical::pulse_v`]); `None` where current is not sensed.
-    pub fn pulse_v(&self, inputs: &Inputs) -> Option<([f32; 2], f32)> {
-        let c = Currents::of(&inputs.current?, &self.cfg.shunt);
+    /// The supply inside each heater's pulse as the frame `inputs`' currents `c` give it, and
+    /// the supply the same frame reads, V ([`Electrical::pulse_v`]).
+    pub fn pulse_v(&self, c: &Currents, inputs: &Inputs) -> ([f32; 2], f32) {
         let supply_v = self.cfg.supply.volts(inputs.supply_counts);
-        Some((self.elec.pulse_v(&c, self.drive(), supply_v), supply_v))
+        (self.elec.pulse_v(c, self.drive(), supply_v), supply_v)
     }
 
     /// The next step's on-samples of the heaters `sag` marks were taken in a sagging supply

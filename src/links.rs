@@ -177,11 +177,7 @@ impl<const N: usize> Links<N> {
 
     /// What the running links hold, W.
     fn held_w(&self) -> f32 {
-        self.demands()
-            .iter()
-            .filter(|d| d.class != Class::Idle)
-            .map(|d| d.reserve_w.pla_w + d.reserve_w.tca_w)
-            .sum()
+        budget::held_w(&self.demands())
     }
 
     /// One control tick at `now_ms`: `inputs[k]` is link `k`'s frame (its thermistors and
@@ -189,14 +185,17 @@ impl<const N: usize> Links<N> {
     pub fn step(&mut self, now_ms: u64, inputs: &[Inputs], out: &mut [LinkOutputs]) {
         // A current over the short threshold with the gate off: a stuck MOSFET whose cut-off
         // did not open. It flows whatever the allowances say, so the scheduler counts it.
-        for (s, i) in self.stray_a.iter_mut().zip(inputs) {
-            *s = i.current.map_or([0.0; 2], |c| {
-                Currents::of(&c, &self.shunt)
-                    .off_a
-                    .map(|a| if a > SHORT_MIN_A { a } else { 0.0 })
+        let currents: Vec<Option<Currents>, N> = inputs
+            .iter()
+            .take(self.count())
+            .map(|i| i.current.map(|c| Currents::of(&c, &self.shunt)))
+            .collect();
+        for (s, c) in self.stray_a.iter_mut().zip(&currents) {
+            *s = c.map_or([0.0; 2], |c| {
+                c.off_a.map(|a| if a > SHORT_MIN_A { a } else { 0.0 })
             });
         }
-        self.judge_sag(inputs);
+        self.judge_sag(inputs, &currents);
         self.start_queued(now_ms);
         for k in 0..self.count() {
             self.note_started(k);
@@ -250,15 +249,17 @@ impl<const N: usize> Links<N> {
     /// `supply-out-of-range` at the lowest voltage read, and an event says what to set. The
     /// sagging morphs would otherwise run on heat they do not get and land off their targets.
     /// One link is judged as the controller alone judges it (`Links` of one is exactly it).
-    fn judge_sag(&mut self, inputs: &[Inputs]) {
-        let n = self.count().min(inputs.len());
+    fn judge_sag(&mut self, inputs: &[Inputs], currents: &[Option<Currents>]) {
+        let n = currents.len();
         let mut sag = [[false; 2]; N];
         let mut lowest: Option<(usize, f32)> = None;
         let mut sagging = 0;
-        for k in (0..n).filter(|_| n > 1) {
-            let Some((pulse_v, supply_v)) = self.ctrl[k].pulse_v(&inputs[k]) else {
+        let judged = if n > 1 { n } else { 0 };
+        for (k, c) in currents.iter().enumerate().take(judged) {
+            let Some(c) = c else {
                 continue;
             };
+            let (pulse_v, supply_v) = self.ctrl[k].pulse_v(c, &inputs[k]);
             for (i, p) in pulse_v.into_iter().enumerate() {
                 if p < (1.0 - PULSE_SAG_SHARE) * supply_v {
                     sag[k][i] = true;
@@ -703,7 +704,7 @@ impl<const N: usize> Links<N> {
                 .map_or(0.0, |r| r.tca_w)
         };
         let mut order: Vec<usize, N> = (0..radii_mm.len().min(N)).collect();
-        // Insertion sort: stable, and N is at most four.
+        // Insertion sort, stable: N is at most four, and core's sort takes 2.7 KiB of flash.
         for i in 1..order.len() {
             let mut j = i;
             while j > 0 && tca_w(order[j - 1]) < tca_w(order[j]) {

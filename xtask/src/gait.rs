@@ -331,17 +331,7 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
     // Each link alone, no budget: its own fastest morph, its energy and its error.
     let alone_jobs: Vec<usize> = (0..n).collect();
     let alone: Vec<Run> = parallel(&alone_jobs, a.threads, "links alone", |&k| {
-        let cmd = format!("MORPH {}", a.targets_mm[k]);
-        let plant: Vec<Hifi> = vec![plants[k].clone()];
-        run(
-            plant,
-            noise_of(noise, k),
-            0.0,
-            a.limit_a,
-            &cmd,
-            false,
-            a.tune,
-        )
+        alone_run(a, &plants[k], noise_of(noise, k), k)
     })?;
     let alone_s: Vec<f64> = alone.iter().map(|r| r.done_s[0]).collect();
     let spread = alone_spread(a, &plants, noise, &alone)?;
@@ -510,18 +500,9 @@ fn alone_spread(
         .flat_map(|k| (1..=a.seeds).map(move |s| (k, s)))
         .collect();
     let runs = parallel(&jobs, a.threads, "links alone, other seeds", |&(k, s)| {
-        let cmd = format!("MORPH {}", a.targets_mm[k]);
         let mut nz = noise_of(noise, k);
         nz.seed = nz.seed.wrapping_add(0x2545_f491 * s);
-        run(
-            vec![plants[k].clone()],
-            nz,
-            0.0,
-            a.limit_a,
-            &cmd,
-            false,
-            a.tune,
-        )
+        alone_run(a, &plants[k], nz, k)
     })?;
     let pp = (0..n)
         .map(|k| {
@@ -539,6 +520,21 @@ fn alone_spread(
         })
         .collect();
     Ok(Some(pp))
+}
+
+/// Link `k`'s morph to its target alone on `plant`, with `noise`, no budget (TUNEd first with
+/// `--tune`).
+fn alone_run(a: &Args, plant: &Hifi, noise: morphlink::bench::Noise, k: usize) -> Run {
+    let cmd = format!("MORPH {}", a.targets_mm[k]);
+    run(
+        vec![plant.clone()],
+        noise,
+        0.0,
+        a.limit_a,
+        &cmd,
+        false,
+        a.tune,
+    )
 }
 
 /// The noise a rig gives its link `k` (so a link alone reads as it does among the others).
