@@ -31,12 +31,15 @@ const _: () =
     assert!(RIGID_THRESHOLD_C <= CLOSED_RIGID_COOL_C && CLOSED_RIGID_COOL_C < SOFT_THRESHOLD_C);
 
 /// Bend need not wait for the PLA thermistor to slow while it reads within this of what the
-/// observer expects ([`super::model::observer::Observer::innovation_k`]), K: the model follows
-/// the rod, so its estimate holds. 3 K is what the reading's 0.5 s smoothing and a bead lag
+/// observer expects ([`super::model::observer::Observer::innovation_k`]), K, and the observer
+/// has not lowered its PLA estimate by more than this since bend began: the model followed the
+/// rod, so its estimate holds. 3 K is what the reading's 0.5 s smoothing and a bead lag
 /// 1.5 s off the assumed 3 s make together at the 1.5 K/s the bead rises at late in soften (the
-/// lumped ensemble's lags are 2–6 s); on the high-fidelity links the bead reads far under the
-/// model there (the rod heats slower than the model's), and bend waits (`cargo xtask
-/// calibration`; docs/calibration.md, "What changed, and why").
+/// lumped ensemble's lags are 2–6 s). A reading that agrees only because the observer has just
+/// caught up with it (a bead that lags its rod by 10 s, as on the high-fidelity links) says the
+/// rod was that much colder than the estimate: the heater is then heating it on, the rod still
+/// flows, and bend waits for the thermistor to slow (`cargo xtask calibration`;
+/// docs/calibration.md, "What changed, and why").
 pub const CLOSED_PLA_AGREE_K: f32 = 3.0;
 const _: () = assert!(CLOSED_PLA_AGREE_K > 0.0 && CLOSED_PLA_AGREE_K < 5.0);
 
@@ -145,6 +148,8 @@ pub struct Closed {
     /// ([`crate::calibration::Calibration::strain_k_m`]) times the bend from the rest
     /// reference's shape to the lock's (0 where either is unknown).
     strain_k: f32,
+    /// The observer's PLA disturbance when bend began, K ([`CLOSED_PLA_AGREE_K`]).
+    bend_d_pla_k: f32,
 }
 
 impl Closed {
@@ -164,6 +169,7 @@ impl Closed {
             stuck_windows: 0,
             own: OwnTemp::new(s.now_ms, s.tca_self_c).filter(|_| s.cal.self_sensed()),
             strain_k: if strain_k.is_finite() { strain_k } else { 0.0 },
+            bend_d_pla_k: 0.0,
         }
     }
 
@@ -241,8 +247,11 @@ impl Closed {
 }
 
 impl Strategy for Closed {
-    fn enter(&mut self, _phase: Phase, _now_ms: u64) {
+    fn enter(&mut self, phase: Phase, _now_ms: u64) {
         self.drive.enter();
+        if phase == Phase::Bend {
+            self.bend_d_pla_k = self.drive.observer().disturbance_k(HeatedNode::Pla);
+        }
         self.stalled_since_ms = None;
         self.window = None;
         self.stuck_windows = 0;
@@ -280,8 +289,12 @@ impl Strategy for Closed {
                 let pla_settled =
                     o.measured_rate_k_per_s(HeatedNode::Pla).abs() <= CLOSED_PLA_SETTLED_K_PER_S;
                 let pla_innovation_k = o.innovation_k(HeatedNode::Pla);
+                // Not found colder than it estimated the rod during bend.
+                let followed = o.disturbance_k(HeatedNode::Pla) - self.bend_d_pla_k
+                    >= -CLOSED_PLA_AGREE_K;
                 let pla = PlaView {
-                    learnt: pla_settled || pla_innovation_k.abs() <= CLOSED_PLA_AGREE_K,
+                    learnt: pla_settled
+                        || (pla_innovation_k.abs() <= CLOSED_PLA_AGREE_K && followed),
                     cold: !pla_settled && pla_innovation_k < -CLOSED_PLA_COLD_K,
                 };
                 self.drive.bend_done(t, pla_c, tca_c, tca_learnt, pla)

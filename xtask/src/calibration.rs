@@ -52,6 +52,8 @@ pub const SECOND_CALIPER_FRACTION: f32 = 0.95;
 pub const CHAIN_STAGE: usize = 4;
 /// The stage of the evaluations after the read chain's measured morph and its four read ones.
 pub const READ_STAGE: usize = 5;
+/// Ticks over which [`Eval::flow_mm_s`] is read: one second.
+const FLOW_TICKS: usize = (1000 / TICK_MS) as usize;
 /// The user's measuring error, mm (uniform ±): a ruler or calliper on a curved link.
 pub const MEASURE_ERROR_MM: f64 = 0.3;
 /// The aims of the issue: p95 |error| after calibration, %, and median time, s.
@@ -131,6 +133,9 @@ struct Eval {
     phase_s: [f64; 3],
     /// How it ended: `done`, the fault's code or `unfinished`.
     end: &'static str,
+    /// How fast the true radius moved over the last second of bend, mm/s (NaN if bend never
+    /// ended): a rod still flowing when lock froze it.
+    flow_mm_s: f64,
 }
 
 /// One rest-shape outcome of the read chain.
@@ -194,6 +199,8 @@ struct MorphRun {
     phase_s: [f64; 3],
     /// `done`, the fault's code (a phase timeout or an alarm) or `unfinished`.
     end: &'static str,
+    /// See [`Eval::flow_mm_s`].
+    flow_mm_s: f64,
 }
 
 /// An end that is a safety alarm (not `done`, a phase timeout, or a morph still running).
@@ -224,10 +231,22 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> MorphRun {
     );
     let end = t0 + (MAX_MORPH_S * 1000.0) as u64;
     let mut phase_s = [f64::NAN; 3];
+    // The true radius over the last second, one a tick: how fast it moved when lock began.
+    let mut last_s = std::collections::VecDeque::with_capacity(FLOW_TICKS + 1);
+    let mut flow_mm_s = f64::NAN;
     while rig.ctrl.busy() && rig.now_ms() < end {
+        if last_s.len() > FLOW_TICKS {
+            last_s.pop_front();
+        }
+        last_s.push_back(rig.radius_mm());
         rig.tick();
         while let Some(e) = rig.ctrl.pop_event() {
             if let Event::Seq(SeqEvent::Phase { phase, t_s, .. }) = e {
+                if phase == Phase::Lock {
+                    let first = last_s.front().copied().unwrap_or(f64::NAN);
+                    let span_s = (last_s.len() - 1).max(1) as f64 * TICK_MS as f64 / 1000.0;
+                    flow_mm_s = (rig.radius_mm() - first).abs() / span_s;
+                }
                 if let Some(i) = phase_slot(phase) {
                     phase_s[i] = t_s as f64;
                 }
@@ -250,6 +269,7 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> MorphRun {
         final_mm: if done { rig.radius_mm() } else { f64::NAN },
         phase_s,
         end,
+        flow_mm_s,
     }
 }
 
@@ -388,6 +408,7 @@ fn evaluate(link: &Link, cal: &Calibration, measured: Option<usize>, targets: &[
                 error_pct: (m.final_mm - t as f64) / t as f64 * 100.0,
                 phase_s: m.phase_s,
                 end: m.end,
+                flow_mm_s: m.flow_mm_s,
             }
         })
         .collect()
@@ -700,7 +721,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
     .collect::<Result<_, _>>()?;
     // CSV: one row per evaluated morph.
     let mut csv = String::from(
-        "plant,draw,air,stage,measured,target_mm,time_s,error_pct,bend_s,lock_s,release_s,end,tune\n",
+        "plant,draw,air,stage,measured,target_mm,time_s,error_pct,bend_s,lock_s,release_s,bend_end_flow_mm_s,end,tune\n",
     );
     for r in &results {
         for (k, e) in r.evals.iter().enumerate() {
@@ -708,7 +729,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
             let tune_line = if k == 0 { r.tune_line.as_str() } else { "" };
             let _ = writeln!(
                 csv,
-                "{},{},{},{},{},{:.2},{:.1},{:.3},{:.1},{:.1},{:.1},{},\"{}\"",
+                "{},{},{},{},{},{:.2},{:.1},{:.3},{:.1},{:.1},{:.1},{:.3},{},\"{}\"",
                 r.plant,
                 r.draw,
                 r.air,
@@ -720,6 +741,7 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                 e.phase_s[0],
                 e.phase_s[1],
                 e.phase_s[2],
+                e.flow_mm_s,
                 e.end,
                 tune_line.replace('"', "'")
             );
@@ -743,9 +765,9 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
             sel.len()
         );
         println!(
-            "| stage | medium | runs | failed | of which alarms | time p50 | \\|error\\| p50 | \\|error\\| p95 |"
+            "| stage | medium | runs | failed | of which alarms | time p50 | \\|error\\| p50 | \\|error\\| p95 | flow at bend's end p95 | max |"
         );
-        println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+        println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
         let mut pts = Vec::new();
         for (si, stage) in STAGES.iter().enumerate() {
             for air in [false, true] {
@@ -758,10 +780,20 @@ pub fn run(args: &Args, root: &Path) -> Result<(), String> {
                 if n == 0 {
                     continue;
                 }
+                let mut flow: Vec<f64> = sel
+                    .iter()
+                    .filter(|r| r.air == air)
+                    .flat_map(|r| r.evals.iter())
+                    .filter(|e| e.measured == *stage && e.flow_mm_s.is_finite())
+                    .map(|e| e.flow_mm_s)
+                    .collect();
+                flow.sort_by(f64::total_cmp);
                 println!(
-                    "| {} | {} | {n} | {failed} | {alarms} | {t50:.1} s | {p50:.2} % | {p95:.2} % |",
+                    "| {} | {} | {n} | {failed} | {alarms} | {t50:.1} s | {p50:.2} % | {p95:.2} % | {:.3} mm/s | {:.3} mm/s |",
                     stage_name(*stage),
                     if air { "air" } else { "water" },
+                    percentile(&flow, 95.0),
+                    flow.last().copied().unwrap_or(f64::NAN),
                 );
                 if !air {
                     pts.push((si as f64 - 1.0, p50, p95));
