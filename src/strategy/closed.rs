@@ -2,7 +2,7 @@
 //! observer); every phase is gated on the corrected estimate, and the lock temperature is
 //! compensated for the release spring-back.
 
-use super::model::observer::{HeatedNode, LEARN_MAX_RATE_K_PER_S, SENSOR_TAU_S};
+use super::model::observer::{HeatedNode, DISTURBANCE_TAU_S, LEARN_MAX_RATE_K_PER_S, SENSOR_TAU_S};
 use super::model::own::{OwnTemp, OWN_STILL_K_PER_S};
 use super::model::{target, ModelDrive, PlaView};
 use super::{Start, Strategy, TargetTemps, Tick, RELEASE_S, RIGID_THRESHOLD_C, SOFT_THRESHOLD_C};
@@ -31,16 +31,25 @@ const _: () =
     assert!(RIGID_THRESHOLD_C <= CLOSED_RIGID_COOL_C && CLOSED_RIGID_COOL_C < SOFT_THRESHOLD_C);
 
 /// Bend need not wait for the PLA thermistor to slow while it reads within this of what the
-/// observer expects ([`super::model::observer::Observer::innovation_k`]), K, and the observer
-/// has not lowered its PLA estimate by more than this since bend began: the model followed the
-/// rod, so its estimate holds. 3 K is what the reading's 0.5 s smoothing and a bead lag
-/// 1.5 s off the assumed 3 s make together at the 1.5 K/s the bead rises at late in soften (the
-/// lumped ensemble's lags are 2–6 s). A reading that agrees only because the observer has just
-/// caught up with it (a bead that lags its rod by 10 s, as on the high-fidelity links) says the
-/// rod was that much colder than the estimate: the heater is then heating it on, the rod still
-/// flows, and bend waits for the thermistor to slow (`cargo xtask calibration`;
-/// docs/calibration.md, "What changed, and why").
+/// observer expects ([`super::model::observer::Observer::innovation_k`]), K, unless the
+/// observer has lowered its PLA estimate by more than this within the last
+/// [`CLOSED_PLA_CORRECTED_S`]: otherwise the model follows the rod, so its estimate holds. 3 K
+/// is what the reading's 0.5 s smoothing and a bead lag 1.5 s off the assumed 3 s make
+/// together at the 1.5 K/s the bead rises at late in soften (the lumped ensemble's lags are
+/// 2–6 s). A reading that agrees only because the observer has just caught up with it (a bead
+/// that lags its rod by 10 s, as on the high-fidelity links) says the rod was that much colder
+/// than the estimate: its heater is heating it on and it still flows (`cargo xtask
+/// calibration`; docs/calibration.md, "Bend ends when the rod has stopped flowing").
 pub const CLOSED_PLA_AGREE_K: f32 = 3.0;
+/// How long a lowering of the observer's PLA estimate holds bend, s ([`CLOSED_PLA_AGREE_K`]):
+/// three of the observer's time constants ([`DISTURBANCE_TAU_S`]), in which it completes 95 %
+/// of a correction and the heater, following the estimate, brings the rod to its target. Since
+/// bend began instead of over this window, a before-TUNE link (whose bead reads a share of its
+/// rise, so the estimate is lowered through all of bend) held its rod 13 K over its target for
+/// up to 20 s more and its median went 54.5 → 65.2 s with no gain in error; and the dead TCA in
+/// a hifi lock was named in 14 s, past the 10 s aim (docs/safety.md).
+pub const CLOSED_PLA_CORRECTED_S: f32 = 3.0 * DISTURBANCE_TAU_S;
+const _: () = assert!(CLOSED_PLA_CORRECTED_S > 0.0 && CLOSED_PLA_CORRECTED_S <= 20.0);
 const _: () = assert!(CLOSED_PLA_AGREE_K > 0.0 && CLOSED_PLA_AGREE_K < 5.0);
 
 /// Bend waits for the PLA thermistor to change slower than this, K/s (unless it reads what the
@@ -148,8 +157,10 @@ pub struct Closed {
     /// ([`crate::calibration::Calibration::strain_k_m`]) times the bend from the rest
     /// reference's shape to the lock's (0 where either is unknown).
     strain_k: f32,
-    /// The observer's PLA disturbance when bend began, K ([`CLOSED_PLA_AGREE_K`]).
-    bend_d_pla_k: f32,
+    /// The observer's highest PLA disturbance of bend no older than [`CLOSED_PLA_CORRECTED_S`]
+    /// (taken afresh once older): when it was taken, ms, and its value, K
+    /// ([`CLOSED_PLA_AGREE_K`]).
+    bend_d_pla: (u64, f32),
 }
 
 impl Closed {
@@ -169,7 +180,7 @@ impl Closed {
             stuck_windows: 0,
             own: OwnTemp::new(s.now_ms, s.tca_self_c).filter(|_| s.cal.self_sensed()),
             strain_k: if strain_k.is_finite() { strain_k } else { 0.0 },
-            bend_d_pla_k: 0.0,
+            bend_d_pla: (0, 0.0),
         }
     }
 
@@ -247,10 +258,10 @@ impl Closed {
 }
 
 impl Strategy for Closed {
-    fn enter(&mut self, phase: Phase, _now_ms: u64) {
+    fn enter(&mut self, phase: Phase, now_ms: u64) {
         self.drive.enter();
         if phase == Phase::Bend {
-            self.bend_d_pla_k = self.drive.observer().disturbance_k(HeatedNode::Pla);
+            self.bend_d_pla = (now_ms, self.drive.observer().disturbance_k(HeatedNode::Pla));
         }
         self.stalled_since_ms = None;
         self.window = None;
@@ -289,9 +300,15 @@ impl Strategy for Closed {
                 let pla_settled =
                     o.measured_rate_k_per_s(HeatedNode::Pla).abs() <= CLOSED_PLA_SETTLED_K_PER_S;
                 let pla_innovation_k = o.innovation_k(HeatedNode::Pla);
-                // Not found colder than it estimated the rod during bend.
-                let followed = o.disturbance_k(HeatedNode::Pla) - self.bend_d_pla_k
-                    >= -CLOSED_PLA_AGREE_K;
+                // Not found colder than it estimated the rod in the last few seconds.
+                let d_pla = o.disturbance_k(HeatedNode::Pla);
+                let (since_ms, high) = self.bend_d_pla;
+                if d_pla >= high
+                    || t.now_ms.saturating_sub(since_ms) as f32 / 1000.0 > CLOSED_PLA_CORRECTED_S
+                {
+                    self.bend_d_pla = (t.now_ms, d_pla);
+                }
+                let followed = d_pla - self.bend_d_pla.1 >= -CLOSED_PLA_AGREE_K;
                 let pla = PlaView {
                     learnt: pla_settled
                         || (pla_innovation_k.abs() <= CLOSED_PLA_AGREE_K && followed),
