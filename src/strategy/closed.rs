@@ -180,7 +180,7 @@ impl Closed {
             stuck_windows: 0,
             own: OwnTemp::new(s.now_ms, s.tca_self_c).filter(|_| s.cal.self_sensed()),
             strain_k: if strain_k.is_finite() { strain_k } else { 0.0 },
-            bend_d_pla: (0, 0.0),
+            bend_d_pla: (0, f32::NEG_INFINITY),
         }
     }
 
@@ -225,8 +225,9 @@ impl Closed {
             _ if may_stall && rate.abs() <= CLOSED_LOCK_STALL_K_PER_S => Some(t.now_ms),
             _ => None,
         };
+        // In whole milliseconds: the same test as in seconds, without a conversion.
         let stalled = self.stalled_since_ms.is_some_and(|since| {
-            t.now_ms.saturating_sub(since) as f32 / 1000.0 >= CLOSED_LOCK_STALL_S
+            t.now_ms.saturating_sub(since) >= (CLOSED_LOCK_STALL_S * 1000.0) as u64
         });
         // Where the PLA settles at the slowest, judged over each window while it reads over
         // the line: still over it, and the lock can never end.
@@ -258,11 +259,10 @@ impl Closed {
 }
 
 impl Strategy for Closed {
-    fn enter(&mut self, phase: Phase, now_ms: u64) {
+    fn enter(&mut self, _phase: Phase, _now_ms: u64) {
         self.drive.enter();
-        if phase == Phase::Bend {
-            self.bend_d_pla = (now_ms, self.drive.observer().disturbance_k(HeatedNode::Pla));
-        }
+        // Taken afresh on bend's first tick.
+        self.bend_d_pla.1 = f32::NEG_INFINITY;
         self.stalled_since_ms = None;
         self.window = None;
         self.stuck_windows = 0;
@@ -303,12 +303,14 @@ impl Strategy for Closed {
                 // Not found colder than it estimated the rod in the last few seconds.
                 let d_pla = o.disturbance_k(HeatedNode::Pla);
                 let (since_ms, high) = self.bend_d_pla;
-                if d_pla >= high
-                    || t.now_ms.saturating_sub(since_ms) as f32 / 1000.0 > CLOSED_PLA_CORRECTED_S
+                let followed = if d_pla >= high
+                    || t.now_ms.saturating_sub(since_ms) > (CLOSED_PLA_CORRECTED_S * 1000.0) as u64
                 {
                     self.bend_d_pla = (t.now_ms, d_pla);
-                }
-                let followed = d_pla - self.bend_d_pla.1 >= -CLOSED_PLA_AGREE_K;
+                    true
+                } else {
+                    d_pla - high >= -CLOSED_PLA_AGREE_K
+                };
                 let pla = PlaView {
                     learnt: pla_settled
                         || (pla_innovation_k.abs() <= CLOSED_PLA_AGREE_K && followed),

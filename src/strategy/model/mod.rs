@@ -255,7 +255,7 @@ impl ModelDrive {
         // drifting while the PLA is held on it) must not keep the rod heated until the timeout.
         let waited_out = if ready_but_pla && !pla_ready {
             let since = *self.pla_wait_since_ms.get_or_insert(t.now_ms);
-            t.now_ms.saturating_sub(since) as f32 / 1000.0 >= MODEL_PLA_WAIT_MAX_S
+            t.now_ms.saturating_sub(since) >= (MODEL_PLA_WAIT_MAX_S * 1000.0) as u64
         } else {
             self.pla_wait_since_ms = None;
             false
