@@ -440,15 +440,22 @@ fn tallest_first(
             let _ = v.push((k, h));
         }
     }
-    let r = |e: &(usize, Heater)| heater(e.1, ohm[e.0][e.1.index()]).resistance_ohm;
+    sort_stable_by(&mut v, |e| {
+        heater(e.1, ohm[e.0][e.1.index()]).resistance_ohm
+    });
+    v
+}
+
+/// Sorts `v` by `key`, ascending, equals kept in their order. An insertion sort: the scheduler
+/// orders at most [`WINDOWS`] items, and core's sort takes 2.7 KiB of flash.
+pub(crate) fn sort_stable_by<T>(v: &mut [T], key: impl Fn(&T) -> f32) {
     for i in 1..v.len() {
         let mut j = i;
-        while j > 0 && r(&v[j - 1]) > r(&v[j]) {
+        while j > 0 && key(&v[j - 1]) > key(&v[j]) {
             v.swap(j - 1, j);
             j -= 1;
         }
     }
-    v
 }
 
 /// The supply a layout is reckoned at, V (0: unknown, no layout).

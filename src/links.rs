@@ -703,16 +703,11 @@ impl<const N: usize> Links<N> {
                 .soften_reserve_w(radii_mm[k])
                 .map_or(0.0, |r| r.tca_w)
         };
-        let mut order: Vec<usize, N> = (0..radii_mm.len().min(N)).collect();
-        // Insertion sort, stable: N is at most four, and core's sort takes 2.7 KiB of flash.
-        for i in 1..order.len() {
-            let mut j = i;
-            while j > 0 && tca_w(order[j - 1]) < tca_w(order[j]) {
-                order.swap(j - 1, j);
-                j -= 1;
-            }
-        }
-        order
+        // Each link's power once, the most first.
+        let mut order: Vec<(f32, usize), N> =
+            (0..radii_mm.len().min(N)).map(|k| (-tca_w(k), k)).collect();
+        budget::sort_stable_by(&mut order, |e| e.0);
+        order.iter().map(|e| e.1).collect()
     }
 
     /// What link `k` answers a MORPH it refuses (busy, faulted, no reading, out of range),
