@@ -191,17 +191,9 @@ fn after_tune_on_drawn_hifi_links_closed_bend_ends_once_the_rod_has_stopped_flow
         let target = 42.92f32;
         // TUNE on the link, then the morph on a copy of it at rest with what TUNE learnt.
         let mut tuned = Bench::hifi_draw(20261122, draw);
-        assert!(tuned.send("TUNE")[0].starts_with("ok"));
-        assert!(tuned.run_until(400.0, |b| !b.rig.ctrl.tuning()));
+        let end = tuned.tune_to_end();
+        assert!(end.starts_with("event: tune done"), "draw {draw}: {end}");
         let cal = tuned.rig.ctrl.calibration();
-        assert!(
-            tuned
-                .lines
-                .iter()
-                .any(|l| l.starts_with("event: tune done")),
-            "draw {draw}: {:?}",
-            tuned.lines
-        );
         let mut b = Bench::hifi_draw(20261122, draw);
         b.rig
             .ctrl

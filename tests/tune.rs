@@ -32,28 +32,11 @@ on_both_links!(
     a_tuned_link_in_the_stillest_rated_air_raises_no_supervisor_alarm,
 );
 
-/// Runs TUNE to its end; returns the line that ended it.
-fn tune(b: &mut Bench) -> String {
-    assert_eq!(b.send("TUNE"), [format!("ok total_s={TUNE_TOTAL_S:.0}")]);
-    let from = b.lines.len();
-    assert!(
-        b.run_until(TUNE_TOTAL_S as f64 + 5.0, |b| !b.rig.ctrl.tuning()),
-        "tune did not end: {:?}",
-        &b.lines[from..]
-    );
-    b.lines[from..]
-        .iter()
-        .rev()
-        .find(|l| l.starts_with("event: tune done") || l.starts_with("event: tune failed"))
-        .cloned()
-        .unwrap_or_else(|| panic!("no end line: {:?}", &b.lines[from..]))
-}
-
 fn a_healthy_link_tunes_within_bounds_and_raises_no_alarm(link: Link) {
     let mut b = Bench::on(link);
     b.run_for(2.0);
     let t0 = b.rig.now_ms();
-    let end = tune(&mut b);
+    let end = b.tune_to_end();
     let took_s = (b.rig.now_ms() - t0) as f64 / 1000.0;
     println!("{link:?}: {end} ({took_s} s)");
     for l in &b.lines {
@@ -92,7 +75,7 @@ fn a_healthy_link_tunes_within_bounds_and_raises_no_alarm(link: Link) {
     // Without current sense there is nothing to fit it from: it stays the nominal.
     let mut t = Bench::on(link).thermistors_only();
     t.run_for(2.0);
-    assert!(tune(&mut t).starts_with("event: tune done"));
+    assert!(t.tune_to_end().starts_with("event: tune done"));
     assert_eq!(t.rig.ctrl.calibration().tca_tcr_ppm_per_k, 1500.0);
     assert_ne!(t.rig.ctrl.calibration(), Calibration::DEFAULT);
 }
@@ -100,7 +83,7 @@ fn a_healthy_link_tunes_within_bounds_and_raises_no_alarm(link: Link) {
 fn the_strain_term_is_the_rest_shape_gauge_and_closed_bends_on_the_own_temperature(link: Link) {
     let mut b = Bench::on(link);
     b.run_for(2.0);
-    assert!(tune(&mut b).starts_with("event: tune done"));
+    assert!(b.tune_to_end().starts_with("event: tune done"));
     let tcr_per_k = b.rig.ctrl.calibration().tca_tcr_ppm_per_k as f64 * 1e-6;
     assert_eq!(b.rig.ctrl.calibration().strain_k_m(), 0.0);
     // The link as built rests (its anchor), then one morph the user measures: the gauge, from
@@ -160,7 +143,7 @@ fn in_still_air_tune_sets_the_still_air_model_and_water_sets_it_back(link: Link)
     assert_eq!(b.send("SIM MEDIUM air"), ["ok medium=air"]);
     b.run_for(2.0);
     let t0 = b.rig.now_ms();
-    let end = tune(&mut b);
+    let end = b.tune_to_end();
     let took_s = (b.rig.now_ms() - t0) as f64 / 1000.0;
     println!("{link:?}: {end} ({took_s} s)");
     assert!(
@@ -191,7 +174,7 @@ fn in_still_air_tune_sets_the_still_air_model_and_water_sets_it_back(link: Link)
     // Back under water, at rest, a tune sets the link file's convection back.
     assert_eq!(b.send("SIM MEDIUM water"), ["ok medium=water"]);
     b.run_for(300.0);
-    let end = tune(&mut b);
+    let end = b.tune_to_end();
     assert!(end.starts_with("event: tune done"), "{end}");
     assert_eq!(
         b.rig.ctrl.calibration().convection_w_m2k,
@@ -209,7 +192,7 @@ fn a_tuned_link_in_the_stillest_rated_air_raises_no_supervisor_alarm(link: Link)
     for h_w_m2k in [25.0, least] {
         let mut b = Bench::in_air_at(link, h_w_m2k).thermistors_only();
         b.run_for(2.0);
-        let end = tune(&mut b);
+        let end = b.tune_to_end();
         assert!(
             end.starts_with("event: tune done"),
             "{h_w_m2k} W/m2K: {end}"
@@ -415,7 +398,7 @@ fn measured_morphs_reduce_the_error_on_a_mismatched_link(link: Link) {
     b.run_for(2.0);
     let before = (settled_radius(&mut b, target) - target as f64).abs();
     b.run_for(240.0);
-    let end = tune(&mut b);
+    let end = b.tune_to_end();
     assert!(end.starts_with("event: tune done"), "{end}");
     // Three measured morphs across the range, each measured 0.2 mm off (a ruler's error).
     for (r, err) in [(35.0f32, 0.2f64), (39.6, -0.2), (44.0, 0.2)] {
@@ -459,7 +442,7 @@ fn an_implausible_report_says_which_bound_and_changes_nothing(link: Link) {
 fn a_heater_stuck_in_a_second_tune_keeps_reset_refused_while_it_heats(link: Link) {
     let mut b = Bench::on(link).thermistors_only();
     b.run_for(2.0);
-    let end = tune(&mut b);
+    let end = b.tune_to_end();
     assert!(end.starts_with("event: tune done"), "{end}");
     b.run_for(600.0);
     assert_eq!(b.send("TUNE"), [format!("ok total_s={TUNE_TOTAL_S:.0}")]);
@@ -497,7 +480,7 @@ fn a_tune_that_would_hide_a_soft_rod_fails_and_the_link_still_morphs() {
     let mut b = Bench::hifi_draw(20261122, 1);
     b.run_for(2.0);
     let before = b.rig.ctrl.calibration();
-    let end = tune(&mut b);
+    let end = b.tune_to_end();
     println!("{end}");
     assert!(end.starts_with("event: tune failed pla reads "), "{end}");
     assert!(end.contains("calibration kept"), "{end}");

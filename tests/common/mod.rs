@@ -189,6 +189,25 @@ impl Bench {
         self.run_until(200.0, |b| b.rig.ctrl.tune_step() == Some(step))
     }
 
+    /// Runs TUNE to its end; returns the line that ended it (`event: tune done ...` or
+    /// `... failed ...`).
+    pub fn tune_to_end(&mut self) -> String {
+        let total_s = morphlink::tune::TUNE_TOTAL_S;
+        assert_eq!(self.send("TUNE"), [format!("ok total_s={total_s:.0}")]);
+        let from = self.lines.len();
+        assert!(
+            self.run_until(total_s as f64 + 5.0, |b| !b.rig.ctrl.tuning()),
+            "tune did not end: {:?}",
+            &self.lines[from..]
+        );
+        self.lines[from..]
+            .iter()
+            .rev()
+            .find(|l| l.starts_with("event: tune done") || l.starts_with("event: tune failed"))
+            .cloned()
+            .unwrap_or_else(|| panic!("no end line: {:?}", &self.lines[from..]))
+    }
+
     /// Ticks for `s` seconds of simulated time.
     pub fn run_for(&mut self, s: f64) {
         let end = self.rig.now_ms() + (s * 1000.0) as u64;
