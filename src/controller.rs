@@ -483,7 +483,9 @@ impl Controller {
             let n = self.events.len();
             let mut kept = false;
             for _ in 0..n {
-                let old = self.events.pop_front().expect("full queue");
+                let Some(old) = self.events.pop_front() else {
+                    break;
+                };
                 if !kept && !matches!(old, Event::Alarm(_)) {
                     kept = true; // dropped: the oldest non-alarm
                     continue;

@@ -50,7 +50,7 @@ mod firmware {
     use core::cell::RefCell;
     use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
     use defmt_rtt as _;
-    use embassy_executor::Spawner;
+    use embassy_executor::{Executor, Spawner};
     use embassy_futures::select::{select, select3, Either, Either3};
     use embassy_futures::yield_now;
     use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
@@ -219,8 +219,20 @@ mod firmware {
             });
     }
 
-    #[embassy_executor::main]
-    async fn main(spawner: Spawner) {
+    /// The entry: the thread-mode executor, its one task [`start`] spawned. Written out rather
+    /// than `#[embassy_executor::main]`, whose `unwrap()` of that spawn would carry
+    /// `SpawnError`'s Debug text in flash for a panic that cannot happen.
+    #[cortex_m_rt::entry]
+    fn main() -> ! {
+        let executor = cortex_m::singleton!(: Executor = Executor::new())
+            .unwrap_or_else(|| panic!("entered once"));
+        executor
+            .run(|spawner| spawner.spawn(start(spawner).unwrap_or_else(|_| panic!("spawned once"))))
+    }
+
+    /// Boot: the board, the core and its settings, then the control and serial tasks.
+    #[embassy_executor::task]
+    async fn start(spawner: Spawner) {
         let parts = board_parts();
         let cause = ResetCause::from_flags(parts.reset_flags);
         defmt::info!(

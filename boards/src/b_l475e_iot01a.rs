@@ -115,6 +115,8 @@ pub fn init() -> Parts {
         // HSI, not the MSI: ±1 % over temperature without LSE trimming is plenty for
         // 115 200 Bd and for thermal timing.
         config.rcc.hsi = true;
+        // The reset clock, unused once the PLL runs from the HSI: off.
+        config.rcc.msi = None;
         config.rcc.pll = Some(Pll {
             source: PllSource::HSI,
             prediv: PllPreDiv::DIV1,
