@@ -109,28 +109,43 @@ const _: () = assert!(
         && CLOSED_LOCK_STALL_MAX_C < SOFT_THRESHOLD_C
 );
 
-/// A lock whose PLA cannot cool under [`CLOSED_LOCK_STALL_MAX_C`] ends at once, as its timeout
-/// would, with the PLA's reading in its alarm: the TCA holding this radius, or the
-/// surroundings, keep the rod too warm to hold the shape, and waiting out the lock timeout
+/// A lock whose PLA cannot cool under [`CLOSED_LOCK_STALL_MAX_C`] is too warm to end: the TCA
+/// holding this radius, or the surroundings, keep the rod soft, and waiting out the lock timeout
 /// (`LOCK_TIMEOUT_S`, 600 s) with the TCA hot changes nothing. It cannot cool under it when even
-/// its slowest settling would leave it over the line by [`CLOSED_LOCK_STUCK_MARGIN_K`]: the PLA
-/// reading and estimate less how fast the reading fell over the last [`CLOSED_LOCK_STUCK_S`]
-/// times this, s, over two windows in a row: a settling slower than any lock here shows (the
-/// links settle in their lock within 20–60 s once the PLA heater is off; a still-air link at
-/// the least rated convection is the slowest), so a rod that is still cooling towards a lockable
-/// temperature is not judged stuck. The fall is the reading's over the window, not the
-/// observer's rate, whose 0.05 K/s of noise would hide any stall.
+/// its slowest settling stays over the line: the PLA reading and estimate less how fast the
+/// reading fell over the last [`CLOSED_LOCK_STUCK_S`] times this, s, over two windows in a row:
+/// a settling slower than any lock here shows (the links settle in their lock within 20–60 s
+/// once the PLA heater is off; a still-air link at the least rated convection is the slowest),
+/// so a rod that is still cooling towards a lockable temperature is not judged stuck. The fall is
+/// the reading's over the window, not the observer's rate, whose 0.05 K/s of noise would hide
+/// any stall. Such a lock first eases the TCA's hold ([`CLOSED_LOCK_EASE_MAX_K`]); once that is
+/// spent it ends at once, as its timeout would, with the PLA's reading in its alarm.
 pub const CLOSED_LOCK_SETTLE_TAU_S: f32 = 200.0;
-/// How far over [`CLOSED_LOCK_STALL_MAX_C`] the PLA's slowest settling must be, K, before a lock
-/// ends as too warm: the noise of the fall between two readings over the window times
-/// [`CLOSED_LOCK_SETTLE_TAU_S`] is about 0.07 K / 30 s × 200 s, 0.5 K, and two windows in a row
-/// must agree; a rod that settles nearer the line waits for the lock timeout, as before.
-pub const CLOSED_LOCK_STUCK_MARGIN_K: f32 = 0.5;
 /// The window over which the PLA's fall is read, s: long enough for its noise to matter little
-/// ([`CLOSED_LOCK_STUCK_MARGIN_K`]).
+/// (0.07 K between two readings, 0.5 K of settling once times [`CLOSED_LOCK_SETTLE_TAU_S`]).
 pub const CLOSED_LOCK_STUCK_S: f32 = 30.0;
+const _: () = assert!(CLOSED_LOCK_SETTLE_TAU_S > 0.0 && CLOSED_LOCK_STUCK_S > 0.0);
+
+/// How far a lock too warm to end may lower its TCA's hold, K, in all: a rod that the TCA's
+/// own heat keeps soft (still air at the tightest radii: the TCA holding the bend warms the
+/// PLA beside it over [`CLOSED_LOCK_STALL_MAX_C`]) cools once the TCA is held a few kelvin
+/// lower, and the rod, still soft, gives back that much of its bend (about 0.27 mm/K) before it
+/// turns rigid. Each time the lock is judged too warm ([`CLOSED_LOCK_SETTLE_TAU_S`]) the hold
+/// comes down by what the model says brings the PLA's settling [`CLOSED_LOCK_EASE_AIM_K`]
+/// under the line, until this much is spent; the next too-warm judgment then ends the lock
+/// as before. `done` reports the eased shape (`missed_mm=` when it is off its target). 10 K
+/// is about 2.7 mm: a bath too warm for any hold still ends in the too-warm alarm.
+pub const CLOSED_LOCK_EASE_MAX_K: f32 = 10.0;
+/// Where an eased hold aims the PLA's settling, K under [`CLOSED_LOCK_STALL_MAX_C`], and how far
+/// under it the lock's settling is still judged: far enough for the stall rule to end the lock
+/// under it despite the reading's noise and the model's coupling being a kelvin off (aimed 1 K
+/// under, a hifi still-air link settled 0.3 K under the line, where its noise kept resetting
+/// the stall). A settling within half this of the line counts as too warm: the stall rule needs
+/// ten seconds on end under the line, which a reading settling that near it seldom gives (a
+/// lumped still-air link settling at 58.1 °C met the lock timeout).
+pub const CLOSED_LOCK_EASE_AIM_K: f32 = 2.0;
 const _: () = assert!(
-    CLOSED_LOCK_SETTLE_TAU_S > 0.0 && CLOSED_LOCK_STUCK_MARGIN_K > 0.0 && CLOSED_LOCK_STUCK_S > 0.0
+    CLOSED_LOCK_EASE_MAX_K > 0.0 && CLOSED_LOCK_EASE_MAX_K <= 20.0 && CLOSED_LOCK_EASE_AIM_K > 0.0
 );
 
 /// The `closed` strategy.
@@ -147,8 +162,14 @@ pub struct Closed {
     /// ([`CLOSED_LOCK_STUCK_S`]).
     window: Option<(u64, f32)>,
     /// Windows in a row whose slowest settling stayed over the line; at two the lock cannot
-    /// finish and its timeout is now.
+    /// finish and its timeout is now, unless the TCA's hold may still come down.
     stuck_windows: u8,
+    /// How far the lock has lowered the TCA's hold, K ([`CLOSED_LOCK_EASE_MAX_K`]).
+    eased_k: f32,
+    /// The PLA bead's steady rise per kelvin of the TCA bead's, with the TCA alone heated (the
+    /// calibration's rises per watt): how far an eased hold lowers the PLA.
+    pla_per_tca: f32,
+
     /// The TCA's own temperature, where the morph started with one (a board that senses
     /// current, after `TUNE` fitted its coefficient): the TCA is then bent and held on it
     /// instead of on its thermistor.
@@ -178,6 +199,8 @@ impl Closed {
             stalled_since_ms: None,
             window: None,
             stuck_windows: 0,
+            eased_k: 0.0,
+            pla_per_tca: s.cal.tca_to_pla_k_per_w / s.cal.tca_rise_k_per_w,
             own: OwnTemp::new(s.now_ms, s.tca_self_c).filter(|_| s.cal.self_sensed()),
             strain_k: if strain_k.is_finite() { strain_k } else { 0.0 },
             bend_d_pla: (0, f32::NEG_INFINITY),
@@ -229,29 +252,38 @@ impl Closed {
         let stalled = self.stalled_since_ms.is_some_and(|since| {
             t.now_ms.saturating_sub(since) >= (CLOSED_LOCK_STALL_S * 1000.0) as u64
         });
-        // Where the PLA settles at the slowest, judged over each window while it reads over
-        // the line: still over it, and the lock can never end.
-        let line_c = CLOSED_LOCK_STALL_MAX_C + CLOSED_LOCK_STUCK_MARGIN_K;
+        // Where the PLA settles at the slowest, judged over each window while it reads near or
+        // over the line: still over it, and the lock can never end.
+        let aim_c = CLOSED_LOCK_STALL_MAX_C - CLOSED_LOCK_EASE_AIM_K;
         let warmest = m.t_pla_c.min(pla_c);
         self.window = match self.window {
-            Some((t0, c0)) if warmest >= line_c => {
+            Some((t0, c0)) if warmest >= aim_c => {
                 let dt_s = t.now_ms.saturating_sub(t0) as f32 / 1000.0;
                 if dt_s < CLOSED_LOCK_STUCK_S {
                     Some((t0, c0))
                 } else {
                     let fall = ((c0 - m.t_pla_c) / dt_s).max(0.0);
-                    let over = warmest - fall * CLOSED_LOCK_SETTLE_TAU_S >= line_c;
-                    self.stuck_windows = if over {
+                    let settle_c = warmest - fall * CLOSED_LOCK_SETTLE_TAU_S;
+                    let too_warm_c = CLOSED_LOCK_STALL_MAX_C - 0.5 * CLOSED_LOCK_EASE_AIM_K;
+                    self.stuck_windows = if settle_c >= too_warm_c {
                         self.stuck_windows.saturating_add(1)
                     } else {
                         0
                     };
+                    // Too warm to end: lower the TCA's hold while it may come down.
+                    let ease_k = ((settle_c - aim_c) / self.pla_per_tca)
+                        .min(CLOSED_LOCK_EASE_MAX_K - self.eased_k);
+                    if self.stuck_windows >= 2 && ease_k > 0.0 {
+                        self.eased_k += ease_k;
+                        self.drive.ease_tca(ease_k);
+                        self.stuck_windows = 0;
+                    }
                     Some((t.now_ms, m.t_pla_c))
                 }
             }
             _ => {
                 self.stuck_windows = 0;
-                (warmest >= line_c).then_some((t.now_ms, m.t_pla_c))
+                (warmest >= aim_c).then_some((t.now_ms, m.t_pla_c))
             }
         };
         (pla_c < rigid_c && lead_c < rigid_c) || stalled
@@ -261,6 +293,7 @@ impl Closed {
 impl Strategy for Closed {
     fn enter(&mut self, _phase: Phase, _now_ms: u64) {
         self.drive.enter();
+
         // Taken afresh on bend's first tick.
         self.bend_d_pla.1 = f32::NEG_INFINITY;
         self.stalled_since_ms = None;

@@ -194,6 +194,12 @@ impl ModelDrive {
         }
     }
 
+    /// Lowers the TCA's target by `k`, K: a lock too warm to end eases its hold
+    /// (`closed`'s [`super::closed::CLOSED_LOCK_EASE_MAX_K`]).
+    pub(crate) fn ease_tca(&mut self, k: f32) {
+        self.tca_target_c -= k;
+    }
+
     /// A new phase: the settle hold starts afresh.
     pub(crate) fn enter(&mut self) {
         self.settled_since_ms = None;
