@@ -131,10 +131,12 @@ const _: () = assert!(CLOSED_LOCK_SETTLE_TAU_S > 0.0 && CLOSED_LOCK_STUCK_S > 0.
 /// PLA beside it over [`CLOSED_LOCK_STALL_MAX_C`]) cools once the TCA is held a few kelvin
 /// lower, and the rod, still soft, gives back that much of its bend (about 0.27 mm/K) before it
 /// turns rigid. Each time the lock is judged too warm ([`CLOSED_LOCK_SETTLE_TAU_S`]) the hold
-/// comes down by what the model says brings the PLA's settling [`CLOSED_LOCK_EASE_AIM_K`]
-/// under the line, until this much is spent; the next too-warm judgment then ends the lock
-/// as before. `done` reports the eased shape (`missed_mm=` when it is off its target). 10 K
-/// is about 2.7 mm: a bath too warm for any hold still ends in the too-warm alarm.
+/// comes down by what the calibration's coupling says brings the PLA's settling
+/// [`CLOSED_LOCK_EASE_AIM_K`] under the line, until this much is spent; the next too-warm
+/// judgment then ends the lock as before. `done` reports the shape bend ended at: the
+/// high-fidelity rods hold it while the hold comes down, a rod of one temperature gives some
+/// back (docs/strategies.md, "A lock too warm to end"). 10 K is about 2.7 mm of a soft rod's
+/// bend: a bath too warm for any hold still ends in the too-warm alarm.
 pub const CLOSED_LOCK_EASE_MAX_K: f32 = 10.0;
 /// Where an eased hold aims the PLA's settling, K under [`CLOSED_LOCK_STALL_MAX_C`], and how far
 /// under it the lock's settling is still judged: far enough for the stall rule to end the lock
@@ -169,7 +171,6 @@ pub struct Closed {
     /// The PLA bead's steady rise per kelvin of the TCA bead's, with the TCA alone heated (the
     /// calibration's rises per watt): how far an eased hold lowers the PLA.
     pla_per_tca: f32,
-
     /// The TCA's own temperature, where the morph started with one (a board that senses
     /// current, after `TUNE` fitted its coefficient): the TCA is then bent and held on it
     /// instead of on its thermistor.
@@ -293,7 +294,6 @@ impl Closed {
 impl Strategy for Closed {
     fn enter(&mut self, _phase: Phase, _now_ms: u64) {
         self.drive.enter();
-
         // Taken afresh on bend's first tick.
         self.bend_d_pla.1 = f32::NEG_INFINITY;
         self.stalled_since_ms = None;
