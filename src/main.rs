@@ -2,9 +2,9 @@
 //! hardware-free core. Builds only for the target (`thumbv7em-none-eabihf`); on the host it
 //! prints how to build it.
 //!
-//! Two embassy tasks share the core: one [`morphlink::controller::Controller`], or with the
-//! `links-2` feature a `morphlink::links::Links` of two (both behind
-//! `morphlink::session::Served`):
+//! A `start` task boots (the board, the core and its settings) and spawns the two that then
+//! share the core: one [`morphlink::controller::Controller`], or with the `links-2` feature a
+//! `morphlink::links::Links` of two (both behind `morphlink::session::Served`):
 //! - `control`, every [`TICK_MS`] (10 Hz): ADC burst (16 samples per input), then the heaters'
 //!   currents where the board senses them (16 readings inside the pulses and between them) →
 //!   `Controller::step` → PWM duties and the supply's cut-off; feeds the watchdog; records its
@@ -242,7 +242,7 @@ mod firmware {
             cause.as_str()
         );
 
-        // Built in its static, not in `main`'s future: held across the settings load below it
+        // Built in its static, not in `start`'s future: held across the settings load below it
         // would take its 3.5 KiB again in the task's RAM.
         CONTROLLER.lock(|c| *c.borrow_mut() = Slot::Ready(new_core()));
         with_core(|c| {

@@ -115,7 +115,7 @@ pub fn init() -> Parts {
         // HSI, not the MSI: ±1 % over temperature without LSE trimming is plenty for
         // 115 200 Bd and for thermal timing.
         config.rcc.hsi = true;
-        // The reset clock, unused once the PLL runs from the HSI: off.
+        // The reset clock: left as reset set it, not reconfigured (the PLL runs from the HSI).
         config.rcc.msi = None;
         config.rcc.pll = Some(Pll {
             source: PllSource::HSI,

@@ -97,8 +97,7 @@ pub const CLOSED_LOCK_STALL_RESET_K_PER_S: f32 = 0.06;
 /// The warmest stalled PLA reading that ends lock, °C: 4 K under the 62 °C glass transition,
 /// where a released shape holds as it does after the full wait and does not creep later
 /// (`tests/morph.rs`; docs/strategies.md, "Where each strategy fails (lumped plant)"). A rod that
-/// settles warmer is left to the lock timeout (`LOCK_TIMEOUT_S`): the link cannot lock that
-/// radius in those surroundings.
+/// settles warmer is too warm to end ([`CLOSED_LOCK_SETTLE_TAU_S`], [`CLOSED_LOCK_EASE_MAX_K`]).
 pub const CLOSED_LOCK_STALL_MAX_C: f32 = 58.0;
 const _: () = assert!(
     CLOSED_LOCK_STALL_K_PER_S > 0.0
@@ -140,12 +139,17 @@ const _: () = assert!(CLOSED_LOCK_SETTLE_TAU_S > 0.0 && CLOSED_LOCK_STUCK_S > 0.
 pub const CLOSED_LOCK_EASE_MAX_K: f32 = 10.0;
 /// Where an eased hold aims the PLA's settling, K under [`CLOSED_LOCK_STALL_MAX_C`], and how far
 /// under it the lock's settling is still judged: far enough for the stall rule to end the lock
-/// under it despite the reading's noise and the model's coupling being a kelvin off (aimed 1 K
-/// under, a hifi still-air link settled 0.3 K under the line, where its noise kept resetting
-/// the stall). A settling within half this of the line counts as too warm: the stall rule needs
-/// ten seconds on end under the line, which a reading settling that near it seldom gives (a
-/// lumped still-air link settling at 58.1 °C met the lock timeout).
+/// under it despite the reading's noise and the coupling being a kelvin off (aimed 1 K under, a
+/// hifi still-air link settled 0.3 K under the line, where its noise kept resetting the stall).
 pub const CLOSED_LOCK_EASE_AIM_K: f32 = 2.0;
+/// A settling from here up is too warm for the lock to end, °C: half [`CLOSED_LOCK_EASE_AIM_K`]
+/// under [`CLOSED_LOCK_STALL_MAX_C`], because the stall rule needs ten seconds on end under the
+/// line, which a reading settling that near it seldom gives (a lumped still-air link settling at
+/// 58.1 °C met the lock timeout).
+const LOCK_TOO_WARM_C: f32 = CLOSED_LOCK_STALL_MAX_C - 0.5 * CLOSED_LOCK_EASE_AIM_K;
+/// The least one easing lowers the hold, K: a strong coupling would otherwise ask for steps so
+/// small that the lock timeout came before the cap was spent.
+const LOCK_EASE_MIN_K: f32 = 1.0;
 const _: () = assert!(
     CLOSED_LOCK_EASE_MAX_K > 0.0 && CLOSED_LOCK_EASE_MAX_K <= 20.0 && CLOSED_LOCK_EASE_AIM_K > 0.0
 );
@@ -163,8 +167,8 @@ pub struct Closed {
     /// Where the current window of a too-warm lock began: ms and the PLA reading, °C
     /// ([`CLOSED_LOCK_STUCK_S`]).
     window: Option<(u64, f32)>,
-    /// Windows in a row whose slowest settling stayed over the line; at two the lock cannot
-    /// finish and its timeout is now, unless the TCA's hold may still come down.
+    /// Windows in a row whose slowest settling was too warm ([`LOCK_TOO_WARM_C`]); at two the
+    /// lock cannot finish and its timeout is now, unless the TCA's hold may still come down.
     stuck_windows: u8,
     /// How far the lock has lowered the TCA's hold, K ([`CLOSED_LOCK_EASE_MAX_K`]).
     eased_k: f32,
@@ -265,16 +269,18 @@ impl Closed {
                 } else {
                     let fall = ((c0 - m.t_pla_c) / dt_s).max(0.0);
                     let settle_c = warmest - fall * CLOSED_LOCK_SETTLE_TAU_S;
-                    let too_warm_c = CLOSED_LOCK_STALL_MAX_C - 0.5 * CLOSED_LOCK_EASE_AIM_K;
-                    self.stuck_windows = if settle_c >= too_warm_c {
+                    self.stuck_windows = if settle_c >= LOCK_TOO_WARM_C {
                         self.stuck_windows.saturating_add(1)
                     } else {
                         0
                     };
-                    // Too warm to end: lower the TCA's hold while it may come down.
+                    // Too warm to end: lower the TCA's hold while it may come down, where the
+                    // stall rule can then end the lock (in warmer surroundings only the bare
+                    // reading under the rigid threshold ends it, which no easing reaches).
                     let ease_k = ((settle_c - aim_c) / self.pla_per_tca)
+                        .max(LOCK_EASE_MIN_K)
                         .min(CLOSED_LOCK_EASE_MAX_K - self.eased_k);
-                    if self.stuck_windows >= 2 && ease_k > 0.0 {
+                    if self.stuck_windows >= 2 && ease_k > 0.0 && cool_surroundings {
                         self.eased_k += ease_k;
                         self.drive.ease_tca(ease_k);
                         self.stuck_windows = 0;
