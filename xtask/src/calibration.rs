@@ -87,6 +87,11 @@ pub struct Args {
     /// writes `calibration_self.csv`, `.svg` and `.png` instead.
     #[arg(long)]
     pub self_bend: bool,
+    /// The medium's temperature drifts at this rate through each read chain, K/h, from the
+    /// link's own (a lab or bath that warms or cools): how the rest-shape readings bear it
+    /// (docs/shape.md). The other stages keep still surroundings.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub ambient_drift_k_per_h: f64,
 }
 
 impl Args {
@@ -255,7 +260,7 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> MorphRun {
     }
     let time_s = (rig.now_ms() - t0) as f64 / 1000.0;
     if !rig.ctrl.busy() && rig.ctrl.fault().is_none() {
-        wait_settled(rig);
+        wait_settled(rig, None);
     }
     // Unfinished, faulted, or an alarm in the minute after `done` (still this morph's).
     let end = match rig.ctrl.fault() {
@@ -275,7 +280,11 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, target_mm: f32) -> MorphRun {
 
 /// Ticks `rig` until an `event: shape` line (or [`morphlink::shape::SHAPE_REST_MAX_S`] and a
 /// minute), sending `measured` (mm) as MEASURED [`SETTLE_AFTER_DONE_S`] in, as a user would.
-fn wait_shape(rig: &mut Rig<Box<dyn Plant>>, measured: Option<f64>) -> (String, f64, f64) {
+fn wait_shape(
+    rig: &mut Rig<Box<dyn Plant>>,
+    measured: Option<f64>,
+    drift: Option<Drift>,
+) -> (String, f64, f64) {
     let t0 = rig.now_ms();
     let stop = t0 + ((morphlink::shape::SHAPE_REST_MAX_S as f64 + 60.0) * 1000.0) as u64;
     let at = t0 + (SETTLE_AFTER_DONE_S * 1000.0) as u64;
@@ -287,7 +296,7 @@ fn wait_shape(rig: &mut Rig<Box<dyn Plant>>, measured: Option<f64>) -> (String, 
                 rig.handle_line(&format!("MEASURED {r:.2}"), &mut |_| {});
             }
         }
-        rig.tick();
+        tick(rig, drift);
         rig.drain_events(&mut |l| {
             if l.starts_with("event: shape") {
                 line = Some(l.to_string());
@@ -311,14 +320,20 @@ fn read_chain(
     cal: &Calibration,
     s: &mut u64,
     calipers: usize,
+    drift_k_per_h: f64,
 ) -> (Calibration, Calibration, Vec<ShapeRow>) {
     let (min, max) = table::range_mm();
     let mut rig = rig(link, cal);
     let mut rows = Vec::new();
+    let drift = (drift_k_per_h != 0.0).then(|| Drift {
+        from_c: link.ambient_c(),
+        k_per_s: drift_k_per_h / 3600.0,
+        since_ms: rig.now_ms(),
+    });
     // As built the rest says nothing (nobody asked): it is the anchor once read.
     let t0 = rig.now_ms();
     while rig.ctrl.rest_shape().anchor().is_none() && rig.now_ms() - t0 < 300_000 {
-        rig.tick();
+        tick(&mut rig, drift);
         rig.drain_events(&mut |_| {});
     }
     let line = match rig.ctrl.rest_shape().anchor() {
@@ -345,7 +360,7 @@ fn read_chain(
         rig.handle_line(&format!("MORPH {target:.2}"), &mut |_| {});
         let end = t0 + (MAX_MORPH_S * 1000.0) as u64;
         while rig.ctrl.busy() && rig.now_ms() < end {
-            rig.tick();
+            tick(&mut rig, drift);
             rig.drain_events(&mut |_| {});
         }
         if rig.ctrl.busy() || rig.ctrl.fault().is_some() {
@@ -354,10 +369,10 @@ fn read_chain(
         }
         // The first `calipers` are measured 60 s after done, by the user.
         let measured = (step < calipers).then(|| {
-            let settled = wait_settled(&mut rig);
+            let settled = wait_settled(&mut rig, drift);
             settled + uniform(s, (-MEASURE_ERROR_MM, MEASURE_ERROR_MM))
         });
-        let (line, true_mm, after_s) = wait_shape(&mut rig, measured);
+        let (line, true_mm, after_s) = wait_shape(&mut rig, measured, drift);
         if step + 1 == calipers {
             measured_cal = rig.ctrl.calibration();
         }
@@ -387,13 +402,36 @@ fn gauge_of(rig: &Rig<Box<dyn Plant>>) -> f64 {
 
 /// Ticks [`SETTLE_AFTER_DONE_S`] past `done`: the plant's true radius then (what a user
 /// measures).
-fn wait_settled(rig: &mut Rig<Box<dyn Plant>>) -> f64 {
+fn wait_settled(rig: &mut Rig<Box<dyn Plant>>, drift: Option<Drift>) -> f64 {
     let settle = (SETTLE_AFTER_DONE_S * 1000.0) as u64 / TICK_MS;
     for _ in 0..settle {
-        rig.tick();
+        tick(rig, drift);
         rig.drain_events(&mut |_| {});
     }
     rig.radius_mm()
+}
+
+/// The medium's temperature drifting at a steady rate through a read chain
+/// (`--ambient-drift-k-per-h`).
+#[derive(Clone, Copy, Debug)]
+struct Drift {
+    /// The medium's temperature when the drift began, °C.
+    from_c: f64,
+    /// Its rate, K/s.
+    k_per_s: f64,
+    /// When it began, ms of rig time.
+    since_ms: u64,
+}
+
+/// One tick of `rig`, the medium first set where `drift` puts it now.
+fn tick(rig: &mut Rig<Box<dyn Plant>>, drift: Option<Drift>) {
+    if let Some(d) = drift {
+        let c = d.from_c + d.k_per_s * rig.now_ms().saturating_sub(d.since_ms) as f64 / 1000.0;
+        rig.bench
+            .set_ambient_c(c)
+            .expect("the plants take any medium temperature a drift reaches");
+    }
+    rig.tick();
 }
 
 fn evaluate(link: &Link, cal: &Calibration, measured: Option<usize>, targets: &[f32]) -> Vec<Eval> {
@@ -470,8 +508,9 @@ fn run_link(link: &Link, targets: &[f32], args: &Args) -> LinkResult {
         }
         evals.extend(evaluate(link, &cal, Some(k + 1), targets));
     }
-    let (chain_cal, read_cal, shapes) = read_chain(link, &tuned, &mut s, 1);
-    let (_, _, shapes2) = read_chain(link, &tuned, &mut s, 2);
+    let drift = args.ambient_drift_k_per_h;
+    let (chain_cal, read_cal, shapes) = read_chain(link, &tuned, &mut s, 1, drift);
+    let (_, _, shapes2) = read_chain(link, &tuned, &mut s, 2, drift);
     evals.extend(evaluate(link, &chain_cal, Some(CHAIN_STAGE), targets));
     evals.extend(evaluate(link, &read_cal, Some(READ_STAGE), targets));
     LinkResult {

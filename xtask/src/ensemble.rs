@@ -87,6 +87,16 @@ pub struct Link {
     pub body: Body,
 }
 
+impl Link {
+    /// The temperature of its medium, °C (the surroundings it was made in).
+    pub fn ambient_c(&self) -> f64 {
+        match &self.body {
+            Body::Lumped(l) => l.spec().params.surroundings.ambient_c,
+            Body::Hifi(h) => h.spec().ambient_c,
+        }
+    }
+}
+
 /// The medium's name in a link's name.
 fn medium_name(air: bool) -> &'static str {
     if air {
