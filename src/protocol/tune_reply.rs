@@ -335,14 +335,6 @@ pub fn tune_event(l: &mut OutLine, e: &TuneEvent) {
                         Fixed(*t_s, 1)
                     );
                 }
-                TuneFailure::PlaReadsOver(share, most) => {
-                    let _ = write!(
-                        l,
-                        "pla reads {}x water's rise, over the {}x a soft rod shows at (air?)",
-                        Fixed(*share, 2),
-                        Fixed(*most, 2)
-                    );
-                }
                 TuneFailure::AmbientMoved(k) => {
                     let _ = write!(
                         l,
@@ -414,7 +406,6 @@ mod tests {
             TuneFailure::PlaTooFast(big),
             TuneFailure::AmbientMoved(big),
             TuneFailure::TcaTooFast(big),
-            TuneFailure::PlaReadsOver(big, big),
         ]);
         let mut lines = Vec::new();
         for f in failures {

@@ -244,12 +244,6 @@ pub enum TuneFailure {
     /// The ambient thermistor moved this far from its baseline during the tune, K (more than
     /// [`TUNE_AMB_MAX_MOVE_K`]): a bath that warmed or cooled reads as heater rise.
     AmbientMoved(f32),
-    /// The PLA's thermistor read this share of the water model's rise, over the most (the
-    /// second value) at which the model strategies can still call the rod soft at this
-    /// ambient ([`pla_share_softens`]): convection weaker than water's that the step could not
-    /// tell from still air. Kept, the share would hide a soft rod and every soften would time
-    /// out, so the calibration stays as it was.
-    PlaReadsOver(f32, f32),
 }
 
 /// The highest PLA reading the model strategies let soften reach, °C: their PLA target plus
@@ -260,10 +254,11 @@ pub const TUNE_SOFTEN_READING_MAX_C: f32 = 85.0;
 pub const TUNE_SOFT_THRESHOLD_C: f32 = 70.0;
 
 /// The most of the water model's rise per watt a PLA thermistor may read for the model
-/// strategies to call the rod soft at `ambient_c` (°C): their observer takes the rod's rise as
-/// the reading's over that share, and their guard holds the reading at most
+/// strategies to call the rod soft at `ambient_c` (°C) on water's model: their observer takes
+/// the rod's rise as the reading's over that share, and their guard holds the reading at most
 /// [`TUNE_SOFTEN_READING_MAX_C`], so over this share the estimate never reaches
-/// [`TUNE_SOFT_THRESHOLD_C`] and soften cannot end (docs/calibration.md, "Draw 1").
+/// [`TUNE_SOFT_THRESHOLD_C`]. A step that reads over it is not water: the tune takes it as
+/// still air, as one that reached its cap early (docs/calibration.md, "Draw 1").
 pub fn pla_share_softens(ambient_c: f32) -> f32 {
     (TUNE_SOFTEN_READING_MAX_C - ambient_c) / (TUNE_SOFT_THRESHOLD_C - ambient_c)
 }
@@ -280,8 +275,9 @@ pub enum TuneEvent {
         /// The heated heater's power, W (0 for settle and cool).
         power_w: f32,
     },
-    /// The PLA's step rose `rise_k` in `t_s`, far faster than in water: still air, whose
-    /// model is used from now on.
+    /// The PLA's step rose `rise_k` in `t_s`, far faster than in water (to its cap early, or
+    /// over what water's model lets a bead that shows a soft rod read,
+    /// [`pla_share_softens`]): still air, whose model is used from now on.
     StillAir {
         /// The PLA thermistor's rise when its step was cut, K.
         rise_k: f32,
@@ -704,17 +700,22 @@ impl Tune {
     }
 
     fn finish(&mut self, now_ms: u64, emit: &mut dyn FnMut(TuneEvent)) -> TuneTick {
+        let y = &self.rec[0][..self.n];
+        let pla = fit_checked(y, TUNE_PLA_W, Fitted::Own(Heater::Pla), &water());
+        // Higher than water's model lets a bead that still shows a soft rod read: still air,
+        // as a step that reached its cap early is (docs/calibration.md, "Draw 1").
+        if let (Ok((r, ..)), Some(&rise_k)) = (pla, y.last()) {
+            if !(r / water().r_pp <= pla_share_softens(self.base_amb_c)) {
+                let t_s = self.n as f32 * TUNE_SAMPLE_S;
+                return self.finish_still_air(now_ms, rise_k, t_s, emit);
+            }
+        }
         if let Some(why) = self.tca_deferred {
             return self.fail(TuneFailure::Fit(Fitted::Own(Heater::Tca), why), emit);
         }
         self.cal.convection_w_m2k = LINK.surroundings.h_w_m2k as f32;
-        let y = &self.rec[0][..self.n];
-        match fit_checked(y, TUNE_PLA_W, Fitted::Own(Heater::Pla), &water()) {
+        match pla {
             Ok((r, tau, method, residual_k)) => {
-                let (share, most) = (r / water().r_pp, pla_share_softens(self.base_amb_c));
-                if !(share <= most) {
-                    return self.fail(TuneFailure::PlaReadsOver(share, most), emit);
-                }
                 self.cal.pla_rise_k_per_w = r;
                 self.cal.pla_tau_s = tau;
                 emit(TuneEvent::Fit {
