@@ -345,6 +345,8 @@ pub struct Tune {
     /// The TCA fit's rejection when its record was too short for its time constant: final
     /// unless the PLA step finds still air.
     tca_deferred: Option<Rejection>,
+    /// The PLA's step reached its cap early: its rise (K) and when (s into the step).
+    capped_early: Option<(f32, f32)>,
     /// The calibration being built (the old one until each value passes).
     cal: Calibration,
     /// The ambient baseline (the settle step's mean; a sum until it ends), °C, and this
@@ -487,6 +489,7 @@ impl Tune {
             tca_end_rise_k: 0.0,
             tca_off_ms: now_ms,
             tca_deferred: None,
+            capped_early: None,
             cal,
             base_amb_c: 0.0,
             amb_acc: 0.0,
@@ -625,9 +628,11 @@ impl Tune {
                 if in_step_s < TUNE_PLA_FASTEST_CAP_S {
                     return self.fail(TuneFailure::PlaTooFast(in_step_s), emit);
                 }
-                return self.finish_still_air(now_ms, pla - self.base_c[0], in_step_s, emit);
+                // Still air: the step ends here and `finish` takes its model.
+                self.capped_early = Some((pla - self.base_c[0], in_step_s));
+            } else {
+                return self.fail(TuneFailure::TcaTooFast(tca - self.base_c[1]), emit);
             }
-            return self.fail(TuneFailure::TcaTooFast(tca - self.base_c[1]), emit);
         }
         if in_step_s + 1e-3 >= self.step.length_s() || capped || self.n >= TUNE_MAX_SAMPLES {
             match self.step {
@@ -702,13 +707,15 @@ impl Tune {
     fn finish(&mut self, now_ms: u64, emit: &mut dyn FnMut(TuneEvent)) -> TuneTick {
         let y = &self.rec[0][..self.n];
         let pla = fit_checked(y, TUNE_PLA_W, Fitted::Own(Heater::Pla), &water());
-        // Higher than water's model lets a bead that still shows a soft rod read: still air,
-        // as a step that reached its cap early is (docs/calibration.md, "Draw 1").
-        if let (Ok((r, ..)), Some(&rise_k)) = (pla, y.last()) {
-            if !(r / water().r_pp <= pla_share_softens(self.base_amb_c)) {
-                let t_s = self.n as f32 * TUNE_SAMPLE_S;
-                return self.finish_still_air(now_ms, rise_k, t_s, emit);
-            }
+        // Faster than water lets it rise: to its cap early, or higher than water's model lets
+        // a bead that still shows a soft rod read (docs/calibration.md, "Draw 1").
+        let over = |(r, ..): (f32, f32, Method, f32)| {
+            let t_s = self.n as f32 * TUNE_SAMPLE_S;
+            let share = r / water().r_pp;
+            (!(share <= pla_share_softens(self.base_amb_c))).then(|| (y[self.n - 1], t_s))
+        };
+        if let Some((rise_k, t_s)) = self.capped_early.or_else(|| pla.ok().and_then(over)) {
+            return self.finish_still_air(now_ms, rise_k, t_s, emit);
         }
         if let Some(why) = self.tca_deferred {
             return self.fail(TuneFailure::Fit(Fitted::Own(Heater::Tca), why), emit);
