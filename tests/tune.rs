@@ -483,7 +483,9 @@ fn a_step_over_what_water_lets_a_soft_rod_read_is_tuned_as_still_air_and_morphs(
     let end = b.tune_to_end();
     assert!(end.starts_with("event: tune done"), "{end}");
     assert!(
-        b.lines.iter().any(|l| l.starts_with("event: tune still-air pla rose")),
+        b.lines
+            .iter()
+            .any(|l| l.starts_with("event: tune still-air pla rose")),
         "{:?}",
         b.lines
     );

@@ -5,7 +5,9 @@
 //! value `t_tca_self_c` is compared with the plant's true TCA mean. Each link runs twice: as
 //! drawn, and with its TCA's strain term (gauge factor) set to zero, which separates what the
 //! coil's strain costs from what the temperature coefficient and the model cost. Prints the
-//! Markdown tables of docs/safety.md, "The TCA as its own thermometer".
+//! Markdown tables of docs/safety.md, "The TCA as its own thermometer", and (after TUNE) how
+//! far the TCA thermistor strays from a bead model driven by the own temperature within the
+//! 20 s a drift must be caught in (docs/shape.md, "Not done, and why").
 
 use morphlink::calibration::{Calibration, TCA_TCR_NOMINAL_PPM_PER_K};
 use morphlink::vocab::Phase;
@@ -34,11 +36,78 @@ pub struct Args {
     pub seed: u64,
 }
 
-/// The errors one morph gave: every judged tick's, and the one as bend ended, K.
+/// The window a drifting TCA thermistor must be caught in, s (issue 35: 0.2 K/s within 20 s,
+/// 4 K).
+pub const DRIFT_WINDOW_S: f64 = 20.0;
+/// Phases of a morph the redundancy residual is judged in.
+const JUDGED: [Phase; 4] = [Phase::Soften, Phase::Bend, Phase::Lock, Phase::Release];
+
+/// The errors one morph gave: every judged tick's, and the one as bend ended, K; and per
+/// morph, per judged phase, the largest change of the redundancy residual over
+/// [`DRIFT_WINDOW_S`] ([`redundancy_changes`]).
 #[derive(Default)]
 struct Errors {
     ticks: Vec<f64>,
     bend_end: Vec<f64>,
+    changes: [Vec<f64>; 4],
+}
+
+/// One tick of a morph: its time (s), phase, the TCA thermistor's reading and the own
+/// temperature (°C), and the TCA's power (W).
+type Sample = (f64, Phase, f64, f64, f64);
+
+/// A healthy TCA thermistor as the own temperature would predict it: a first-order lag of
+/// `tau_s` behind the own temperature less `drop_k_per_w` times the TCA's power (the fall from
+/// the coil to the bead beside it while it heats).
+fn predicted(trace: &[Sample], tau_s: f64, drop_k_per_w: f64) -> Vec<f64> {
+    let mut b = trace.first().map_or(0.0, |s| s.2);
+    let mut last_t = trace.first().map_or(0.0, |s| s.0);
+    trace
+        .iter()
+        .map(|&(t, _, _, own, p)| {
+            let keep = (-(t - last_t) / tau_s).exp();
+            last_t = t;
+            b = own - drop_k_per_w * p + (b - (own - drop_k_per_w * p)) * keep;
+            b
+        })
+        .collect()
+}
+
+/// The residual of the TCA thermistor against [`predicted`], with the lag and the drop fitted
+/// on the morph itself (a grid; the best case a check with both learnt could hope for), and
+/// per judged phase the largest change of that residual over [`DRIFT_WINDOW_S`], K: what a
+/// drift of 0.2 K/s (4 K in the window) would have to stand out of.
+fn redundancy_changes(trace: &[Sample]) -> [f64; 4] {
+    let trace: Vec<Sample> = trace.iter().copied().filter(|s| s.3.is_finite()).collect();
+    let mut best = (f64::INFINITY, Vec::new());
+    for tau_s in [2.0, 3.0, 4.0, 6.0, 8.0, 10.0] {
+        for drop in [0.0, 2.5, 5.0, 7.5, 10.0, 15.0, 20.0] {
+            let r: Vec<f64> = predicted(&trace, tau_s, drop)
+                .iter()
+                .zip(&trace)
+                .map(|(p, s)| s.2 - p)
+                .collect();
+            let mean = r.iter().sum::<f64>() / r.len().max(1) as f64;
+            let ss = r.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>();
+            if ss < best.0 {
+                best = (ss, r);
+            }
+        }
+    }
+    let r = best.1;
+    let mut out = [0.0f64; 4];
+    let mut from = 0;
+    for i in 0..trace.len() {
+        while trace[i].0 - trace[from].0 > DRIFT_WINDOW_S {
+            from += 1;
+        }
+        if let Some(k) = JUDGED.iter().position(|&p| p == trace[i].1) {
+            for j in from..i {
+                out[k] = out[k].max((r[i] - r[j]).abs());
+            }
+        }
+    }
+    out
 }
 
 /// Morphs `target_mm` on a fresh copy of `spec` with `cal`; the self-sensed TCA's errors.
@@ -59,6 +128,7 @@ fn morph(
     rig.handle_line(&format!("MORPH {target_mm} auto"), &mut |_| {});
     let amb = spec.ambient_c;
     let mut last: Option<f64> = None;
+    let mut trace: Vec<Sample> = Vec::new();
     let stop = rig.now_ms() + 900_000;
     while !rig.ctrl.idle() && rig.now_ms() < stop {
         let was_bend = rig.ctrl.phase() == Phase::Bend;
@@ -78,6 +148,17 @@ fn morph(
             }
         }
         last = err;
+        let m = rig.ctrl.measurements();
+        trace.push((
+            rig.now_ms() as f64 / 1000.0,
+            phase,
+            m.t_tca_c as f64,
+            rig.ctrl.tca_self_c().map_or(f64::NAN, f64::from),
+            rig.ctrl.powers().tca_w as f64,
+        ));
+    }
+    for (v, c) in e.changes.iter_mut().zip(redundancy_changes(&trace)) {
+        v.push(c);
     }
 }
 
@@ -168,6 +249,9 @@ pub fn run(args: &Args) -> Result<(), String> {
         for (i, e) in r.into_iter().enumerate() {
             all[i].ticks.extend(e.ticks);
             all[i].bend_end.extend(e.bend_end);
+            for (a, c) in all[i].changes.iter_mut().zip(e.changes) {
+                a.extend(c);
+            }
         }
         misses.push(miss.abs() * 100.0);
         let (spec, _) = morphlink_sim::ensemble::hifi_draw(args.seed, *d).expect("valid");
@@ -207,6 +291,26 @@ pub fn run(args: &Args) -> Result<(), String> {
             percentile(v, 0.95),
             largest
         );
+    }
+    let _ = writeln!(t);
+    let _ = writeln!(
+        t,
+        "| after TUNE | phase | morphs | largest 20 s change, p50 | p95 | largest | over 4 K |\n| --- | --- | --- | --- | --- | --- | --- |"
+    );
+    for (name, i) in [("as drawn", 1), ("no strain term", 3)] {
+        for (phase, v) in JUDGED.iter().zip(all[i].changes.iter_mut()) {
+            let over = v.iter().filter(|&&c| c > 0.2 * DRIFT_WINDOW_S).count();
+            let largest = v.iter().cloned().fold(0.0f64, f64::max);
+            let _ = writeln!(
+                t,
+                "| {name} | {} | {} | {:.1} K | {:.1} K | {:.1} K | {over} |",
+                phase.as_str(),
+                v.len(),
+                percentile(v, 0.5),
+                percentile(v, 0.95),
+                largest,
+            );
+        }
     }
     print!("{t}");
     Ok(())
