@@ -138,14 +138,10 @@ fn the_strain_term_is_the_rest_shape_gauge_and_closed_bends_on_the_own_temperatu
     assert_eq!(t.alarms(), Vec::<String>::new());
 }
 
-fn in_still_air_tune_sets_the_still_air_model_and_water_sets_it_back(link: Link) {
-    let mut b = Bench::on(link);
-    assert_eq!(b.send("SIM MEDIUM air"), ["ok medium=air"]);
-    b.run_for(2.0);
-    let t0 = b.rig.now_ms();
+/// Runs TUNE on `b` and holds that it ended `done` on the still-air model, saying so
+/// (`event: tune still-air ...`); the done line.
+fn tune_as_still_air(b: &mut Bench) -> String {
     let end = b.tune_to_end();
-    let took_s = (b.rig.now_ms() - t0) as f64 / 1000.0;
-    println!("{link:?}: {end} ({took_s} s)");
     assert!(
         b.lines
             .iter()
@@ -157,6 +153,17 @@ fn in_still_air_tune_sets_the_still_air_model_and_water_sets_it_back(link: Link)
         end.starts_with("event: tune done") && end.contains(" convection_w_m2k=20.0 "),
         "{end}"
     );
+    end
+}
+
+fn in_still_air_tune_sets_the_still_air_model_and_water_sets_it_back(link: Link) {
+    let mut b = Bench::on(link);
+    assert_eq!(b.send("SIM MEDIUM air"), ["ok medium=air"]);
+    b.run_for(2.0);
+    let t0 = b.rig.now_ms();
+    let end = tune_as_still_air(&mut b);
+    let took_s = (b.rig.now_ms() - t0) as f64 / 1000.0;
+    println!("{link:?}: {end} ({took_s} s)");
     assert!(took_s <= TUNE_TOTAL_S as f64, "{took_s} s");
     assert_eq!(b.alarms(), Vec::<String>::new());
     assert_eq!(b.rig.ctrl.outputs(), Outputs::IDLE);
@@ -480,17 +487,7 @@ fn a_heater_stuck_in_a_second_tune_keeps_reset_refused_while_it_heats(link: Link
 fn a_step_over_what_water_lets_a_soft_rod_read_is_tuned_as_still_air_and_morphs() {
     let mut b = Bench::hifi_draw(20261122, 1);
     b.run_for(2.0);
-    let end = b.tune_to_end();
-    assert!(end.starts_with("event: tune done"), "{end}");
-    assert!(
-        b.lines
-            .iter()
-            .any(|l| l.starts_with("event: tune still-air pla rose")),
-        "{:?}",
-        b.lines
-    );
-    let cal = b.rig.ctrl.calibration();
-    assert_eq!(cal.convection_w_m2k, morphlink::tune::TUNE_STILL_AIR_W_M2K);
+    tune_as_still_air(&mut b);
     // MORPH rests the link to ambient first, then morphs.
     assert!(b.send("MORPH 40")[0].starts_with("ok"));
     let from = b.lines.len();
