@@ -279,9 +279,9 @@ pub enum TuneEvent {
     /// over what water's model lets a bead that shows a soft rod read,
     /// [`pla_share_softens`]): still air, whose model is used from now on.
     StillAir {
-        /// The PLA thermistor's rise when its step was cut, K.
+        /// The PLA thermistor's rise when its step ended (cut at its cap, or at its end), K.
         rise_k: f32,
-        /// Into the step, s.
+        /// Into the step when it ended, s.
         t_s: f32,
     },
     /// A value was fitted and passed its checks.
