@@ -1344,8 +1344,7 @@ fn a_low_supply_raises_no_false_alarm(link: Link) {
             }
             b.run_for(2.0);
             if tune {
-                assert!(b.send("TUNE")[0].starts_with("ok"));
-                assert!(b.run_until(400.0, |b| !b.rig.ctrl.tuning()));
+                b.tune_to_end();
                 assert!(b.alarms_since(0).is_empty(), "{:?}", b.lines);
             }
             assert!(b.send("SIM SUPPLY 9")[0].starts_with("ok"));
