@@ -500,6 +500,24 @@ fn four_hifi_links_under_8_w_finish_within_the_budget() {
     assert!(max_w <= 8.0 + 1e-3, "{max_w}");
 }
 
+/// Under one soften's worth, the least budget under which each morph of the gait starts on an
+/// idle board (every link waits its turn), each link's bend still ends and every link is done:
+/// a TCA the allowance holds short of its target counts as stalled whatever the allowance's
+/// milliwatts of tick-to-tick movement.
+#[test]
+fn four_hifi_links_under_one_softens_worth_finish() {
+    let mut rig = four_hifi(3.0);
+    let least_w = [34.0, 38.0, 42.0, 46.0]
+        .iter()
+        .enumerate()
+        .filter_map(|(k, &r)| rig.links.link(k).soften_reserve_w(r))
+        .map(|r| morphlink::budget::least_budget_w(r, 4))
+        .fold(0.0f32, f32::max);
+    let budget_w = (least_w * 100.0).ceil() / 100.0;
+    let max_w = gait_finishes(&mut rig, 3.0, budget_w as f64);
+    assert!(max_w <= budget_w as f64 + 1e-3, "{max_w}");
+}
+
 /// Sets `supply_limit_a` and `supply_budget_w`, runs `GAIT 34 38 42 46` and holds that every
 /// link ends `done` with no alarm; returns the highest summed power any tick reckoned, W.
 fn gait_finishes<P: morphlink_plant::Plant>(

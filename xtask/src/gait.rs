@@ -1,6 +1,7 @@
 //! `cargo xtask gait`: several links on one supply budget (docs/multilink.md). Four links of
 //! the hifi ensemble (their drawn links, in the medium asked for) morph at once with `GAIT`
-//! on one bench supply, for each budget; each link also morphs alone with no budget. Prints,
+//! on one bench supply, for each budget (the first one soften's worth: the least under which
+//! each of the gait's morphs starts); each link also morphs alone with no budget. Prints,
 //! per budget, the makespan (every link `done`) against its lower bound (the slowest link's
 //! own morph, and the total energy of the links' own morphs over the budget), the highest
 //! summed heater power of any tick (as the controllers reckon it and as the plants took it)
@@ -31,6 +32,11 @@ pub struct Args {
     /// Budgets to run, W (0: no budget).
     #[arg(long, value_delimiter = ',', default_value = "5,8,12,0")]
     pub budgets_w: Vec<f32>,
+    /// Leave out the row at one soften's worth: the least budget under which the gait's most
+    /// demanding soften starts on an idle board (what `CONFIG SET supply_budget_w` refuses
+    /// under), found on the links themselves after their TUNE with `--tune`.
+    #[arg(long)]
+    pub no_least: bool,
     /// The bench supply's current limit, A (also set as `supply_limit_a`).
     #[arg(long, default_value_t = 3.0)]
     pub limit_a: f32,
@@ -101,6 +107,10 @@ pub fn links(n: usize, medium: Medium) -> Result<(Vec<Hifi>, morphlink::bench::N
 /// What one run gave.
 #[derive(Clone, Debug, Default)]
 pub struct Run {
+    /// The budget it ran under, W (0: none).
+    pub budget_w: f32,
+    /// Whether that budget was one soften's worth ([`Budget::OneSoften`]).
+    pub least: bool,
     /// Seconds from the command to each link's `done` (NaN: not done).
     pub done_s: Vec<f64>,
     /// Each link's true radius after the settle, mm.
@@ -124,15 +134,29 @@ pub struct Run {
     pub trace: Vec<(f64, Vec<f64>, f64, Vec<f64>)>,
 }
 
-/// Runs `plants` on one supply with `budget_w` (0: none): with `tune`, TUNE on every link and
-/// a wait until each has cooled to [`COOL_K`] of ambient; then the command `cmd`, then until
-/// every link is done (or [`GAIT_MAX_S`]), then [`SETTLE_S`].
+/// The budget a [`run`] is under.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Budget {
+    /// None (`supply_budget_w` left at its default).
+    None,
+    /// This many watts.
+    Watts(f32),
+    /// One soften's worth for the run's targets ([`least_budget_w`]).
+    OneSoften,
+}
+
+/// Runs `plants` on one supply under `budget` (with [`Budget::OneSoften`], for `targets_mm`):
+/// with `tune`, TUNE on every link and a wait until each
+/// has cooled to [`COOL_K`] of ambient; then the command `cmd`, then until every link is done
+/// (or [`GAIT_MAX_S`]), then [`SETTLE_S`].
+#[allow(clippy::too_many_arguments)]
 pub fn run(
     plants: Vec<Hifi>,
     noise: morphlink::bench::Noise,
-    budget_w: f32,
+    budget: Budget,
     limit_a: f32,
     cmd: &str,
+    targets_mm: &[f32],
     trace: bool,
     tune: bool,
 ) -> Run {
@@ -179,12 +203,20 @@ pub fn run(
             tune_alarms.push(format!("TUNE: {e}"));
         }
     }
+    let least = budget == Budget::OneSoften;
+    let budget_w = match budget {
+        Budget::None => 0.0,
+        Budget::Watts(w) => w,
+        Budget::OneSoften => least_budget_w(&rig, targets_mm),
+    };
     if budget_w > 0.0 {
         say(&mut rig, &format!("CONFIG SET supply_budget_w {budget_w}"));
     }
     let start_ms = rig.now_ms();
     say(&mut rig, cmd);
     let mut r = Run {
+        budget_w,
+        least,
         done_s: vec![f64::NAN; n],
         min_v: f64::INFINITY,
         ..Run::default()
@@ -248,6 +280,19 @@ pub fn run(
     }
     r.radius_mm = (0..n).map(|k| rig.radius_mm(k)).collect();
     r
+}
+
+/// One soften's worth for morphs to `targets_mm` on `rig`'s links, W: the least budget under
+/// which each of them starts on an idle board (the largest soften reserve, with every link's
+/// probe pulses, `morphlink::budget::least_budget_w`), rounded up to the 0.01 W that
+/// `CONFIG SET` is given.
+pub fn least_budget_w(rig: &MultiRig<Hifi>, targets_mm: &[f32]) -> f32 {
+    let n = targets_mm.len();
+    let most = (0..n)
+        .filter_map(|k| rig.links.link(k).soften_reserve_w(targets_mm[k]))
+        .map(|r| morphlink::budget::least_budget_w(r, n))
+        .fold(0.0f32, f32::max);
+    (most * 100.0).ceil() / 100.0
 }
 
 /// The link an event line names (`@<n> ...`; link 1 without an address).
@@ -346,9 +391,18 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         .cloned()
         .filter(|b| *b > 0.0)
         .fold(f32::INFINITY, f32::min);
-    let runs: Vec<Run> = parallel(&a.budgets_w, a.threads, "budgets", |&b| {
-        let trace = (a.trace.is_some() || a.plot.is_some()) && b == tightest;
-        run(plants.clone(), noise, b, a.limit_a, &gait, trace, a.tune)
+    let budgets: Vec<Budget> = (!a.no_least)
+        .then_some(Budget::OneSoften)
+        .into_iter()
+        .chain(a.budgets_w.iter().map(|&w| match w > 0.0 {
+            true => Budget::Watts(w),
+            false => Budget::None,
+        }))
+        .collect();
+    let runs: Vec<Run> = parallel(&budgets, a.threads, "budgets", |&b| {
+        let trace = (a.trace.is_some() || a.plot.is_some()) && b == Budget::Watts(tightest);
+        let t = &a.targets_mm;
+        run(plants.clone(), noise, b, a.limit_a, &gait, t, trace, a.tune)
     })?;
     let mut out = String::new();
     let _ = writeln!(
@@ -380,7 +434,8 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     );
     let mut failures = Vec::new();
-    for (b, r) in a.budgets_w.iter().zip(&runs) {
+    for r in &runs {
+        let b = &r.budget_w;
         let makespan = r.done_s.iter().cloned().fold(0.0, f64::max);
         let all_done = r.done_s.iter().all(|d| d.is_finite());
         let bound = if *b > 0.0 {
@@ -391,10 +446,10 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         let worse_pp = (0..n)
             .map(|k| error_pct(r.radius_mm[k], a.targets_mm[k]).abs() - alone_err[k].abs())
             .fold(f64::NEG_INFINITY, f64::max);
-        let name = if *b > 0.0 {
-            format!("{b}")
-        } else {
-            "none".into()
+        let name = match (*b > 0.0, r.least) {
+            (true, true) => format!("{b} (one soften)"),
+            (true, false) => format!("{b}"),
+            _ => "none".into(),
         };
         let _ = writeln!(
             out,
@@ -440,11 +495,7 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         }
     }
     print!("{out}");
-    let traced = runs
-        .iter()
-        .zip(&a.budgets_w)
-        .find(|(_, b)| **b == tightest)
-        .map(|(r, _)| r);
+    let traced = runs.iter().find(|r| !r.least && r.budget_w == tightest);
     if let (Some(path), Some(r)) = (&a.plot, traced) {
         let chart = morphlink_host::gait_chart::GaitChart {
             title: format!("{gait} on {n} hifi links, {tightest} W, {} A", a.limit_a),
@@ -529,9 +580,10 @@ fn alone_run(a: &Args, plant: &Hifi, noise: morphlink::bench::Noise, k: usize) -
     run(
         vec![plant.clone()],
         noise,
-        0.0,
+        Budget::None,
         a.limit_a,
         &cmd,
+        &a.targets_mm[k..=k],
         false,
         a.tune,
     )

@@ -130,6 +130,10 @@ pub struct ModelDrive {
     pla_target_c: f32,
     last_ms: u64,
     applied: Powers,
+    /// Whether the TCA was given the most it may have when its power was last set: its cap,
+    /// or a shared supply's allowance, judged against that tick's own (an allowance moves by
+    /// milliwatts from tick to tick).
+    tca_at_most: bool,
     settled_since_ms: Option<u64>,
     /// Since when bend has waited on the PLA's view alone, ms.
     pla_wait_since_ms: Option<u64>,
@@ -168,6 +172,7 @@ impl ModelDrive {
             pla_target_c,
             last_ms: s.now_ms,
             applied: Powers::default(),
+            tca_at_most: false,
             settled_since_ms: None,
             pla_wait_since_ms: None,
         }
@@ -249,8 +254,7 @@ impl ModelDrive {
         let reached = (tca_c - self.tca_target_c).abs() <= MODEL_SETTLE_BAND_C
             || passive
             || (tca_c < self.tca_target_c
-                && self.applied.tca_w
-                    >= deliverable_w(&HeaterConfig::TCA, tca_most_w(t), t.supply_v) - 1e-3
+                && self.tca_at_most
                 && self.observer.measured_rate_k_per_s(HeatedNode::Tca) * MODEL_STALL_TAU_S
                     < self.tca_target_c - MODEL_SETTLE_BAND_C - tca_c
                 && t.since_start_s > STALL_AFTER_S);
@@ -307,6 +311,8 @@ impl ModelDrive {
             tca_w: deliverable_w(&HeaterConfig::TCA, p.tca_w, t.supply_v),
         }
         .min(t.allow_w);
+        self.tca_at_most = self.applied.tca_w
+            >= deliverable_w(&HeaterConfig::TCA, tca_most_w(t), t.supply_v) - 1e-3;
         p
     }
 }
