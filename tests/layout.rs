@@ -233,3 +233,64 @@ fn the_supervisor_stays_within_its_code_and_constant_budget() {
         tuned.len()
     );
 }
+
+/// Every snake_case name with two underscores or more that ARCHITECTURE.md, a README or a
+/// page of docs/ puts in backticks (a test, a constant's or a function's name, a setting, a
+/// wire field) is a word of the workspace's Rust sources: a test renamed or a constant removed
+/// leaves no doc naming what no longer exists.
+#[test]
+fn every_name_the_docs_give_is_in_the_sources() {
+    let mut files = Vec::new();
+    rust_files(&root(), &mut files);
+    let mut words = std::collections::HashSet::new();
+    for f in &files {
+        let s = fs::read_to_string(f).unwrap();
+        for w in s.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')) {
+            if !w.is_empty() {
+                words.insert(w.to_string());
+            }
+        }
+    }
+    let mut docs = vec![
+        root().join("ARCHITECTURE.md"),
+        root().join("README.md"),
+        root().join("boards/README.md"),
+    ];
+    for e in fs::read_dir(root().join("docs")).unwrap().flatten() {
+        if e.path().extension().is_some_and(|x| x == "md") {
+            docs.push(e.path());
+        }
+    }
+    let is_name = |n: &str| {
+        n.matches('_').count() >= 2
+            && n.starts_with(|c: char| c.is_ascii_lowercase())
+            && n.chars()
+                .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
+    };
+    let mut missing = Vec::new();
+    let mut checked = 0;
+    for d in &docs {
+        let text = fs::read_to_string(d).unwrap();
+        let mut fenced = false;
+        for (n, line) in text.lines().enumerate() {
+            if line.starts_with("```") {
+                fenced = !fenced;
+                continue;
+            }
+            if fenced {
+                continue;
+            }
+            for span in line.split('`').skip(1).step_by(2) {
+                if is_name(span) {
+                    checked += 1;
+                    if !words.contains(span) {
+                        let shown = d.strip_prefix(root()).unwrap().display().to_string();
+                        missing.push(format!("{shown}:{}: `{span}`", n + 1));
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked > 50, "only {checked} names found: is the scan right?");
+    assert!(missing.is_empty(), "named in the docs, not in the sources: {missing:?}");
+}
