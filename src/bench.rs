@@ -374,6 +374,15 @@ impl<P: Plant> Bench<P> {
         self.drift[index.min(2)] = Some((rate_k_per_s, None));
     }
 
+    /// Removes the faults and the drift injected on the sensor of
+    /// [`crate::vocab::Sensor::index`] `index` alone.
+    pub fn clear_sensor(&mut self, index: usize) {
+        let i = index.min(2);
+        self.thermistor_fault[i] = None;
+        self.stuck_counts[i] = None;
+        self.drift[i] = None;
+    }
+
     /// Removes every injected fault.
     pub fn clear_faults(&mut self) {
         self.thermistor_fault = [None; 3];

@@ -29,6 +29,20 @@ pub const MAX_DECIMAL_LEN: usize = 12;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Fixed(pub f32, pub u8);
 
+impl Fixed {
+    /// `x` to two decimals, rounded up (within 0.01 of it): a least value printed so that the
+    /// printed number is itself taken (`RANGE`'s min, a budget's least).
+    pub fn up2(x: f32) -> Fixed {
+        Fixed(x + 0.00499, 2)
+    }
+
+    /// `x` to two decimals, rounded down: a most value printed so that the printed number is
+    /// itself taken (`RANGE`'s max).
+    pub fn down2(x: f32) -> Fixed {
+        Fixed(x - 0.00499, 2)
+    }
+}
+
 impl fmt::Display for Fixed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let Fixed(value, decimals) = *self;

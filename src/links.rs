@@ -333,7 +333,19 @@ impl<const N: usize> Links<N> {
                 q.reserve_w,
                 ohm,
             ) {
-                return;
+                // Nothing runs that could free room (every link idle or stopped): it never
+                // starts, so it is dropped and says why, instead of waiting for good.
+                if (0..self.count()).any(|j| self.ctrl[j].busy()) {
+                    return;
+                }
+                self.queued[k] = None;
+                let mut why = OutLine::new();
+                let needs_w = budget::least_budget_w(q.reserve_w, self.count());
+                wire::never_starts(&mut why, needs_w, self.budget.budget_w, self.budget.limit_a);
+                let mut e = OutLine::new();
+                wire::queued_dropped_event(&mut e, &why);
+                self.push_event(k, &e);
+                continue;
             }
             self.queued[k] = None;
             let mut refusal = OutLine::new();
@@ -410,6 +422,10 @@ impl<const N: usize> Links<N> {
             }
         };
         let n = self.count();
+        if address.is_some() && Self::is_board_line(rest) {
+            out(&protocol::format_error(&wire::ERR_BOARD_ADDRESSED));
+            return None;
+        }
         match address {
             Some(Address::Link(k)) if k >= n => {
                 let mut l = OutLine::new();
@@ -444,6 +460,17 @@ impl<const N: usize> Links<N> {
             }
             None => self.board_or_link(now_ms, None, rest, out),
         }
+    }
+
+    /// Whether `line` is the board's own (GAIT, LINKS, a supply setting), which takes no
+    /// address.
+    fn is_board_line(line: &str) -> bool {
+        wire::parse_links_command(line).is_some()
+            || matches!(
+                protocol::parse_line(line),
+                Ok(Some(Command::Config(ConfigCommand::Set { name, .. })))
+                    if wire::supply_setting(name.as_str()).is_some()
+            )
     }
 
     /// A line for the board (GAIT, LINKS, the supply's settings, an unaddressed ABORT) or
@@ -510,8 +537,65 @@ impl<const N: usize> Links<N> {
                 self.ctrl[k].handle(now_ms, Command::Abort, out);
                 None
             }
+            Ok(Some(cmd @ (Command::Tune | Command::Heat { .. }))) => {
+                let mut l = OutLine::new();
+                if self.fixed_refused(k, &cmd, &mut l) {
+                    out(&l);
+                    None
+                } else {
+                    self.ctrl[k].handle_line(now_ms, line, out).map(|s| (k, s))
+                }
+            }
             _ => self.ctrl[k].handle_line(now_ms, line, out).map(|s| (k, s)),
         }
+    }
+
+    /// Why link `k` cannot take a TUNE or HEAT (`cmd`) now, written in `l`: a morph of its
+    /// own waits in the queue, or, under a budget, the fixed powers it holds do not fit beside
+    /// the running links' reserves (or a queued morph is ahead of it). Such a step holds its
+    /// powers from the first tick, ahead of every morph, so it must fit as a morph's soften
+    /// must: it never takes a running link's reserve. A busy link answers for itself.
+    fn fixed_refused(&self, k: usize, cmd: &Command, l: &mut OutLine) -> bool {
+        if self.queued(k) {
+            *l = protocol::format_error(&wire::ERR_QUEUED);
+            return true;
+        }
+        if !self.budget.binding() || self.ctrl[k].busy() {
+            return false;
+        }
+        let (what, needs) = match *cmd {
+            Command::Heat {
+                heater, power_w, ..
+            } => (
+                "HEAT",
+                match heater {
+                    crate::vocab::Heater::Pla => Powers {
+                        pla_w: power_w,
+                        tca_w: 0.0,
+                    },
+                    crate::vocab::Heater::Tca => Powers {
+                        pla_w: 0.0,
+                        tca_w: power_w,
+                    },
+                },
+            ),
+            _ => (
+                "TUNE",
+                Powers {
+                    pla_w: crate::tune::TUNE_PLA_W,
+                    tca_w: crate::tune::TUNE_TCA_W,
+                },
+            ),
+        };
+        let ahead = (0..self.count()).any(|j| self.queued(j));
+        let ohm = self.ctrl[k].heater_ohm();
+        let demands = self.demands();
+        if !ahead && budget::admits(&self.budget, self.supply_v(), &demands, needs, ohm) {
+            return false;
+        }
+        let free_w = self.budget.budget_w - self.held_w();
+        wire::fixed_over_budget(l, what, needs.pla_w + needs.tca_w, free_w);
+        true
     }
 
     /// Every link's heaters off and every queued morph dropped (an unaddressed ABORT, also
@@ -745,6 +829,12 @@ impl<const N: usize> Links<N> {
             Err(SupplyRefusal::UnderReserves(held_w)) => {
                 wire::budget_under_reserves(&mut l, value, held_w)
             }
+            Err(SupplyRefusal::UnderQueued(needs_w, k)) => {
+                wire::budget_under_queued(&mut l, value, needs_w, k)
+            }
+            Err(SupplyRefusal::UnderBudget(most_w)) => {
+                wire::limit_under_budget(&mut l, value, most_w, self.budget.budget_w)
+            }
         }
         out(&l);
     }
@@ -832,6 +922,15 @@ impl<const N: usize> Links<N> {
                 if value < held {
                     return Err(SupplyRefusal::UnderReserves(held));
                 }
+                // A queued morph must still fit once the links ahead of it are done.
+                let n = self.count();
+                if let Some((k, needs_w)) = (0..n)
+                    .filter_map(|k| self.queued[k].map(|q| (k, q)))
+                    .map(|(k, q)| (k, budget::least_budget_w(q.reserve_w, n)))
+                    .find(|&(_, w)| value < w)
+                {
+                    return Err(SupplyRefusal::UnderQueued(needs_w, k));
+                }
                 let most_w = self.budget.limit_a * v;
                 if self.budget.limit_a < budget::LIMIT_MAX_A && v.is_finite() && value > most_w {
                     return Err(SupplyRefusal::OverSupply(most_w));
@@ -852,16 +951,30 @@ impl<const N: usize> Links<N> {
                 } else {
                     budget::NOMINAL_SUPPLY_V
                 };
+                // At each heater's resistance read or its nominal one, the lower: a heater read
+                // warm (the TCA's resistance rises with its temperature) draws more once cold.
+                let nominal = [
+                    HeaterConfig::PLA.resistance_ohm,
+                    HeaterConfig::TCA.resistance_ohm,
+                ];
                 let least = self
                     .ctrl
                     .iter()
-                    .flat_map(|c| c.heater_ohm())
+                    .flat_map(|c| {
+                        let ohm = c.heater_ohm();
+                        [ohm[0].min(nominal[0]), ohm[1].min(nominal[1])]
+                    })
                     .map(|ohm| v / ohm)
                     .fold(0.0, f32::max);
                 if value < least {
                     return Err(SupplyRefusal::Range(budget::BudgetError::TooSmall {
                         least,
                     }));
+                }
+                // The budget must stay within what the lower limit gives.
+                let most_w = value * v;
+                if self.budget.budget_w < budget::BUDGET_MAX_W && self.budget.budget_w > most_w {
+                    return Err(SupplyRefusal::UnderBudget(most_w));
                 }
             }
         }
@@ -874,4 +987,8 @@ enum SupplyRefusal {
     Range(budget::BudgetError),
     OverSupply(f32),
     UnderReserves(f32),
+    /// A budget under what a queued morph needs (W, its link).
+    UnderQueued(f32, usize),
+    /// A limit that gives less than the budget (W at the measured supply).
+    UnderBudget(f32),
 }

@@ -291,6 +291,12 @@ fn every_name_the_docs_give_is_in_the_sources() {
             }
         }
     }
-    assert!(checked > 50, "only {checked} names found: is the scan right?");
-    assert!(missing.is_empty(), "named in the docs, not in the sources: {missing:?}");
+    assert!(
+        checked > 50,
+        "only {checked} names found: is the scan right?"
+    );
+    assert!(
+        missing.is_empty(),
+        "named in the docs, not in the sources: {missing:?}"
+    );
 }

@@ -303,6 +303,15 @@ fn a_shared_fault_stops_every_link_and_each_says_why() {
     assert!(say(&mut rig, "@1 SIM SUPPLY 7")[0].starts_with("ok"));
     let events = run_until_idle(&mut rig, 60, |_| {});
     every_link_stopped_by(&rig, &events, "supply-out-of-range");
+    // The one ambient bead opens, injected through any link: every link reads it.
+    let mut rig = four(10.0);
+    assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
+    for _ in 0..20 {
+        rig.tick();
+    }
+    assert!(say(&mut rig, "@3 SIM FAULT thermistor-open amb")[0].starts_with("ok"));
+    let events = run_until_idle(&mut rig, 60, |_| {});
+    every_link_stopped_by(&rig, &events, "thermistor-open");
 }
 
 /// Holds that every one of four links raised `code`'s alarm and stands faulted, heaters off
@@ -365,6 +374,40 @@ fn bad_input_is_refused_with_a_clear_error_and_changes_nothing() {
         ),
         ("@* SIM STATE", "error: bad-argument"),
         ("LINKS 2", "error: bad-argument"),
+        // One address, plain digits: no sign, no leading zero, never a second address.
+        ("@01 STATUS", "error: bad-argument A link address is"),
+        ("@+2 STATUS", "error: bad-argument A link address is"),
+        (
+            "@18446744073709551617 STATUS",
+            "error: bad-argument A link address is",
+        ),
+        ("@2 @3 RANGE", "error: bad-argument One address per line"),
+        // The board's own commands take no address.
+        (
+            "@2 GAIT 40 40 40 40",
+            "error: bad-argument GAIT, LINKS and the supply's",
+        ),
+        (
+            "@* LINKS",
+            "error: bad-argument GAIT, LINKS and the supply's",
+        ),
+        (
+            "@2 CONFIG SET supply_budget_w 8",
+            "error: bad-argument GAIT, LINKS",
+        ),
+        // A GAIT's mode comes last, once.
+        (
+            "GAIT 34 38 paper 42 46",
+            "error: bad-argument GAIT takes one radius",
+        ),
+        (
+            "GAIT paper 34 38 42 46",
+            "error: bad-argument GAIT takes one radius",
+        ),
+        (
+            "GAIT 34 38 42 46 paper closed",
+            "error: bad-argument GAIT takes one radius",
+        ),
     ] {
         let r = say(&mut rig, line);
         assert_eq!(r.len(), 1, "{line}: {r:?}");
@@ -412,6 +455,118 @@ fn bad_input_is_refused_with_a_clear_error_and_changes_nothing() {
     assert!(r[0].starts_with("error: fault-latched"), "{r:?}");
     assert!(r[0].ends_with("(link 3; no link was started)"), "{r:?}");
     assert!(rig.links.idle());
+}
+
+/// Every least or most value a refusal prints is itself taken: the budget's and the limit's
+/// least, the range's ends.
+#[test]
+fn the_least_a_refusal_names_is_taken() {
+    let mut rig = four(3.0);
+    let value_after = |r: &str, key: &str| -> String {
+        let at = r.find(key).unwrap_or_else(|| panic!("{key} in {r}")) + key.len();
+        r[at..]
+            .split([' ', '.'])
+            .take(2)
+            .collect::<Vec<_>>()
+            .join(".")
+    };
+    for (name, unit) in [("supply_budget_w", "W"), ("supply_limit_a", "A")] {
+        let r = say(&mut rig, &format!("CONFIG SET {name} 0.5"));
+        let least = value_after(&r[0], "the least that works is ");
+        let ok = say(&mut rig, &format!("CONFIG SET {name} {least}"));
+        assert!(ok[0].starts_with("ok"), "{r:?} then {least} {unit}: {ok:?}");
+    }
+    say(&mut rig, "CONFIG SET supply_limit_a 20");
+    say(&mut rig, "CONFIG SET supply_budget_w 100");
+    let r = say(&mut rig, "RANGE");
+    let (min, max) = (value_after(&r[0], "min_mm="), value_after(&r[0], "max_mm="));
+    for radius in [min, max] {
+        let line = format!("MORPH {radius}");
+        assert_eq!(say(&mut rig, &line), ["ok"], "{r:?}: {line}");
+        assert_eq!(say(&mut rig, "ABORT"), ["ok"]);
+        for _ in 0..10 {
+            rig.tick();
+        }
+        say(&mut rig, "RESET");
+    }
+}
+
+/// A TUNE or HEAT holds fixed powers from its first tick, ahead of every morph: under a
+/// budget it starts only where those fit beside the running links' reserves, so it never
+/// starves a running morph; and a link whose MORPH is queued refuses both (the queue would
+/// drop its morph).
+#[test]
+fn a_tune_or_heat_never_takes_a_running_morphs_reserve() {
+    let mut rig = four(3.0);
+    say(&mut rig, "CONFIG SET supply_limit_a 3");
+    say(&mut rig, "CONFIG SET supply_budget_w 4.5");
+    assert_eq!(say(&mut rig, "@1 MORPH 34"), ["ok"]);
+    for _ in 0..3 {
+        rig.tick();
+    }
+    for line in ["@2 HEAT pla 1 60", "@3 TUNE"] {
+        let r = say(&mut rig, line);
+        assert!(r[0].starts_with("error: busy"), "{line}: {r:?}");
+        assert!(r[0].contains("W free beside the running"), "{line}: {r:?}");
+    }
+    // A small HEAT that fits beside the reserve is taken.
+    assert!(say(&mut rig, "@4 HEAT tca 0.1 5")[0].starts_with("ok"));
+    assert_eq!(say(&mut rig, "@2 MORPH 46"), ["ok"]);
+    assert!(rig.links.queued(1));
+    for line in ["@2 TUNE", "@2 HEAT pla 0.2 5"] {
+        let r = say(&mut rig, line);
+        assert!(
+            r[0].starts_with("error: busy this link's last MORPH waits"),
+            "{line}: {r:?}"
+        );
+    }
+    let events = run_until_idle(&mut rig, 900, |_| {});
+    assert!(!events.iter().any(|e| e.contains("alarm:")), "{events:?}");
+    for k in [1, 2] {
+        assert!(
+            events
+                .iter()
+                .any(|e| e.starts_with(&format!("@{k} event: done"))),
+            "link {k}: {events:?}"
+        );
+    }
+}
+
+/// A queued morph never waits for good: a budget lowered under what it needs is refused, and
+/// one that cannot start with every link idle (here a current limit taken while the TCA ran
+/// hot, which a cold TCA passes) is dropped with the reason.
+#[test]
+fn a_queued_morph_never_waits_for_good() {
+    let mut rig = four(3.0);
+    say(&mut rig, "CONFIG SET supply_limit_a 3");
+    say(&mut rig, "CONFIG SET supply_budget_w 4.5");
+    assert_eq!(say(&mut rig, "@1 MORPH 46"), ["ok"]);
+    assert_eq!(say(&mut rig, "@2 MORPH 34"), ["ok"]);
+    assert!(rig.links.queued(1));
+    let r = say(&mut rig, "CONFIG SET supply_budget_w 3");
+    assert!(
+        r[0].starts_with(
+            "error: busy supply_budget_w 3.00 W is less than the morph queued on link 2"
+        ),
+        "{r:?}"
+    );
+    assert_eq!(rig.links.budget().budget_w, 4.5);
+    let events = run_until_idle(&mut rig, 900, |_| {});
+    assert!(
+        events.iter().any(|e| e.starts_with("@2 event: done")),
+        "{events:?}"
+    );
+
+    // A limit lowered under a budget it cannot give is refused.
+    let mut rig = four(3.0);
+    say(&mut rig, "CONFIG SET supply_limit_a 3");
+    say(&mut rig, "CONFIG SET supply_budget_w 30");
+    let r = say(&mut rig, "CONFIG SET supply_limit_a 2");
+    assert!(
+        r[0].starts_with("error: out-of-range supply_limit_a 2.00 A gives"),
+        "{r:?}"
+    );
+    assert_eq!(rig.links.budget().limit_a, 3.0);
 }
 
 #[test]

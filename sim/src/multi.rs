@@ -14,7 +14,8 @@ use morphlink::bench::{Bench, Noise, SIM_WAIT_MAX_S};
 use morphlink::budget::MAX_LINKS;
 use morphlink::controller::{Config, Inputs, TICK_MS};
 use morphlink::links::{LinkOutputs, Links};
-use morphlink::protocol::{reply, OutLine, SimCommand};
+use morphlink::protocol::{reply, OutLine, SimCommand, SimFault};
+use morphlink::vocab::Sensor;
 use morphlink_plant::{Duties, Plant, Setting};
 
 /// Most heater windows of one period.
@@ -283,6 +284,13 @@ impl<P: Plant> MultiRig<P> {
     }
 
     fn sim_command(&mut self, k: usize, cmd: SimCommand, out: &mut impl FnMut(&str)) {
+        /// The fault a `SIM FAULT` injects.
+        fn f_of(cmd: SimCommand) -> Option<SimFault> {
+            match cmd {
+                SimCommand::Fault(f, _) => Some(f),
+                _ => None,
+            }
+        }
         match cmd {
             SimCommand::Wait(seconds) => self.wait(seconds, out),
             SimCommand::Supply(v) => {
@@ -297,6 +305,33 @@ impl<P: Plant> MultiRig<P> {
                     reply::sim_supply(&mut l, v);
                 }
                 out(&l);
+            }
+            // The ambient bead is the board's, one for every link (docs/multilink.md): a
+            // fault or drift on it reaches every link's frame, and a CLEAR on any link clears it.
+            SimCommand::Fault(_, Sensor::Amb) | SimCommand::Drift(Sensor::Amb, _)
+                if !matches!(
+                    f_of(cmd),
+                    Some(SimFault::HeaterOpen | SimFault::HeaterStuck)
+                ) =>
+            {
+                let mut reply = OutLine::new();
+                for (j, b) in self.benches.iter_mut().enumerate() {
+                    b.command(cmd, &mut |l: &str| {
+                        if j == k {
+                            reply.clear();
+                            let _ = reply.push_str(l);
+                        }
+                    });
+                }
+                out(&reply);
+            }
+            SimCommand::Clear => {
+                for (j, b) in self.benches.iter_mut().enumerate() {
+                    if j != k {
+                        b.clear_sensor(Sensor::Amb.index());
+                    }
+                }
+                self.benches[k].command(cmd, &mut |l: &str| out(l));
             }
             _ => {
                 let mut reply = OutLine::new();

@@ -86,19 +86,26 @@ pub fn split_address(line: &str) -> Result<(Option<Address>, &str), ProtoError> 
     let (word, rest) = rest.split_once([' ', '\t']).unwrap_or((rest, ""));
     const BAD: ProtoError =
         bad("A link address is @<n> (from @1) or @* before a command, e.g. @2 MORPH 38.");
+    // Plain decimal digits, no sign and no leading zero, at most three (`@01`, `@+2` and a
+    // number past any `usize` are the same mistake on every platform).
+    let digits = !word.is_empty()
+        && word.len() <= 3
+        && word.bytes().all(|b| b.is_ascii_digit())
+        && !word.starts_with('0');
     let address = if word == "*" {
         Address::All
+    } else if digits {
+        Address::Link(word.parse::<usize>().map_err(|_| BAD)? - 1)
     } else {
-        let n: usize = word.parse().map_err(|_| BAD)?;
-        if n == 0 {
-            return Err(BAD);
-        }
-        Address::Link(n - 1)
+        return Err(BAD);
     };
     if rest.trim().is_empty() {
         return Err(bad(
             "A link address needs a command after it, e.g. @2 STATUS.",
         ));
+    }
+    if rest.trim_start().starts_with('@') {
+        return Err(bad("One address per line, e.g. @2 STATUS."));
     }
     Ok((Some(address), rest))
 }
@@ -137,16 +144,20 @@ pub fn parse_links_command(line: &str) -> Option<Result<LinksCommand, ProtoError
     }
     let mut radii_mm = [0.0; MAX_LINKS];
     let mut count = 0;
-    let mut mode = Mode::Auto;
+    let mut mode = None;
+    const FORM: ProtoError =
+        bad("GAIT takes one radius in mm per link, then an optional mode, e.g. GAIT 38 40.");
     for w in words {
+        // The mode comes last, once: a word after it is a mistake, not a second choice.
+        if mode.is_some() {
+            return Some(Err(FORM));
+        }
         if let Some(m) = MODES.iter().find(|m| m.as_str().eq_ignore_ascii_case(w)) {
-            mode = *m;
+            mode = Some(*m);
             continue;
         }
         let Some(r) = crate::fixed::parse_decimal(w).filter(|r| r.is_finite() && *r > 0.0) else {
-            return Some(Err(bad(
-                "GAIT takes one radius in mm per link, then an optional mode, e.g. GAIT 38 40.",
-            )));
+            return Some(Err(FORM));
         };
         if count == MAX_LINKS {
             return Some(Err(bad("GAIT takes at most one radius per link.")));
@@ -162,7 +173,7 @@ pub fn parse_links_command(line: &str) -> Option<Result<LinksCommand, ProtoError
     Some(Ok(LinksCommand::Gait {
         radii_mm,
         count,
-        mode,
+        mode: mode.unwrap_or(Mode::Auto),
     }))
 }
 
@@ -211,6 +222,10 @@ pub const ERR_SAVE_BUSY: ProtoError = ProtoError {
     text: "SAVE waits until every link is idle (a flash write stalls the CPU); ABORT or wait",
 };
 
+/// GAIT, LINKS or a supply setting sent with an address: they are the board's.
+pub const ERR_BOARD_ADDRESSED: ProtoError =
+    bad("GAIT, LINKS and the supply's settings are the board's: send them without an address.");
+
 /// `<prefix><line>`: a link's line as a board of several links sends it, `@<n> ` first.
 pub fn addressed(l: &mut OutLine, link: usize, line: &str) {
     let _ = write!(l, "@{} {line}", link + 1);
@@ -257,7 +272,7 @@ pub fn morph_over_budget(l: &mut OutLine, needs_w: f32, budget_w: f32) {
         ErrorCode::OutOfRange,
         format_args!(
             "this morph's soften needs {} W of the supply; supply_budget_w is {} W ({LINKS_DOC})",
-            Fixed(needs_w, 2),
+            Fixed::up2(needs_w),
             Fixed(budget_w, 2)
         ),
     );
@@ -342,8 +357,8 @@ pub fn supply_refused(l: &mut OutLine, s: SupplySetting, value: f32, why: Budget
             ErrorCode::OutOfRange,
             format_args!(
                 "{name} takes {}..{} {unit} ({LINKS_DOC})",
-                Fixed(min, 2),
-                Fixed(max, 2)
+                Fixed::up2(min),
+                Fixed::down2(max)
             ),
         ),
         BudgetError::TooSmall { least } => error(
@@ -352,7 +367,7 @@ pub fn supply_refused(l: &mut OutLine, s: SupplySetting, value: f32, why: Budget
             format_args!(
                 "{name} {} {unit} is too small: the least that works is {} {unit} ({LINKS_DOC})",
                 Fixed(value, 2),
-                Fixed(least, 2)
+                Fixed::up2(least)
             ),
         ),
     }
@@ -367,7 +382,7 @@ pub fn budget_over_supply(l: &mut OutLine, value: f32, most_w: f32) {
             "supply_budget_w {} W is more than the supply gives, {} W at supply_limit_a and the \
              measured supply ({LINKS_DOC})",
             Fixed(value, 2),
-            Fixed(most_w, 2)
+            Fixed::down2(most_w)
         ),
     );
 }
@@ -382,6 +397,68 @@ pub fn budget_under_reserves(l: &mut OutLine, value: f32, held_w: f32) {
              they are done ({LINKS_DOC})",
             Fixed(value, 2),
             Fixed(held_w, 2)
+        ),
+    );
+}
+
+/// A budget lowered under what a queued morph needs to start (`link`, 0-based).
+pub fn budget_under_queued(l: &mut OutLine, value: f32, needs_w: f32, link: usize) {
+    error(
+        l,
+        ErrorCode::Busy,
+        format_args!(
+            "supply_budget_w {} W is less than the morph queued on link {} needs, {} W; ABORT it \
+             first ({LINKS_DOC})",
+            Fixed(value, 2),
+            link + 1,
+            Fixed::up2(needs_w)
+        ),
+    );
+}
+
+/// A current limit lowered under what the budget draws at the measured supply.
+pub fn limit_under_budget(l: &mut OutLine, value: f32, most_w: f32, budget_w: f32) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!(
+            "supply_limit_a {} A gives {} W at the measured supply, under supply_budget_w {} W; \
+             lower supply_budget_w first ({LINKS_DOC})",
+            Fixed(value, 2),
+            Fixed::down2(most_w),
+            Fixed(budget_w, 2)
+        ),
+    );
+}
+
+/// A TUNE or HEAT (`what`) whose fixed powers, `needs_w`, do not fit beside the running and
+/// queued morphs: it would take their reserves.
+pub fn fixed_over_budget(l: &mut OutLine, what: &str, needs_w: f32, free_w: f32) {
+    error(
+        l,
+        ErrorCode::Busy,
+        format_args!(
+            "{what} holds {} W of the supply; supply_budget_w has {} W free beside the running \
+             and queued morphs: send it when they are done ({LINKS_DOC})",
+            Fixed::up2(needs_w),
+            Fixed::down2(free_w.max(0.0))
+        ),
+    );
+}
+
+/// Why a queued morph is dropped when the links ahead of it are done and it still cannot
+/// start: `error: out-of-range the supply cannot start this morph with every link idle: its
+/// soften needs <W> W under supply_budget_w=<W> and supply_limit_a=<A>`.
+pub fn never_starts(l: &mut OutLine, needs_w: f32, budget_w: f32, limit_a: f32) {
+    error(
+        l,
+        ErrorCode::OutOfRange,
+        format_args!(
+            "the supply cannot start this morph with every link idle: its soften needs {} W \
+             under supply_budget_w={} and supply_limit_a={} ({LINKS_DOC})",
+            Fixed::up2(needs_w),
+            Fixed(budget_w, 2),
+            Fixed(limit_a, 2)
         ),
     );
 }

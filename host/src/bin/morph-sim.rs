@@ -276,8 +276,18 @@ fn main() {
         eprintln!("morph-sim: --flash-file keeps one link's settings; it needs --links 1");
         std::process::exit(2);
     }
-    if !(cli.supply_limit_a > 0.0 && cli.supply_ohm >= 0.0 && cli.supply_ohm < 10.0) {
-        eprintln!("morph-sim: --supply-limit-a must be above 0 A and --supply-ohm 0..10 ohm");
+    if !(cli.supply_limit_a > 0.0
+        && cli.supply_limit_a.is_finite()
+        && cli.supply_ohm >= 0.0
+        && cli.supply_ohm < 10.0)
+    {
+        eprintln!(
+            "morph-sim: --supply-limit-a must be a number above 0 A and --supply-ohm 0..10 ohm"
+        );
+        std::process::exit(2);
+    }
+    if !(cli.max_time_s > 0.0 && cli.max_time_s.is_finite()) {
+        eprintln!("morph-sim: --max-time-s must be a number of seconds above 0");
         std::process::exit(2);
     }
     if let Some(path) = &cli.flash_file {

@@ -8,7 +8,11 @@ use super::*;
 pub fn range(l: &mut OutLine, min_mm: f32, max_mm: f32) {
     ok_with(
         l,
-        format_args!("min_mm={} max_mm={}", Fixed(min_mm, 2), Fixed(max_mm, 2)),
+        format_args!(
+            "min_mm={} max_mm={}",
+            Fixed::up2(min_mm),
+            Fixed::down2(max_mm)
+        ),
     );
 }
 
@@ -165,7 +169,7 @@ pub fn radius_out_of_range(l: &mut OutLine, min_mm: f32, max_mm: f32) {
     error(
         l,
         ErrorCode::OutOfRange,
-        format_args!("reachable={}..{}", Fixed(min_mm, 2), Fixed(max_mm, 2)),
+        format_args!("reachable={}..{}", Fixed::up2(min_mm), Fixed::down2(max_mm)),
     );
 }
 
