@@ -557,6 +557,45 @@ fn a_queued_morph_never_waits_for_good() {
         "{events:?}"
     );
 
+    // A limit taken while a low-resistance TCA ran hot (its resistance read higher than its
+    // nominal one and its cold one): once cold that TCA draws more than the limit, so a morph
+    // queued on it never starts even on an idle board; it is dropped and says why.
+    let low = LinkSetup {
+        heater_ohm: [
+            LinkSetup::NOMINAL.heater_ohm[0],
+            0.9 * LinkSetup::NOMINAL.heater_ohm[1],
+        ],
+        ..LinkSetup::NOMINAL
+    };
+    let plants = (0..4).map(|k| if k == 1 { low } else { LinkSetup::NOMINAL }.lumped());
+    let mut rig = on_supply(plants, LinkSetup::NOMINAL.noise(), 3.0);
+    say(&mut rig, "CONFIG SET supply_limit_a 3");
+    assert_eq!(say(&mut rig, "@2 MORPH 34"), ["ok"]);
+    for _ in 0..200 {
+        rig.tick();
+    }
+    let r = say(&mut rig, "CONFIG SET supply_limit_a 0.5");
+    let least = r[0]
+        .split("the least that works is ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .unwrap_or_else(|| panic!("{r:?}"))
+        .to_string();
+    assert!(say(&mut rig, &format!("CONFIG SET supply_limit_a {least}"))[0].starts_with("ok"));
+    run_until_idle(&mut rig, 900, |_| {});
+    for _ in 0..1200 {
+        rig.tick();
+    }
+    assert_eq!(say(&mut rig, "@2 MORPH 40"), ["ok"]);
+    let events = run_until_idle(&mut rig, 10, |_| {});
+    assert!(
+        events.iter().any(|e| e.starts_with(
+            "@2 event: queued-morph dropped (error: out-of-range the supply cannot start this morph with every link idle"
+        )),
+        "{events:?}"
+    );
+    assert!(rig.links.idle());
+
     // A limit lowered under a budget it cannot give is refused.
     let mut rig = four(3.0);
     say(&mut rig, "CONFIG SET supply_limit_a 3");
