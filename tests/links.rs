@@ -294,24 +294,21 @@ fn a_stray_the_budget_cannot_hold_stops_every_link_and_each_says_why() {
 
 #[test]
 fn a_shared_fault_stops_every_link_and_each_says_why() {
-    let mut rig = four(10.0);
-    assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
-    for _ in 0..20 {
-        rig.tick();
+    for (sim, code) in [
+        // The shared supply falls below what the heaters are rated for.
+        ("@1 SIM SUPPLY 7", "supply-out-of-range"),
+        // The one ambient bead opens, injected through any link: every link reads it.
+        ("@3 SIM FAULT thermistor-open amb", "thermistor-open"),
+    ] {
+        let mut rig = four(10.0);
+        assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
+        for _ in 0..20 {
+            rig.tick();
+        }
+        assert!(say(&mut rig, sim)[0].starts_with("ok"), "{sim}");
+        let events = run_until_idle(&mut rig, 60, |_| {});
+        every_link_stopped_by(&rig, &events, code);
     }
-    // The shared supply falls below what the heaters are rated for.
-    assert!(say(&mut rig, "@1 SIM SUPPLY 7")[0].starts_with("ok"));
-    let events = run_until_idle(&mut rig, 60, |_| {});
-    every_link_stopped_by(&rig, &events, "supply-out-of-range");
-    // The one ambient bead opens, injected through any link: every link reads it.
-    let mut rig = four(10.0);
-    assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
-    for _ in 0..20 {
-        rig.tick();
-    }
-    assert!(say(&mut rig, "@3 SIM FAULT thermistor-open amb")[0].starts_with("ok"));
-    let events = run_until_idle(&mut rig, 60, |_| {});
-    every_link_stopped_by(&rig, &events, "thermistor-open");
 }
 
 /// Holds that every one of four links raised `code`'s alarm and stands faulted, heaters off
