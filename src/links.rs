@@ -51,6 +51,10 @@ pub struct Links<const N: usize> {
     since: [u32; N],
     was_busy: [bool; N],
     queued: [Option<Queued>; N],
+    /// The PLA power each link's running soften was admitted with, W: what brings its rod
+    /// soft within half its soften timeout ([`Links::in_time_pla_w`]); its reserve in rest
+    /// and soften is never less.
+    soften_pla_w: [f32; N],
     next_order: u32,
     shares: [LinkShare; N],
     events: Deque<OutLine, LINK_EVENTS>,
@@ -82,6 +86,7 @@ impl<const N: usize> Links<N> {
             since: [0; N],
             was_busy: [false; N],
             queued: [None; N],
+            soften_pla_w: [0.0; N],
             next_order: 1,
             shares: [[Share::default(); 2]; N],
             events: Deque::new(),
@@ -161,11 +166,15 @@ impl<const N: usize> Links<N> {
             Doing::Morph(Phase::Soften | Phase::Rest) => Class::Softening,
             Doing::Morph(_) | Doing::Idle => Class::Idle,
         };
+        let mut reserve_w = c.reserve_w();
+        if class == Class::Softening {
+            reserve_w.pla_w = reserve_w.pla_w.max(self.soften_pla_w[k]);
+        }
         Demand {
             class,
             since: self.since[k],
             wanted_w: c.wanted(),
-            reserve_w: c.reserve_w(),
+            reserve_w,
             ohm: c.heater_ohm(),
             stray_a: self.stray_a[k],
         }
@@ -236,6 +245,18 @@ impl<const N: usize> Links<N> {
             });
             self.ctrl[k].step(now_ms, &inputs[k]);
             out[k] = self.outputs(k);
+        }
+        // A link that faults drops the morph it has queued at once, with the reason: a morph
+        // left queued would start by itself after a RESET, which the user did not ask.
+        for k in 0..n {
+            if self.queued[k].is_some() && self.ctrl[k].fault().is_some() {
+                self.queued[k] = None;
+                let mut why = OutLine::new();
+                self.ctrl[k].morph_refusal(&mut why);
+                let mut e = OutLine::new();
+                wire::queued_dropped_event(&mut e, &why);
+                self.push_event(k, &e);
+            }
         }
     }
 
@@ -348,6 +369,7 @@ impl<const N: usize> Links<N> {
                 continue;
             }
             self.queued[k] = None;
+            self.soften_pla_w[k] = q.reserve_w.pla_w;
             let mut refusal = OutLine::new();
             let cmd = Command::Morph {
                 radius_mm: q.radius_mm,
@@ -626,6 +648,70 @@ impl<const N: usize> Links<N> {
         self.ctrl[k].finish_save(result, &mut |l: &str| out(l));
     }
 
+    /// What a morph to `radius_mm` on link `k` reserves in soften, W: the controller's
+    /// ([`Controller::soften_reserve_w`]), its PLA's share at least what softens the rod in
+    /// time ([`Links::in_time_pla_w`]). `None` for a radius outside the table.
+    pub fn soften_reserve_w(&self, k: usize, radius_mm: f32) -> Option<Powers> {
+        let mut r = self.ctrl[k].soften_reserve_w(radius_mm)?;
+        r.pla_w = r.pla_w.max(self.in_time_pla_w(k));
+        Some(r)
+    }
+
+    /// The least PLA power that brings link `k`'s rod soft within half its soften timeout, W,
+    /// on its thermal model (the calibration's convection, from its PLA's reading, the rest of
+    /// the link at ambient; at most the PLA's cap): the power a soften under a budget is
+    /// admitted with and never cut below. The controller's own reserve, 1.3 times what holds
+    /// the rod soft, softens a rod in water within a time constant of some 20 s; in still air
+    /// that constant is minutes, and a soften held to it met its timeout (docs/multilink.md).
+    /// The half leaves room for the model's error and the bead's lag.
+    pub fn in_time_pla_w(&self, k: usize) -> f32 {
+        use crate::lumped::{node, Network};
+        let c = &self.ctrl[k];
+        let m = c.measurements();
+        let morph = &c.settings().morph;
+        let amb_c = if m.t_amb_c.is_finite() {
+            m.t_amb_c
+        } else {
+            20.0
+        };
+        let start_c = if m.t_pla_c.is_finite() {
+            m.t_pla_c.max(amb_c)
+        } else {
+            amb_c
+        };
+        let window_s = 0.5 * morph.soften_timeout_s;
+        let h = c.calibration().model_convection_w_m2k();
+        let cap_w = HeaterConfig::PLA.max_power_w;
+        let softens = |pla_w: f32| {
+            let mut net = Network::new(h, amb_c);
+            net.temp_c[node::PLA] = start_c;
+            let dt_s = net.max_stable_step_s().min(0.1);
+            let mut t_s = 0.0;
+            while t_s < window_s {
+                net.advance(dt_s, 0.0, pla_w, amb_c);
+                if net.temp_c[node::PLA] >= morph.soft_threshold_c {
+                    return true;
+                }
+                t_s += dt_s;
+            }
+            false
+        };
+        if !softens(cap_w) {
+            return cap_w;
+        }
+        // Bisection to 1/256 of the cap.
+        let (mut lo, mut hi) = (0.0, cap_w);
+        for _ in 0..8 {
+            let mid = 0.5 * (lo + hi);
+            if softens(mid) {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        hi
+    }
+
     /// Whether link `k` would refuse a MORPH on its own (busy, faulted, no reading, radius):
     /// it then answers it itself.
     fn refuses_morph(&self, k: usize, radius_mm: f32) -> bool {
@@ -643,7 +729,7 @@ impl<const N: usize> Links<N> {
             *l = protocol::format_error(&wire::ERR_QUEUED);
             return true;
         }
-        if let Some(r) = self.ctrl[k].soften_reserve_w(radius_mm) {
+        if let Some(r) = self.soften_reserve_w(k, radius_mm) {
             let needs_w = budget::least_budget_w(r, self.count());
             if self.budget.binding() && needs_w > self.budget.budget_w {
                 wire::morph_over_budget(l, needs_w, self.budget.budget_w);
@@ -672,7 +758,7 @@ impl<const N: usize> Links<N> {
             self.ctrl[k].handle(now_ms, cmd, out);
             return;
         }
-        let reserve_w = self.ctrl[k].soften_reserve_w(radius_mm).unwrap_or_default();
+        let reserve_w = self.soften_reserve_w(k, radius_mm).unwrap_or_default();
         let ahead = (0..self.count()).any(|j| self.queued(j));
         let ohm = self.ctrl[k].heater_ohm();
         let fits = budget::admits(
@@ -683,6 +769,7 @@ impl<const N: usize> Links<N> {
             ohm,
         );
         if !self.budget.binding() || (!ahead && fits) {
+            self.soften_pla_w[k] = reserve_w.pla_w;
             self.ctrl[k].handle(now_ms, cmd, out);
             self.note_started(k);
             return;
@@ -890,12 +977,11 @@ impl<const N: usize> Links<N> {
     /// The least budget that lets every link soften its cheapest morph, W.
     pub fn least_budget_w(&self) -> f32 {
         let (min_mm, max_mm) = crate::table::range_mm();
-        self.ctrl
-            .iter()
-            .map(|c| {
+        (0..self.count())
+            .map(|k| {
                 [min_mm, max_mm]
                     .iter()
-                    .filter_map(|&r| c.soften_reserve_w(r))
+                    .filter_map(|&r| self.soften_reserve_w(k, r))
                     .map(|r| budget::least_budget_w(r, self.count()))
                     .fold(f32::INFINITY, f32::min)
             })

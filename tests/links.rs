@@ -529,6 +529,41 @@ fn a_tune_or_heat_never_takes_a_running_morphs_reserve() {
     }
 }
 
+/// A link that faults while its morph waits in the queue drops that morph at once and says
+/// why: after the user clears the fault and sends RESET, nothing starts by itself.
+#[test]
+fn a_fault_drops_its_links_queued_morph_at_once() {
+    let mut rig = four(3.0);
+    say(&mut rig, "CONFIG SET supply_limit_a 3");
+    say(&mut rig, "CONFIG SET supply_budget_w 5");
+    assert_eq!(say(&mut rig, "@1 MORPH 34"), ["ok"]);
+    assert_eq!(say(&mut rig, "@2 MORPH 46"), ["ok"]);
+    assert!(rig.links.queued(1));
+    assert!(say(&mut rig, "@2 SIM FAULT heater-open tca")[0].starts_with("ok"));
+    let mut events = Vec::new();
+    for _ in 0..20 {
+        rig.tick();
+        rig.drain_events(&mut |l: &str| events.push(l.to_string()));
+    }
+    assert!(!rig.links.queued(1), "{events:?}");
+    assert!(
+        events
+            .iter()
+            .any(|e| e.starts_with("@2 event: queued-morph dropped (error: fault-latched")),
+        "{events:?}"
+    );
+    assert!(say(&mut rig, "@2 SIM CLEAR")[0].starts_with("ok"));
+    for _ in 0..20 {
+        rig.tick();
+    }
+    say(&mut rig, "@2 RESET");
+    let events = run_until_idle(&mut rig, 900, |_| {});
+    assert!(
+        !events.iter().any(|e| e.starts_with("@2 event: phase")),
+        "link 2 started by itself: {events:?}"
+    );
+}
+
 /// A queued morph never waits for good: a budget lowered under what it needs is refused, and
 /// one that cannot start with every link idle (here a current limit taken while the TCA ran
 /// hot, which a cold TCA passes) is dropped with the reason.
@@ -701,12 +736,44 @@ fn four_hifi_links_under_one_softens_worth_finish() {
     let least_w = [34.0, 38.0, 42.0, 46.0]
         .iter()
         .enumerate()
-        .filter_map(|(k, &r)| rig.links.link(k).soften_reserve_w(r))
+        .filter_map(|(k, &r)| rig.links.soften_reserve_w(k, r))
         .map(|r| morphlink::budget::least_budget_w(r, 4))
         .fold(0.0f32, f32::max);
     let budget_w = (least_w * 100.0).ceil() / 100.0;
     let max_w = gait_finishes(&mut rig, 3.0, budget_w as f64);
     assert!(max_w <= budget_w as f64 + 1e-3, "{max_w}");
+}
+
+/// In still air a rod held at 1.3 times what keeps it soft takes minutes to soften: a soften
+/// under a budget is admitted with, and never cut below, what softens it within half its
+/// timeout, so four still-air links under 8 W all soften in time instead of the youngest
+/// meeting the soften timeout on their reserves while the oldest take the rest.
+#[test]
+fn still_air_softens_under_a_budget_in_time() {
+    let mut rig = four_hifi(3.0);
+    for l in [
+        "@1 SIM MEDIUM air",
+        "@2 SIM MEDIUM air",
+        "@3 SIM MEDIUM air",
+        "@4 SIM MEDIUM air",
+        "@* CONFIG SET convection_w_m2k 20",
+    ] {
+        assert!(say(&mut rig, l).last().unwrap().starts_with("ok"), "{l}");
+    }
+    // The still-air model's rises, as a still-air TUNE sets them.
+    let cal = rig.links.link(0).calibration();
+    let r = cal.model_resistances();
+    for (name, v) in [
+        ("pla_rise_k_per_w", r.r_pp),
+        ("tca_rise_k_per_w", r.r_tt),
+        ("pla_to_tca_k_per_w", r.r_tp),
+        ("tca_to_pla_k_per_w", r.r_tp),
+    ] {
+        let l = format!("@* CONFIG SET {name} {v:.2}");
+        assert!(say(&mut rig, &l).last().unwrap().starts_with("ok"), "{l}");
+    }
+    let max_w = gait_finishes(&mut rig, 3.0, 8.0);
+    assert!(max_w <= 8.0 + 1e-3, "{max_w}");
 }
 
 /// Sets `supply_limit_a` and `supply_budget_w`, runs `GAIT 34 38 42 46` and holds that every

@@ -289,7 +289,7 @@ pub fn run(
 pub fn least_budget_w(rig: &MultiRig<Hifi>, targets_mm: &[f32]) -> f32 {
     let n = targets_mm.len();
     let most = (0..n)
-        .filter_map(|k| rig.links.link(k).soften_reserve_w(targets_mm[k]))
+        .filter_map(|k| rig.links.soften_reserve_w(k, targets_mm[k]))
         .map(|r| morphlink::budget::least_budget_w(r, n))
         .fold(0.0f32, f32::max);
     (most * 100.0).ceil() / 100.0
