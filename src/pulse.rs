@@ -16,14 +16,14 @@ pub const HEAT_MAX_FRACTION: f32 = 0.2;
 pub const HEAT_MAX_S: f32 = 60.0;
 const _: () = assert!(HEAT_MAX_FRACTION > 0.0 && HEAT_MAX_FRACTION <= 0.25);
 
-/// The window HEAT's time is counted over, s: a heater may be pulsed for at most
-/// [`HEAT_MAX_S`] in any such window ([`HeatBudget`]), so chained pulses average at most a
-/// fifth of the pulse power: 0.2 W into the PLA, whose steady rise even in still air (about
+/// The window HEAT's time is counted over, s: a heater's pulse time is a bucket of
+/// [`HEAT_MAX_S`] given back at [`HEAT_MAX_S`] per this window ([`HeatBudget`]; a full bucket
+/// is empty again after it), so chained pulses average at most a fifth of the pulse power: 0.2 W into the PLA, whose steady rise even in still air (about
 /// 100 K/W) stays some 20 K, far below the glass transition (docs/protocol.md, `HEAT`).
 pub const HEAT_WINDOW_S: f32 = 300.0;
 const _: () = assert!(HEAT_WINDOW_S >= 2.0 * HEAT_MAX_S);
 
-/// Each heater's HEAT time in the last [`HEAT_WINDOW_S`], as a bucket that drains at
+/// Each heater's HEAT time, as a bucket that drains at
 /// `HEAT_MAX_S / HEAT_WINDOW_S` seconds per second: a pulse counts its whole length when it
 /// starts (an ABORTed one too) and is refused if the bucket would pass [`HEAT_MAX_S`].
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

@@ -288,7 +288,7 @@ pub fn heat_budget(l: &mut OutLine, heater: Heater, left_s: f32) {
         l,
         ErrorCode::Busy,
         format_args!(
-            "{} has {} s of HEAT left: at most {} s per heater in any {} s, the rest is back \
+            "{} has {} s of HEAT left: at most {} s per heater, given back at that per {} s \
              as it cools",
             heater.as_str(),
             Fixed(left_s.max(0.0), 1),
