@@ -664,6 +664,12 @@ impl<const N: usize> Links<N> {
     /// the rod soft, softens a rod in water within a time constant of some 20 s; in still air
     /// that constant is minutes, and a soften held to it met its timeout (docs/multilink.md).
     /// The half leaves room for the model's error and the bead's lag.
+    ///
+    /// The model is linear: its PLA node is `P u(t) + f(t)` above ambient, `u` its response to
+    /// 1 W from ambient and `f` its free fall from the reading, so one run of each at the
+    /// model's stable step gives the least `P` that reaches the threshold at some moment of
+    /// the window. It runs in the serial task, within the control tick's time on the target
+    /// (a bisection of whole runs here starved the control task into the watchdog).
     pub fn in_time_pla_w(&self, k: usize) -> f32 {
         use crate::lumped::{node, Network};
         let c = &self.ctrl[k];
@@ -679,37 +685,26 @@ impl<const N: usize> Links<N> {
         } else {
             amb_c
         };
-        let window_s = 0.5 * morph.soften_timeout_s;
+        let rise_k = morph.soft_threshold_c - amb_c;
         let h = c.calibration().model_convection_w_m2k();
-        let cap_w = HeaterConfig::PLA.max_power_w;
-        let softens = |pla_w: f32| {
-            let mut net = Network::new(h, amb_c);
-            net.temp_c[node::PLA] = start_c;
-            let dt_s = net.max_stable_step_s().min(0.1);
-            let mut t_s = 0.0;
-            while t_s < window_s {
-                net.advance(dt_s, 0.0, pla_w, amb_c);
-                if net.temp_c[node::PLA] >= morph.soft_threshold_c {
-                    return true;
-                }
-                t_s += dt_s;
-            }
-            false
-        };
-        if !softens(cap_w) {
-            return cap_w;
-        }
-        // Bisection to 1/256 of the cap.
-        let (mut lo, mut hi) = (0.0, cap_w);
-        for _ in 0..8 {
-            let mid = 0.5 * (lo + hi);
-            if softens(mid) {
-                hi = mid;
-            } else {
-                lo = mid;
+        let mut step = Network::new(h, amb_c);
+        let mut free = step;
+        free.temp_c[node::PLA] = start_c;
+        let dt_s = step.max_stable_step_s();
+        let window_s = 0.5 * morph.soften_timeout_s;
+        let mut least_w = f32::INFINITY;
+        let mut t_s = 0.0;
+        while t_s < window_s {
+            step.advance(dt_s, 0.0, 1.0, amb_c);
+            free.advance(dt_s, 0.0, 0.0, amb_c);
+            t_s += dt_s;
+            let u_k = step.temp_c[node::PLA] - amb_c;
+            let f_k = free.temp_c[node::PLA] - amb_c;
+            if u_k > 0.0 {
+                least_w = least_w.min((rise_k - f_k) / u_k);
             }
         }
-        hi
+        least_w.clamp(0.0, HeaterConfig::PLA.max_power_w)
     }
 
     /// Whether link `k` would refuse a MORPH on its own (busy, faulted, no reading, radius):
@@ -979,10 +974,14 @@ impl<const N: usize> Links<N> {
         let (min_mm, max_mm) = crate::table::range_mm();
         (0..self.count())
             .map(|k| {
+                let in_time_w = self.in_time_pla_w(k);
                 [min_mm, max_mm]
                     .iter()
-                    .filter_map(|&r| self.soften_reserve_w(k, r))
-                    .map(|r| budget::least_budget_w(r, self.count()))
+                    .filter_map(|&r| self.ctrl[k].soften_reserve_w(r))
+                    .map(|mut r| {
+                        r.pla_w = r.pla_w.max(in_time_w);
+                        budget::least_budget_w(r, self.count())
+                    })
                     .fold(f32::INFINITY, f32::min)
             })
             .fold(0.0, f32::max)

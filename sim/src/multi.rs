@@ -306,9 +306,12 @@ impl<P: Plant> MultiRig<P> {
                 }
                 out(&l);
             }
-            // The ambient bead is the board's, one for every link (docs/multilink.md): a
-            // fault or drift on it reaches every link's frame, and a CLEAR on any link clears it.
-            SimCommand::Fault(_, Sensor::Amb) | SimCommand::Drift(Sensor::Amb, _)
+            // The ambient bead is the board's, one for every link (docs/multilink.md): the
+            // room it reads, and a fault or drift on it, reach every link's frame, and a CLEAR
+            // on any link clears it.
+            SimCommand::Ambient(_)
+            | SimCommand::Fault(_, Sensor::Amb)
+            | SimCommand::Drift(Sensor::Amb, _)
                 if !matches!(
                     f_of(cmd),
                     Some(SimFault::HeaterOpen | SimFault::HeaterStuck)
