@@ -13,17 +13,17 @@
 //!
 //! | from | line | meaning |
 //! | --- | --- | --- |
-//! | rig | `hello protocol=1 tick_s=<s>` | once, at start |
-//! | rig | `step dt_s=<s> pla_duty=<0..1> tca_duty=<0..1>` | hold these duties for `dt_s`, then reply |
-//! | rig | `set supply_v=<V>`, `set ambient_c=<°C>`, `set medium=<water\|air>` | a `SIM` change |
+//! | rig | `hello protocol=1 tick_s=<s>` | once, at start (`tick_s` over 0, at most [`STEP_MAX_S`]) |
+//! | rig | `step dt_s=<s> pla_duty=<0..1> tca_duty=<0..1>` | hold these duties for `dt_s` (0 to [`STEP_MAX_S`]), then reply |
+//! | rig | `set supply_v=<V>`, `set ambient_c=<°C>`, `set medium=<water\|air>` | a `SIM` change ([`SUPPLY_MAX_V`], [`AMBIENT_RANGE_C`]) |
 //! | plant | `ok t_pla_c=<°C> t_tca_c=<°C> t_amb_c=<°C> supply_v=<V> radius_mm=<mm>` and optionally `r_pla_ohm=<Ω> r_tca_ohm=<Ω>` | to every line; the resistances (both or neither) are the heaters' true ones at this step, for a board that senses current |
 //! | plant | `error: <text>` | refused; `error: unsupported ...` to a `set` it cannot do |
 //!
 //! ```text
 //! > hello protocol=1 tick_s=0.1
-//! < ok t_pla_c=22 t_tca_c=22 t_amb_c=22 supply_v=12 radius_mm=53.065346621112695
+//! < ok t_pla_c=22 t_tca_c=22 t_amb_c=22 supply_v=12 radius_mm=53.065346621112695 r_pla_ohm=30 r_tca_ohm=6.5
 //! > step dt_s=0.1 pla_duty=0.8333333333333334 tca_duty=0
-//! < ok t_pla_c=22.072693128353844 t_tca_c=22 t_amb_c=22 supply_v=12 radius_mm=53.06534662111271
+//! < ok t_pla_c=22.072693128353844 t_tca_c=22 t_amb_c=22 supply_v=12 radius_mm=53.06534662111271 r_pla_ohm=30.00665202700923 r_tca_ohm=6.5
 //! > set medium=air
 //! < error: unsupported medium
 //! ```
@@ -38,6 +38,16 @@ use core::fmt::{self, Write};
 
 /// The plant protocol's version, sent in `hello`.
 pub const PROTOCOL: u32 = 1;
+
+/// Longest step (and control tick) a `hello` or `step` may ask for, s: a rig steps once per
+/// control tick (0.1 s); a step far longer is a mistake, and the plant's work grows with it
+/// (a `step dt_s=1e308` ran for good).
+pub const STEP_MAX_S: f64 = 10.0;
+/// Highest supply a `set supply_v` may ask for, V: above any board's heaters and their parts.
+pub const SUPPLY_MAX_V: f64 = 60.0;
+/// The surroundings a `set ambient_c` may ask for, °C: cold room to hot bath, a liquid medium
+/// throughout.
+pub const AMBIENT_RANGE_C: (f64, f64) = (-20.0, 100.0);
 
 /// The word an `error:` reply starts with when a plant cannot make a [`Setting`].
 pub const UNSUPPORTED: &str = "unsupported";
@@ -204,6 +214,15 @@ impl<'a> KeyValues<'a> {
             .ok_or(ParseError::BadValue(key))
     }
 
+    fn within(self, key: &'static str, (lo, hi): (f64, f64)) -> Result<f64, ParseError> {
+        let v = self.number(key)?;
+        if (lo..=hi).contains(&v) {
+            Ok(v)
+        } else {
+            Err(ParseError::BadValue(key))
+        }
+    }
+
     fn duty(self, key: &'static str) -> Result<f64, ParseError> {
         let d = self.number(key)?;
         if (0.0..=1.0).contains(&d) {
@@ -224,11 +243,14 @@ pub fn parse_request(line: &str) -> Result<Request, ParseError> {
                 .parse()
                 .map_err(|_| ParseError::BadValue("protocol"))?;
             let tick_s = kv.number("tick_s")?;
+            if !(tick_s > 0.0 && tick_s <= STEP_MAX_S) {
+                return Err(ParseError::BadValue("tick_s"));
+            }
             Ok(Request::Hello { protocol, tick_s })
         }
         STEP => {
             let dt_s = kv.number("dt_s")?;
-            if dt_s < 0.0 {
+            if !(0.0..=STEP_MAX_S).contains(&dt_s) {
                 return Err(ParseError::BadValue("dt_s"));
             }
             let duty = Duties {
@@ -244,8 +266,8 @@ pub fn parse_request(line: &str) -> Result<Request, ParseError> {
                     continue;
                 };
                 return Ok(Request::Set(match key {
-                    "supply_v" => Setting::SupplyV(kv.number("supply_v")?),
-                    "ambient_c" => Setting::AmbientC(kv.number("ambient_c")?),
+                    "supply_v" => Setting::SupplyV(kv.within("supply_v", (0.0, SUPPLY_MAX_V))?),
+                    "ambient_c" => Setting::AmbientC(kv.within("ambient_c", AMBIENT_RANGE_C)?),
                     "medium" => Setting::Medium(match kv.get("medium") {
                         Some("water") => Medium::Water,
                         Some("air") => Medium::Air,
@@ -511,6 +533,12 @@ mod tests {
             ),
             ("step dt_s=-1 pla_duty=0 tca_duty=0", BadValue("dt_s")),
             ("step dt_s=NaN pla_duty=0 tca_duty=0", BadValue("dt_s")),
+            ("step dt_s=1e308 pla_duty=1 tca_duty=1", BadValue("dt_s")),
+            ("hello protocol=1 tick_s=0", BadValue("tick_s")),
+            ("hello protocol=1 tick_s=-1", BadValue("tick_s")),
+            ("set supply_v=-12", BadValue("supply_v")),
+            ("set supply_v=1e308", BadValue("supply_v")),
+            ("set ambient_c=-300", BadValue("ambient_c")),
             ("step dt_s=0.1 pla_duty tca_duty=0", NotKeyValue),
             ("hello protocol=one tick_s=0.1", BadValue("protocol")),
             ("hello tick_s=0.1", Missing("protocol")),
