@@ -350,7 +350,11 @@ fn run(cli: &Cli) -> Result<(), Stop> {
     let (tx, rx) = mpsc::channel::<Vec<u8>>();
     std::thread::spawn(move || {
         let mut stdin = std::io::stdin().lock();
-        let mut buf = [0u8; 256];
+        // A pipe's whole capacity: a script written in one go (`printf ... | morph-sim --speed
+        // max`) arrives as one piece, so no line of it waits while the simulation runs ahead
+        // (with 256 bytes, an ABORT in the second piece was acted on 5 or 18 simulated seconds
+        // late, as the threads fell).
+        let mut buf = vec![0u8; 1 << 16];
         loop {
             match stdin.read(&mut buf) {
                 Ok(0) | Err(_) => break,

@@ -200,6 +200,29 @@ pub fn start(link: &mut Link, o: &Opts, events: &mut Vec<String>) -> Result<usiz
             ))
         })?;
     link.links = n;
+    // Checked before the budget is set: a refused gait changes nothing.
+    if o.radii_mm.len() != n {
+        return Err(MorphEnd::Failed(format!(
+            "{} radii for {} links: a gait takes one radius per link",
+            o.radii_mm.len(),
+            n
+        )));
+    }
+    let line = format!(
+        "GAIT {} {}",
+        o.radii_mm
+            .iter()
+            .map(|r| r.to_string())
+            .collect::<Vec<_>>()
+            .join(" "),
+        o.mode
+    );
+    if let Err(e) = morphlink::protocol::links::check_line(&line) {
+        return Err(MorphEnd::Failed(format!(
+            "GAIT refused before anything was sent: {}",
+            morphlink::protocol::format_error(&e)
+        )));
+    }
     if let Some(b) = o.budget_w {
         let (_, set) = link.command(
             &format!("CONFIG SET supply_budget_w {b}"),
@@ -212,8 +235,6 @@ pub fn start(link: &mut Link, o: &Opts, events: &mut Vec<String>) -> Result<usiz
         println!("{set}");
     }
     wait_for_sensors(link, &mut |l| events.push(l.to_string()))?;
-    let radii: Vec<String> = o.radii_mm.iter().map(|r| r.to_string()).collect();
-    let line = format!("GAIT {} {}", radii.join(" "), o.mode);
     let (_, reply) = link
         .command(&line, REPLY_TIMEOUT_S, &mut |l| events.push(l.to_string()))
         .map_err(|e| match e {

@@ -104,7 +104,7 @@ enum Cmd {
         #[arg(long, default_value_t = DEFAULT_POLL_MS)]
         poll_ms: u64,
         /// Abort the morph if it is not done after this many seconds of link time.
-        #[arg(long, default_value_t = DEFAULT_MORPH_TIMEOUT_S)]
+        #[arg(long, default_value_t = DEFAULT_MORPH_TIMEOUT_S, value_parser = parse_timeout_s)]
         timeout_s: f64,
         /// Follow the morph in a live terminal view (key `a` aborts, `q` quits).
         #[arg(long)]
@@ -129,7 +129,7 @@ enum Cmd {
         #[arg(long, default_value_t = DEFAULT_POLL_MS)]
         poll_ms: u64,
         /// Abort if not every link is done after this many seconds of link time.
-        #[arg(long, default_value_t = 2.0 * DEFAULT_MORPH_TIMEOUT_S)]
+        #[arg(long, default_value_t = 2.0 * DEFAULT_MORPH_TIMEOUT_S, value_parser = parse_timeout_s)]
         timeout_s: f64,
         /// Set the supply budget first (`CONFIG SET supply_budget_w`), W.
         #[arg(long)]
@@ -209,6 +209,15 @@ fn parse_sim_speed(s: &str) -> Result<f64, String> {
     morphlink_host::speed::check("--sim-speed", f)
 }
 
+/// `--timeout-s`: a number of seconds above 0 (NaN would turn the timeout off, a negative
+/// one end every morph at once).
+fn parse_timeout_s(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(t) if t > 0.0 && t.is_finite() => Ok(t),
+        _ => Err(format!("a number of seconds above 0, not `{s}`")),
+    }
+}
+
 /// Refuses a file morphctl could not write at the end of a run (`--plot`), before anything is
 /// sent: its directory must exist and take a new file.
 fn check_writable(path: &Path, what: &str) -> Result<(), String> {
@@ -222,6 +231,10 @@ fn check_writable(path: &Path, what: &str) -> Result<(), String> {
             path.display(),
             dir.display()
         ));
+    }
+    // A directory of that name (`d.svg`, `x.svg/`) could never be written as a file.
+    if path.is_dir() || path.as_os_str().to_string_lossy().ends_with('/') {
+        return Err(format!("{what} {}: that is a directory", path.display()));
     }
     let probe = dir.join(format!(".morphctl-write-check-{}", std::process::id()));
     match File::create(&probe) {
@@ -391,7 +404,10 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 finish(&mut link, end)
             };
             if let (Some(path), Some(csv)) = (&log, &csv) {
-                println!("telemetry: {} ({} samples)", path.display(), csv.rows);
+                match csv.rows {
+                    0 => println!("telemetry: none logged; {} left as it was", path.display()),
+                    n => println!("telemetry: {} ({n} samples)", path.display()),
+                }
                 if let Some(e) = &csv.failed {
                     eprintln!("morphctl: the log stopped early: {e}");
                 }
@@ -444,7 +460,10 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 finish(&mut link, end)
             };
             if let (Some(path), Some(csv)) = (&log, &csv) {
-                println!("telemetry: {} ({} rows)", path.display(), csv.rows);
+                match csv.rows {
+                    0 => println!("telemetry: none logged; {} left as it was", path.display()),
+                    n => println!("telemetry: {} ({n} rows)", path.display()),
+                }
                 if let Some(e) = &csv.failed {
                     eprintln!("morphctl: the log stopped early: {e}");
                 }
@@ -591,46 +610,55 @@ fn sim_time_and_radius(
     Ok(num("time_s").zip(num("radius_mm")))
 }
 
-/// The telemetry CSV, written as the samples arrive: a run that ends early keeps its rows.
+/// The telemetry CSV, written as the samples arrive: a run that ends early keeps its rows. The
+/// file is made at the first row, so a run that logs nothing (a MORPH refused) leaves whatever
+/// was at the path as it was.
 struct CsvLog {
-    file: BufWriter<File>,
+    file: Option<BufWriter<File>>,
     path: PathBuf,
+    header: String,
+    /// Data rows written (the header is not one).
     rows: usize,
     /// The first write error; later rows are not attempted.
     failed: Option<String>,
 }
 
 impl CsvLog {
-    /// A new log at `path` under `header`.
+    /// A log at `path` under `header`, checked writable now and written from its first row.
     fn create(path: &Path, header: &str) -> Result<CsvLog, String> {
-        let mut log = CsvLog {
-            file: BufWriter::new(
-                File::create(path).map_err(|e| format!("cannot write {}: {e}", path.display()))?,
-            ),
+        check_writable(path, "--log")?;
+        Ok(CsvLog {
+            file: None,
             path: path.to_path_buf(),
+            header: header.to_string(),
             rows: 0,
             failed: None,
-        };
-        log.line(header);
-        match log.failed.take() {
-            Some(e) => Err(e),
-            None => Ok(log),
-        }
+        })
     }
 
-    /// Appends one line and flushes it to the file.
+    /// Appends one line and flushes it to the file (made, with its header, at the first).
     fn write_line(&mut self, text: &str) -> bool {
         if self.failed.is_some() {
             return false;
         }
-        if let Err(e) = writeln!(self.file, "{text}").and_then(|_| self.file.flush()) {
+        let written = (|| -> std::io::Result<()> {
+            if self.file.is_none() {
+                let mut f = BufWriter::new(File::create(&self.path)?);
+                writeln!(f, "{}", self.header)?;
+                self.file = Some(f);
+            }
+            let f = self.file.as_mut().expect("made above");
+            writeln!(f, "{text}")?;
+            f.flush()
+        })();
+        if let Err(e) = written {
             self.failed = Some(format!("cannot write {}: {e}", self.path.display()));
             return false;
         }
         true
     }
 
-    /// Appends one row.
+    /// Appends one data row.
     fn line(&mut self, row: &str) {
         if self.write_line(row) {
             self.rows += 1;

@@ -11,7 +11,7 @@
 //! the log's bracketed times (`[wall 12.345 s]`) are wall-clock seconds since the script began.
 
 use crate::link::{Link, LinkError, REPLY_TIMEOUT_S};
-use morphlink::protocol::client::{classify, LineKind};
+use morphlink::protocol::client::{classify, link_of, LineKind};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
@@ -202,8 +202,9 @@ fn end_of(l: &str) -> Option<End> {
     match classify(l) {
         LineKind::Done => Some(End::Done),
         LineKind::Alarm => Some(End::Alarm),
-        LineKind::Event if l.starts_with("event: tune done") => Some(End::Done),
-        LineKind::Event if l.starts_with("event: tune failed") => Some(End::TuneFailed),
+        // A board of several links addresses its events (`@1 event: tune done ...`).
+        LineKind::Event if link_of(l).1.starts_with("event: tune done") => Some(End::Done),
+        LineKind::Event if link_of(l).1.starts_with("event: tune failed") => Some(End::TuneFailed),
         _ => None,
     }
 }

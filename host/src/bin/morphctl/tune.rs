@@ -4,7 +4,7 @@
 
 use super::{finish, morph, MorphEnd, MorphOpts};
 use crate::link::{field, Link, LinkError, REPLY_TIMEOUT_S};
-use morphlink::protocol::client::{classify, LineKind};
+use morphlink::protocol::client::{classify, link_of, LineKind};
 use std::io::BufRead;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -124,10 +124,12 @@ fn run_tune(link: &mut Link, speed: f64) -> MorphEnd {
     loop {
         for e in events.drain(..) {
             println!("{e}");
-            if e.starts_with("event: tune done") {
+            // A board of several links addresses its events (`@1 event: tune done ...`).
+            let text = link_of(&e).1;
+            if text.starts_with("event: tune done") {
                 return MorphEnd::Finished(ExitCode::SUCCESS);
             }
-            if e.starts_with("event: tune failed") || classify(&e) == LineKind::Alarm {
+            if text.starts_with("event: tune failed") || classify(&e) == LineKind::Alarm {
                 return MorphEnd::Finished(ExitCode::FAILURE);
             }
         }
