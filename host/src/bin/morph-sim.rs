@@ -81,7 +81,9 @@ struct Cli {
 fn parse_timeout(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(t) if t > 0.0 && t <= 86_400.0 => Ok(t),
-        _ => Err(format!("a timeout must be 0..86400 s, got `{s}`")),
+        _ => Err(format!(
+            "a timeout must be over 0 and at most 86400 s, got `{s}`"
+        )),
     }
 }
 
