@@ -48,7 +48,10 @@ pub fn check(path: &Path) -> Result<(), String> {
     let meta = match std::fs::metadata(path) {
         Ok(m) => m,
         // Absent: an erased flash, so long as SAVE could make the file there.
-        Err(e) if e.kind() == ErrorKind::NotFound => return creatable(path),
+        Err(e) if e.kind() == ErrorKind::NotFound => {
+            return crate::out_path::check_new_file(path)
+                .map_err(|e| format!("{e}, so SAVE could not keep it"))
+        }
         Err(e) => return Err(format!("cannot look at it: {e}")),
     };
     if let Some(what) = not_a_file(meta.file_type()) {
@@ -64,32 +67,6 @@ pub fn check(path: &Path) -> Result<(), String> {
         .open(path)
         .map(drop)
         .map_err(|e| format!("cannot open it for writing ({e}), so SAVE could not keep it"))
-}
-
-/// Whether a file could be made at `path` (absent), so that SAVE can keep it there: its
-/// directory exists and takes a new file (a probe made and removed beside it).
-fn creatable(path: &Path) -> Result<(), String> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    if !dir.is_dir() {
-        return Err(format!(
-            "its directory {} does not exist, so SAVE could not keep it",
-            dir.display()
-        ));
-    }
-    let probe = dir.join(format!(".morph-sim-flash-check-{}", std::process::id()));
-    match OpenOptions::new().write(true).create_new(true).open(&probe) {
-        Ok(_) => {
-            let _ = std::fs::remove_file(&probe);
-            Ok(())
-        }
-        Err(e) => Err(format!(
-            "no file can be made in {} ({e}), so SAVE could not keep it",
-            dir.display()
-        )),
-    }
 }
 
 /// The settings flash kept in `path`: its image, or `None` (with a note on stderr) if the file

@@ -221,33 +221,8 @@ fn parse_timeout_s(s: &str) -> Result<f64, String> {
 /// Refuses a file morphctl could not write at the end of a run (`--plot`), before anything is
 /// sent: its directory must exist and take a new file.
 fn check_writable(path: &Path, what: &str) -> Result<(), String> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    if !dir.is_dir() {
-        return Err(format!(
-            "{what} {}: the directory {} does not exist",
-            path.display(),
-            dir.display()
-        ));
-    }
-    // A directory of that name (`d.svg`, `x.svg/`) could never be written as a file.
-    if path.is_dir() || path.as_os_str().to_string_lossy().ends_with('/') {
-        return Err(format!("{what} {}: that is a directory", path.display()));
-    }
-    let probe = dir.join(format!(".morphctl-write-check-{}", std::process::id()));
-    match File::create(&probe) {
-        Ok(_) => {
-            let _ = std::fs::remove_file(&probe);
-            Ok(())
-        }
-        Err(e) => Err(format!(
-            "{what} {}: cannot write in {}: {e}",
-            path.display(),
-            dir.display()
-        )),
-    }
+    morphlink_host::out_path::check_new_file(path)
+        .map_err(|e| format!("{what} {}: {e}", path.display()))
 }
 
 fn main() -> ExitCode {

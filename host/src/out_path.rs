@@ -1,0 +1,46 @@
+//! Whether a file a tool writes later (a plot at the end of a run, a flash image at SAVE) can
+//! be made at its path, checked before the run, so a run is never lost to a path that was
+//! wrong from the start.
+
+use std::fs::OpenOptions;
+use std::path::Path;
+
+/// Holds that a new file can be made at `path`: its directory exists and takes a new file (a
+/// probe made beside it and removed), and `path` is not a directory (`d.svg`, `x.svg/`). The
+/// error says which, without the path itself (the caller names it).
+pub fn check_new_file(path: &Path) -> Result<(), String> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(format!("the directory {} does not exist", dir.display()));
+    }
+    if path.is_dir() || path.as_os_str().to_string_lossy().ends_with('/') {
+        return Err("that is a directory".to_string());
+    }
+    let probe = dir.join(format!(".morphlink-write-check-{}", std::process::id()));
+    match OpenOptions::new().write(true).create_new(true).open(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => Err(format!("no file can be made in {} ({e})", dir.display())),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_missing_directory_a_directory_and_an_unwritable_place_are_refused() {
+        let tmp = std::env::temp_dir();
+        assert!(check_new_file(&tmp.join("morphlink-out-path-test.svg")).is_ok());
+        let e = check_new_file(&tmp.join("no-such-dir-morphlink/x.svg")).unwrap_err();
+        assert!(e.contains("does not exist"), "{e}");
+        assert_eq!(check_new_file(&tmp).unwrap_err(), "that is a directory");
+        let e = check_new_file(Path::new("/proc/x")).unwrap_err();
+        assert!(e.starts_with("no file can be made in /proc"), "{e}");
+    }
+}
