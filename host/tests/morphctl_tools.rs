@@ -198,6 +198,26 @@ fn calibrate_asks_again_after_an_answer_that_is_not_a_radius_and_says_it_is_not_
     );
 }
 
+/// Every number `calibrate` is given is checked before the first morph: a bad one found after
+/// it would leave the calibration changed by the morphs before it.
+#[test]
+fn calibrate_refuses_a_bad_number_before_any_morph() {
+    for args in [
+        ["--radii", "34,NaN", "--measured", "34.1,40"],
+        ["--radii", "34,38", "--measured", "34.1,-1"],
+        ["--radii", "34", "--measured", "34.1,40"],
+    ] {
+        let mut all = vec!["--sim", "--sim-speed", "50", "calibrate"];
+        all.extend(args);
+        let out = morphctl(&all);
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stdout}{err}");
+        assert!(!stdout.contains("calibrate: morph 1"), "{args:?}: {stdout}");
+        assert!(err.starts_with("morphctl: "), "{args:?}: {err}");
+    }
+}
+
 #[test]
 fn tune_on_the_simulator_says_the_fit_ends_with_it_or_saves_it_to_the_flash_file() {
     let out = morphctl(&["--sim", "--sim-speed", "200", "tune"]);

@@ -215,6 +215,23 @@ pub fn calibrate(
     } else {
         radii.to_vec()
     };
+    // Every given number is checked before the first morph: a bad one found later would leave
+    // the calibration changed by the morphs before it.
+    if let Some(r) = radii.iter().find(|r| !(r.is_finite() && **r > 0.0)) {
+        return Err(format!("--radii {r}: a radius is a number of mm over 0"));
+    }
+    if let Some(m) = measured.iter().find(|m| !(m.is_finite() && **m > 0.0)) {
+        return Err(format!(
+            "--measured {m}: a measured radius is a number of mm over 0"
+        ));
+    }
+    if measured.len() > radii.len() {
+        return Err(format!(
+            "{} --measured values for {} morphs: one per morph at most",
+            measured.len(),
+            radii.len()
+        ));
+    }
     let mut counted = 0;
     for (i, &r) in radii.iter().enumerate() {
         println!("calibrate: morph {} of {} to {r} mm", i + 1, radii.len());
