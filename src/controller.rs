@@ -420,10 +420,7 @@ impl Controller {
                 let tca_w = self.last.map_or(0.0, |l| l.power_w);
                 self.morph_reserve_w(phase, tca_w)
             }
-            Doing::Tune => Powers {
-                pla_w: crate::tune::TUNE_PLA_W,
-                tca_w: crate::tune::TUNE_TCA_W,
-            },
+            Doing::Tune => crate::tune::TUNE_STEP_POWERS,
             Doing::Heat(_) => self.wanted,
             Doing::Idle => Powers::default(),
         }

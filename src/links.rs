@@ -250,12 +250,9 @@ impl<const N: usize> Links<N> {
         // left queued would start by itself after a RESET, which the user did not ask.
         for k in 0..n {
             if self.queued[k].is_some() && self.ctrl[k].fault().is_some() {
-                self.queued[k] = None;
                 let mut why = OutLine::new();
                 self.ctrl[k].morph_refusal(&mut why);
-                let mut e = OutLine::new();
-                wire::queued_dropped_event(&mut e, &why);
-                self.push_event(k, &e);
+                self.drop_queued(k, &why);
             }
         }
     }
@@ -359,13 +356,10 @@ impl<const N: usize> Links<N> {
                 if (0..self.count()).any(|j| self.ctrl[j].busy()) {
                     return;
                 }
-                self.queued[k] = None;
                 let mut why = OutLine::new();
                 let needs_w = budget::least_budget_w(q.reserve_w, self.count());
                 wire::never_starts(&mut why, needs_w, self.budget.budget_w, self.budget.limit_a);
-                let mut e = OutLine::new();
-                wire::queued_dropped_event(&mut e, &why);
-                self.push_event(k, &e);
+                self.drop_queued(k, &why);
                 continue;
             }
             self.queued[k] = None;
@@ -383,11 +377,18 @@ impl<const N: usize> Links<N> {
             });
             self.note_started(k);
             if !refusal.is_empty() {
-                let mut e = OutLine::new();
-                wire::queued_dropped_event(&mut e, &refusal);
-                self.push_event(k, &e);
+                self.drop_queued(k, &refusal);
             }
         }
+    }
+
+    /// Drops link `k`'s queued morph, if any, and says why: `why` is the refusal it met
+    /// (`event: queued-morph dropped (<why>)`).
+    fn drop_queued(&mut self, k: usize, why: &str) {
+        self.queued[k] = None;
+        let mut e = OutLine::new();
+        wire::queued_dropped_event(&mut e, why);
+        self.push_event(k, &e);
     }
 
     /// Queues a board event line of link `k` (addressed where there are several links).
@@ -588,26 +589,8 @@ impl<const N: usize> Links<N> {
         let (what, needs) = match *cmd {
             Command::Heat {
                 heater, power_w, ..
-            } => (
-                "HEAT",
-                match heater {
-                    crate::vocab::Heater::Pla => Powers {
-                        pla_w: power_w,
-                        tca_w: 0.0,
-                    },
-                    crate::vocab::Heater::Tca => Powers {
-                        pla_w: 0.0,
-                        tca_w: power_w,
-                    },
-                },
-            ),
-            _ => (
-                "TUNE",
-                Powers {
-                    pla_w: crate::tune::TUNE_PLA_W,
-                    tca_w: crate::tune::TUNE_TCA_W,
-                },
-            ),
+            } => ("HEAT", Powers::only(heater, power_w)),
+            _ => ("TUNE", crate::tune::TUNE_STEP_POWERS),
         };
         let ahead = (0..self.count()).any(|j| self.queued(j));
         let ohm = self.ctrl[k].heater_ohm();
@@ -652,8 +635,13 @@ impl<const N: usize> Links<N> {
     /// ([`Controller::soften_reserve_w`]), its PLA's share at least what softens the rod in
     /// time ([`Links::in_time_pla_w`]). `None` for a radius outside the table.
     pub fn soften_reserve_w(&self, k: usize, radius_mm: f32) -> Option<Powers> {
+        self.soften_reserve_at(k, radius_mm, self.in_time_pla_w(k))
+    }
+
+    /// [`Links::soften_reserve_w`] with link `k`'s in-time PLA power already worked out.
+    fn soften_reserve_at(&self, k: usize, radius_mm: f32, in_time_w: f32) -> Option<Powers> {
         let mut r = self.ctrl[k].soften_reserve_w(radius_mm)?;
-        r.pla_w = r.pla_w.max(self.in_time_pla_w(k));
+        r.pla_w = r.pla_w.max(in_time_w);
         Some(r)
     }
 
@@ -717,14 +705,15 @@ impl<const N: usize> Links<N> {
             || c.soften_reserve_w(radius_mm).is_none()
     }
 
-    /// Why link `k` cannot take a morph to `radius_mm` under the budget now, written in `l`;
-    /// `None` if it can (started at once or queued).
-    fn morph_checks(&self, k: usize, radius_mm: f32, l: &mut OutLine) -> bool {
+    /// Why link `k` cannot take a morph whose soften reserves `reserve_w` (`None`: a radius
+    /// outside the table, which the link refuses itself) under the budget now, written in `l`;
+    /// false if it can (started at once or queued).
+    fn morph_checks(&self, k: usize, reserve_w: Option<Powers>, l: &mut OutLine) -> bool {
         if self.queued(k) {
             *l = protocol::format_error(&wire::ERR_QUEUED);
             return true;
         }
-        if let Some(r) = self.soften_reserve_w(k, radius_mm) {
+        if let Some(r) = reserve_w {
             let needs_w = budget::least_budget_w(r, self.count());
             if self.budget.binding() && needs_w > self.budget.budget_w {
                 wire::morph_over_budget(l, needs_w, self.budget.budget_w);
@@ -746,14 +735,16 @@ impl<const N: usize> Links<N> {
     ) {
         let cmd = Command::Morph { radius_mm, mode };
         let mut l = OutLine::new();
-        if self.morph_checks(k, radius_mm, &mut l) {
+        // Once per MORPH: it runs the link's thermal model (`Links::in_time_pla_w`).
+        let reserve = self.soften_reserve_w(k, radius_mm);
+        if self.morph_checks(k, reserve, &mut l) {
             return out(&l);
         }
         if self.refuses_morph(k, radius_mm) {
             self.ctrl[k].handle(now_ms, cmd, out);
             return;
         }
-        let reserve_w = self.soften_reserve_w(k, radius_mm).unwrap_or_default();
+        let reserve_w = reserve.unwrap_or_default();
         let ahead = (0..self.count()).any(|j| self.queued(j));
         let ohm = self.ctrl[k].heater_ohm();
         let fits = budget::admits(
@@ -834,7 +825,8 @@ impl<const N: usize> Links<N> {
                 // Every link is checked before any starts: a refused GAIT changes nothing.
                 for (k, &r) in radii_mm[..count].iter().enumerate() {
                     let mut why = OutLine::new();
-                    if !self.morph_checks(k, r, &mut why) && self.refuses_morph(k, r) {
+                    let reserve = self.soften_reserve_w(k, r);
+                    if !self.morph_checks(k, reserve, &mut why) && self.refuses_morph(k, r) {
                         // The link's own refusal, asked of a copy so nothing changes.
                         why = self.refusal_of(k, r, mode);
                     }
@@ -974,14 +966,12 @@ impl<const N: usize> Links<N> {
         let (min_mm, max_mm) = crate::table::range_mm();
         (0..self.count())
             .map(|k| {
+                // The in-time power is the link's, whatever the radius: worked out once.
                 let in_time_w = self.in_time_pla_w(k);
                 [min_mm, max_mm]
                     .iter()
-                    .filter_map(|&r| self.ctrl[k].soften_reserve_w(r))
-                    .map(|mut r| {
-                        r.pla_w = r.pla_w.max(in_time_w);
-                        budget::least_budget_w(r, self.count())
-                    })
+                    .filter_map(|&r| self.soften_reserve_at(k, r, in_time_w))
+                    .map(|r| budget::least_budget_w(r, self.count()))
                     .fold(f32::INFINITY, f32::min)
             })
             .fold(0.0, f32::max)

@@ -117,16 +117,7 @@ impl Pulse {
         if now_ms >= self.until_ms {
             return None;
         }
-        Some(match self.heater {
-            Heater::Pla => Powers {
-                pla_w: self.power_w,
-                tca_w: 0.0,
-            },
-            Heater::Tca => Powers {
-                pla_w: 0.0,
-                tca_w: self.power_w,
-            },
-        })
+        Some(Powers::only(self.heater, self.power_w))
     }
 }
 

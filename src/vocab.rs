@@ -210,6 +210,20 @@ impl Powers {
         }
     }
 
+    /// `w` W on heater `h`, the other off.
+    pub fn only(h: Heater, w: f32) -> Powers {
+        match h {
+            Heater::Pla => Powers {
+                pla_w: w,
+                tca_w: 0.0,
+            },
+            Heater::Tca => Powers {
+                pla_w: 0.0,
+                tca_w: w,
+            },
+        }
+    }
+
     /// The power of one heater, W.
     pub fn of(&self, h: Heater) -> f32 {
         match h {

@@ -32,6 +32,19 @@ fn four(limit_a: f64) -> MultiRig<Lumped> {
     on_supply(plants, LinkSetup::NOMINAL.noise(), limit_a)
 }
 
+/// Four nominal lumped links on a 3 A bench supply, `supply_limit_a 3` and a budget of
+/// `budget_w` (W).
+fn four_under(budget_w: f64) -> MultiRig<Lumped> {
+    let mut rig = four(3.0);
+    for l in [
+        "CONFIG SET supply_limit_a 3".to_string(),
+        format!("CONFIG SET supply_budget_w {budget_w}"),
+    ] {
+        assert!(say(&mut rig, &l)[0].starts_with("ok"), "{l}");
+    }
+    rig
+}
+
 /// Holds that every alarm in `events` is link 2's and links 1, 3 and 4 ended `done`.
 fn only_link_2_stopped(events: &[String], what: &str) {
     let alarms: Vec<_> = events.iter().filter(|e| e.contains("alarm:")).collect();
@@ -494,9 +507,7 @@ fn the_least_a_refusal_names_is_taken() {
 /// drop its morph).
 #[test]
 fn a_tune_or_heat_never_takes_a_running_morphs_reserve() {
-    let mut rig = four(3.0);
-    say(&mut rig, "CONFIG SET supply_limit_a 3");
-    say(&mut rig, "CONFIG SET supply_budget_w 4.5");
+    let mut rig = four_under(4.5);
     assert_eq!(say(&mut rig, "@1 MORPH 34"), ["ok"]);
     for _ in 0..3 {
         rig.tick();
@@ -533,9 +544,7 @@ fn a_tune_or_heat_never_takes_a_running_morphs_reserve() {
 /// why: after the user clears the fault and sends RESET, nothing starts by itself.
 #[test]
 fn a_fault_drops_its_links_queued_morph_at_once() {
-    let mut rig = four(3.0);
-    say(&mut rig, "CONFIG SET supply_limit_a 3");
-    say(&mut rig, "CONFIG SET supply_budget_w 5");
+    let mut rig = four_under(5.0);
     assert_eq!(say(&mut rig, "@1 MORPH 34"), ["ok"]);
     assert_eq!(say(&mut rig, "@2 MORPH 46"), ["ok"]);
     assert!(rig.links.queued(1));
@@ -569,9 +578,7 @@ fn a_fault_drops_its_links_queued_morph_at_once() {
 /// hot, which a cold TCA passes) is dropped with the reason.
 #[test]
 fn a_queued_morph_never_waits_for_good() {
-    let mut rig = four(3.0);
-    say(&mut rig, "CONFIG SET supply_limit_a 3");
-    say(&mut rig, "CONFIG SET supply_budget_w 4.5");
+    let mut rig = four_under(4.5);
     assert_eq!(say(&mut rig, "@1 MORPH 46"), ["ok"]);
     assert_eq!(say(&mut rig, "@2 MORPH 34"), ["ok"]);
     assert!(rig.links.queued(1));
@@ -629,9 +636,7 @@ fn a_queued_morph_never_waits_for_good() {
     assert!(rig.links.idle());
 
     // A limit lowered under a budget it cannot give is refused.
-    let mut rig = four(3.0);
-    say(&mut rig, "CONFIG SET supply_limit_a 3");
-    say(&mut rig, "CONFIG SET supply_budget_w 30");
+    let mut rig = four_under(30.0);
     let r = say(&mut rig, "CONFIG SET supply_limit_a 2");
     assert!(
         r[0].starts_with("error: out-of-range supply_limit_a 2.00 A gives"),
@@ -642,9 +647,7 @@ fn a_queued_morph_never_waits_for_good() {
 
 #[test]
 fn an_unaddressed_abort_stops_every_link_and_empties_the_queue() {
-    let mut rig = four(3.0);
-    say(&mut rig, "CONFIG SET supply_limit_a 3");
-    say(&mut rig, "CONFIG SET supply_budget_w 5");
+    let mut rig = four_under(5.0);
     assert_eq!(say(&mut rig, "GAIT 34 38 42 46"), ["ok"]);
     for _ in 0..30 {
         rig.tick();
@@ -803,9 +806,7 @@ fn gait_finishes<P: morphlink_plant::Plant>(
 #[test]
 fn the_supply_settings_kept_by_save_come_back_only_if_still_in_range() {
     use morphlink::budget::SupplyBudget;
-    let mut rig = four(3.0);
-    say(&mut rig, "CONFIG SET supply_limit_a 3");
-    say(&mut rig, "CONFIG SET supply_budget_w 8");
+    let mut rig = four_under(8.0);
     let kept = rig
         .links
         .board_record(0)

@@ -104,6 +104,21 @@ pub fn classify(line: &str) -> LineKind {
     }
 }
 
+/// `GAIT <r1> .. <rN>[ <mode>]`, the line a client sends for a gait (radii in mm, each in its
+/// shortest form): morphctl's and the xtasks' one spelling of it.
+pub fn gait_line(radii_mm: &[f32], mode: Option<&str>) -> super::OutLine {
+    use core::fmt::Write;
+    let mut l = super::OutLine::new();
+    let _ = l.push_str("GAIT");
+    for r in radii_mm {
+        let _ = write!(l, " {r}");
+    }
+    if let Some(m) = mode {
+        let _ = write!(l, " {m}");
+    }
+    l
+}
+
 /// True if `line` ends a command's reply (`ok`, `ok ...` or `error:...`).
 pub fn is_final_reply(line: &str) -> bool {
     classify(line).is_final()

@@ -52,6 +52,13 @@ pub const TUNE_COOL_S: f32 = 30.0;
 /// cap), about 30 K of rise in water: under the glass transition in all but the warmest
 /// water.
 pub const TUNE_PLA_W: f32 = 1.0;
+/// What a tune holds of the supply while it runs, W: each step's power, both together (a
+/// shared budget keeps them for it from its first tick, `Controller::reserve_w`).
+pub const TUNE_STEP_POWERS: Powers = Powers {
+    pla_w: TUNE_PLA_W,
+    tca_w: TUNE_TCA_W,
+};
+
 /// Length of the PLA step, s: about three of its thermistor's time constants.
 pub const TUNE_PLA_S: f32 = 90.0;
 /// A heated step ends early once its thermistor has risen this far above the baseline, K

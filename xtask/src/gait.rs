@@ -365,14 +365,7 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         return Err(format!("1 to {MAX_LINKS} targets, one per link"));
     }
     let (plants, noise) = links(n, a.medium)?;
-    let gait = format!(
-        "GAIT {}",
-        a.targets_mm
-            .iter()
-            .map(|t| t.to_string())
-            .collect::<Vec<_>>()
-            .join(" ")
-    );
+    let gait = morphlink::protocol::client::gait_line(&a.targets_mm, None).to_string();
     // Each link alone, no budget: its own fastest morph, its energy and its error.
     let alone_jobs: Vec<usize> = (0..n).collect();
     let alone: Vec<Run> = parallel(&alone_jobs, a.threads, "links alone", |&k| {

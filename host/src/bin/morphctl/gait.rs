@@ -208,15 +208,7 @@ pub fn start(link: &mut Link, o: &Opts, events: &mut Vec<String>) -> Result<usiz
             n
         )));
     }
-    let line = format!(
-        "GAIT {} {}",
-        o.radii_mm
-            .iter()
-            .map(|r| r.to_string())
-            .collect::<Vec<_>>()
-            .join(" "),
-        o.mode
-    );
+    let line = morphlink::protocol::client::gait_line(&o.radii_mm, Some(&o.mode));
     if let Err(e) = morphlink::protocol::links::check_line(&line) {
         return Err(MorphEnd::Failed(format!(
             "GAIT refused before anything was sent: {}",
