@@ -806,7 +806,7 @@ fn gait_finishes<P: morphlink_plant::Plant>(
 #[test]
 fn the_supply_settings_kept_by_save_come_back_only_if_still_in_range() {
     use morphlink::budget::SupplyBudget;
-    let mut rig = four_under(8.0);
+    let rig = four_under(8.0);
     let kept = rig
         .links
         .board_record(0)
