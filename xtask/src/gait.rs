@@ -3,7 +3,8 @@
 //! on one bench supply, for each budget (the first one soften's worth: the least under which
 //! each of the gait's morphs starts); each link also morphs alone with no budget. Prints,
 //! per budget, the makespan (every link `done`) against its lower bound (the slowest link's
-//! own morph, and the total energy of the links' own morphs over the budget), the highest
+//! own morph, and the total energy of the links' own morphs over the budget) and against the
+//! best schedule of the links' bends as they run alone ([`bends_as_alone_s`]), the highest
 //! summed heater power of any tick (as the controllers reckon it and as the plants took it)
 //! against the budget, the highest instantaneous current of any PWM period against the
 //! supply's limit, the alarms, and each link's final error against its error alone. Fails if
@@ -132,6 +133,124 @@ pub struct Run {
     pub queued: usize,
     /// (time, each link's power, total, each link's true radius) per tick, for the trace.
     pub trace: Vec<(f64, Vec<f64>, f64, Vec<f64>)>,
+    /// Each link's phases, as [`bends_as_alone_s`] takes them.
+    pub phases: Vec<Phases>,
+}
+
+/// How long one link spent in its morph's phases, s, and the least power its heaters drew in
+/// bend, W: what [`bends_as_alone_s`] takes of a link's morph alone.
+#[derive(Clone, Debug, Default)]
+pub struct Phases {
+    /// From the command to the end of soften (a rest included), s.
+    pub soften_s: f64,
+    /// Bend, s.
+    pub bend_s: f64,
+    /// From the end of bend to `done` (lock and release), s.
+    pub after_s: f64,
+    /// The lowest mean power of both heaters over any [`HOLD_WINDOW_S`] of bend, W (its
+    /// whole bend if shorter): the PLA's hold of a soft rod and the TCA's heat.
+    pub hold_w: f64,
+    /// Both heaters' powers in bend so far, one per tick, W.
+    bend_w: Vec<f64>,
+}
+
+/// The window a bend's power is averaged over, s: long enough to smooth the controllers'
+/// ripple, short enough that the lowest window is what bend never went under.
+pub const HOLD_WINDOW_S: f64 = 5.0;
+
+impl Phases {
+    /// Adds one tick of `dt_s` in `phase` with both heaters at `power_w`.
+    fn note(&mut self, phase: morphlink::vocab::Phase, power_w: f64, dt_s: f64) {
+        use morphlink::vocab::Phase::*;
+        match phase {
+            Rest | Soften => self.soften_s += dt_s,
+            Bend => {
+                self.bend_s += dt_s;
+                self.bend_w.push(power_w);
+            }
+            Lock | Release => self.after_s += dt_s,
+            _ => {}
+        }
+    }
+
+    /// Fixes [`Phases::hold_w`] from bend's powers, `dt_s` apart.
+    fn finish(&mut self, dt_s: f64) {
+        let p = std::mem::take(&mut self.bend_w);
+        let w = ((HOLD_WINDOW_S / dt_s).round() as usize).clamp(1, p.len().max(1));
+        self.hold_w = p
+            .windows(w)
+            .map(|s| s.iter().sum::<f64>() / w as f64)
+            .fold(f64::INFINITY, f64::min);
+        if !self.hold_w.is_finite() {
+            self.hold_w = 0.0;
+        }
+    }
+}
+
+/// The shortest makespan of the links' own morphs under `budget_w`, s, if each bend runs as
+/// it runs alone: as long, and drawing throughout at least the least it drew alone
+/// ([`Phases::hold_w`]); each soften at least as long as alone before it, each lock and
+/// release as long as alone after it, and soften and lock taken as drawing nothing. So it
+/// bounds from below any schedule that bends each link as alone; a scheduler that throttles a
+/// bend's TCA trades a longer bend, and more of its PLA's hold, for room beside it, which this
+/// does not bound. Exact for the rigid bends: the serial schedule (each bend at the earliest
+/// moment it fits beside the bends already placed) over every order gives every active
+/// schedule, among which is a shortest.
+pub fn bends_as_alone_s(links: &[Phases], budget_w: f64) -> f64 {
+    fn orders(n: usize) -> Vec<Vec<usize>> {
+        if n == 0 {
+            return vec![vec![]];
+        }
+        let mut out = Vec::new();
+        for o in orders(n - 1) {
+            for at in 0..=o.len() {
+                let mut v = o.clone();
+                v.insert(at, n - 1);
+                out.push(v);
+            }
+        }
+        out
+    }
+    let mut best = f64::INFINITY;
+    for order in orders(links.len()) {
+        // (start, end, hold) of the bends placed.
+        let mut placed: Vec<(f64, f64, f64)> = Vec::new();
+        let mut makespan = 0.0f64;
+        for &k in &order {
+            let l = &links[k];
+            // A link that bent under this budget drew no more than it.
+            let hold = l.hold_w.min(budget_w);
+            let fits = |t: f64| {
+                let load_at = |x: f64| {
+                    placed
+                        .iter()
+                        .filter(|(s, e, _)| *s <= x && x < *e)
+                        .map(|p| p.2)
+                        .sum::<f64>()
+                };
+                std::iter::once(t)
+                    .chain(
+                        placed
+                            .iter()
+                            .map(|p| p.0)
+                            .filter(|&s| t < s && s < t + l.bend_s),
+                    )
+                    .all(|x| load_at(x) + hold <= budget_w + 1e-9)
+            };
+            let mut starts: Vec<f64> = std::iter::once(l.soften_s)
+                .chain(placed.iter().map(|p| p.1).filter(|&e| e > l.soften_s))
+                .collect();
+            starts.sort_by(f64::total_cmp);
+            let t = starts
+                .into_iter()
+                .find(|&t| fits(t))
+                .expect("the last end fits");
+            placed.push((t, t + l.bend_s, hold));
+            makespan = makespan.max(t + l.bend_s + l.after_s);
+        }
+        best = best.min(makespan);
+    }
+    best
 }
 
 /// The budget a [`run`] is under.
@@ -219,6 +338,7 @@ pub fn run(
         least,
         done_s: vec![f64::NAN; n],
         min_v: f64::INFINITY,
+        phases: vec![Phases::default(); n],
         ..Run::default()
     };
     for l in &lines {
@@ -257,6 +377,16 @@ pub fn run(
             let radii = (0..n).map(|k| rig.radius_mm(k)).collect();
             r.trace.push((elapsed_s, each, t.reckoned_w, radii));
         }
+        for (k, ph) in r.phases.iter_mut().enumerate() {
+            if r.done_s[k].is_nan() {
+                let c = rig.links.link(k);
+                ph.note(
+                    c.phase(),
+                    (c.powers().pla_w + c.powers().tca_w) as f64,
+                    dt_s,
+                );
+            }
+        }
         if last_done_ms.is_none() {
             r.energy_j += t.power_w * dt_s;
             r.max_reckoned_w = r.max_reckoned_w.max(t.reckoned_w);
@@ -279,6 +409,9 @@ pub fn run(
         }
     }
     r.radius_mm = (0..n).map(|k| rig.radius_mm(k)).collect();
+    for ph in &mut r.phases {
+        ph.finish(dt_s);
+    }
     r
 }
 
@@ -410,6 +543,22 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         fmt_list(&alone_err.iter().map(|e| e.abs()).collect::<Vec<_>>(), 2),
         energy_j
     );
+    let _ = writeln!(
+        out,
+        "alone, soften / bend / lock and release s, least power in bend W: {}",
+        alone
+            .iter()
+            .map(|r| {
+                let p = &r.phases[0];
+                format!(
+                    "{:.1} / {:.1} / {:.1}, {:.2}",
+                    p.soften_s, p.bend_s, p.after_s, p.hold_w
+                )
+            })
+            .collect::<Vec<_>>()
+            .join("; ")
+    );
+    let alone_phases: Vec<Phases> = alone.iter().map(|r| r.phases[0].clone()).collect();
     if let Some(pp) = &spread {
         let _ = writeln!(
             out,
@@ -420,11 +569,11 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
     }
     let _ = writeln!(
         out,
-        "| budget W | makespan s | lower bound s | ratio | max power W (reckoned / true) | peak A | min V | queued | worst |error| vs alone pp | alarms |"
+        "| budget W | makespan s | lower bound s | ratio | bends as alone s | ratio | max power W (reckoned / true) | peak A | min V | queued | worst |error| vs alone pp | alarms |"
     );
     let _ = writeln!(
         out,
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     );
     let mut failures = Vec::new();
     for r in &runs {
@@ -436,6 +585,12 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         } else {
             slowest_s
         };
+        let rigid = if *b > 0.0 {
+            // Never under the lower bound: soften's and lock's power are not in it.
+            bends_as_alone_s(&alone_phases, *b as f64).max(bound)
+        } else {
+            bound
+        };
         let worse_pp = (0..n)
             .map(|k| error_pct(r.radius_mm[k], a.targets_mm[k]).abs() - alone_err[k].abs())
             .fold(f64::NEG_INFINITY, f64::max);
@@ -446,7 +601,7 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
         };
         let _ = writeln!(
             out,
-            "| {name} | {} | {:.1} | {} | {:.2} / {:.2} | {:.2} | {:.2} | {} | {:+.2} | {} |",
+            "| {name} | {} | {:.1} | {} | {:.1} | {} | {:.2} / {:.2} | {:.2} | {:.2} | {} | {:+.2} | {} |",
             if all_done {
                 format!("{makespan:.1}")
             } else {
@@ -455,6 +610,12 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
             bound,
             if all_done {
                 format!("{:.2}", makespan / bound)
+            } else {
+                "-".into()
+            },
+            rigid,
+            if all_done {
+                format!("{:.2}", makespan / rigid)
             } else {
                 "-".into()
             },
@@ -599,4 +760,54 @@ fn fmt_list(v: &[f64], decimals: usize) -> String {
         .map(|x| format!("{x:.decimals$}"))
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn link(soften_s: f64, bend_s: f64, after_s: f64, hold_w: f64) -> Phases {
+        Phases {
+            soften_s,
+            bend_s,
+            after_s,
+            hold_w,
+            ..Phases::default()
+        }
+    }
+
+    #[test]
+    fn bends_that_do_not_fit_together_run_one_after_another() {
+        let l = [link(4.0, 50.0, 10.0, 3.0), link(5.0, 40.0, 15.0, 3.0)];
+        // 6 W takes both at once: the slower alone bounds it.
+        assert_eq!(bends_as_alone_s(&l, 6.0), 64.0);
+        // 5 W takes one: the best order bends the second first (5 + 40), then the first
+        // (45 + 50 + 10): 105 s; the other order gives 4 + 50 + 40 + 15 = 109 s.
+        assert_eq!(bends_as_alone_s(&l, 5.0), 105.0);
+    }
+
+    #[test]
+    fn a_bend_fits_beside_another_only_where_their_sum_fits_the_budget() {
+        // Two bends of 2 W fit 5 W beside each other, a third of 2 W waits for one of them.
+        let l = [
+            link(0.0, 10.0, 0.0, 2.0),
+            link(0.0, 20.0, 0.0, 2.0),
+            link(0.0, 10.0, 0.0, 2.0),
+        ];
+        assert_eq!(bends_as_alone_s(&l, 5.0), 20.0);
+        assert_eq!(bends_as_alone_s(&l, 3.0), 40.0);
+    }
+
+    #[test]
+    fn a_hold_is_the_least_window_of_its_bend() {
+        let mut p = Phases::default();
+        for k in 0..100 {
+            let w = if (40..60).contains(&k) { 1.0 } else { 3.0 };
+            p.note(morphlink::vocab::Phase::Bend, w, 0.1);
+        }
+        p.finish(0.1);
+        assert!((p.bend_s - 10.0).abs() < 1e-9);
+        // The 5 s windows over the 2 s dip: the lowest has 2 s at 1 W and 3 s at 3 W.
+        assert!((p.hold_w - 2.2).abs() < 1e-9, "{}", p.hold_w);
+    }
 }
