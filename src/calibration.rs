@@ -45,6 +45,12 @@ pub struct FieldInfo {
     pub doc: &'static str,
 }
 
+/// [`FIELDS`]' row of [`Calibration::tca_self_bend`], a switch: `CONFIG SET` takes it as one
+/// of [`SWITCH_CHOICES`], so that no value between off and on is taken for either.
+pub const SELF_BEND_FIELD: usize = 15;
+/// The words a switch takes: 0 (off) and 1 (on), the value being the word's index.
+pub const SWITCH_CHOICES: [&str; 2] = ["0", "1"];
+
 /// Smallest rise per watt `TUNE` accepts, as a share of the model's: a bead that sees under a
 /// third of its heater's rise is off its heater (or the link is in a stirred bath far from the
 /// model), and the observer would amplify its noise threefold.
@@ -487,7 +493,7 @@ impl Calibration {
             12 => &mut self.power_sum_ratio,
             13 => &mut self.convection_w_m2k,
             14 => &mut self.tca_tcr_ppm_per_k,
-            15 => &mut self.tca_self_bend,
+            SELF_BEND_FIELD => &mut self.tca_self_bend,
             16 => &mut self.tca_strain_k_m,
             17 => &mut self.tca_strain_sd_share,
             18 => &mut self.version,
@@ -519,7 +525,7 @@ impl Calibration {
             12 => self.power_sum_ratio,
             13 => self.convection_w_m2k,
             14 => self.tca_tcr_ppm_per_k,
-            15 => self.tca_self_bend,
+            SELF_BEND_FIELD => self.tca_self_bend,
             16 => self.tca_strain_k_m,
             17 => self.tca_strain_sd_share,
             18 => self.version,

@@ -116,6 +116,10 @@ fn each_bad_config_set_is_refused_with_a_clear_error_and_changes_nothing() {
             "error: bad-argument auto_mode takes one of",
         ),
         (
+            "CONFIG SET tca_self_bend 0.5",
+            "error: bad-argument tca_self_bend takes one of 0|1",
+        ),
+        (
             "CONFIG SET aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa 1",
             "error: bad-argument CONFIG SET: no setting has so long a name",
         ),

@@ -323,14 +323,21 @@ pub const CALIBRATION_SPECS: [Spec; CALIBRATION_SETTINGS] = {
     let mut i = 0;
     while i < CALIBRATION_SETTINGS {
         let f = FIELDS[i];
-        specs[i] = Spec::number(
-            f.name,
-            f.unit,
-            Calibration::DEFAULT.value(i),
-            (f.min, f.max),
-            CALIBRATION_DECIMALS,
-            f.doc,
-        );
+        let choices: &[&str] = match i {
+            crate::calibration::SELF_BEND_FIELD => &crate::calibration::SWITCH_CHOICES,
+            _ => &[],
+        };
+        specs[i] = Spec {
+            choices,
+            ..Spec::number(
+                f.name,
+                f.unit,
+                Calibration::DEFAULT.value(i),
+                (f.min, f.max),
+                CALIBRATION_DECIMALS,
+                f.doc,
+            )
+        };
         i += 1;
     }
     specs
