@@ -92,6 +92,11 @@ pub struct Args {
     /// (docs/shape.md). The other stages keep still surroundings.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub ambient_drift_k_per_h: f64,
+    /// The read chain's four read morphs are measured instead, each with the plant's true
+    /// radius (a `MEASURED` with no error): what rest readings as good as a caliper, and
+    /// better, could buy (docs/shape.md). The "+ 4 read" rows then give that.
+    #[arg(long)]
+    pub true_reads: bool,
 }
 
 impl Args {
@@ -321,6 +326,7 @@ fn read_chain(
     s: &mut u64,
     calipers: usize,
     drift_k_per_h: f64,
+    true_reads: bool,
 ) -> (Calibration, Calibration, Vec<ShapeRow>) {
     let (min, max) = table::range_mm();
     let mut rig = rig(link, cal);
@@ -367,10 +373,14 @@ fn read_chain(
             rig.handle_line("ABORT", &mut |_| {});
             break;
         }
-        // The first `calipers` are measured 60 s after done, by the user.
-        let measured = (step < calipers).then(|| {
+        // The first `calipers` are measured 60 s after done, by the user; with `true_reads`
+        // the rest too, without error.
+        let measured = (step < calipers || true_reads).then(|| {
             let settled = wait_settled(&mut rig, drift);
-            settled + uniform(s, (-MEASURE_ERROR_MM, MEASURE_ERROR_MM))
+            match step < calipers {
+                true => settled + uniform(s, (-MEASURE_ERROR_MM, MEASURE_ERROR_MM)),
+                false => settled,
+            }
         });
         let (line, true_mm, after_s) = wait_shape(&mut rig, measured, drift);
         if step + 1 == calipers {
@@ -509,8 +519,9 @@ fn run_link(link: &Link, targets: &[f32], args: &Args) -> LinkResult {
         evals.extend(evaluate(link, &cal, Some(k + 1), targets));
     }
     let drift = args.ambient_drift_k_per_h;
-    let (chain_cal, read_cal, shapes) = read_chain(link, &tuned, &mut s, 1, drift);
-    let (_, _, shapes2) = read_chain(link, &tuned, &mut s, 2, drift);
+    let truth = args.true_reads;
+    let (chain_cal, read_cal, shapes) = read_chain(link, &tuned, &mut s, 1, drift, truth);
+    let (_, _, shapes2) = read_chain(link, &tuned, &mut s, 2, drift, truth);
     evals.extend(evaluate(link, &chain_cal, Some(CHAIN_STAGE), targets));
     evals.extend(evaluate(link, &read_cal, Some(READ_STAGE), targets));
     LinkResult {
