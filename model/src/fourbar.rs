@@ -654,10 +654,12 @@ pub fn inverse(
     let radii: Vec<f64> = (0..=INVERSE_SCAN)
         .map(|i| lo + (hi - lo) * i as f64 / INVERSE_SCAN as f64)
         .collect();
-    let mut vals = Vec::with_capacity(radii.len());
+    let mut raw = Vec::with_capacity(radii.len());
     for &r in &radii {
-        vals.push(value(r)? - want_mm);
+        raw.push(value(r)?);
     }
+    // Only the signs of the differences are used: they stay right for any finite want.
+    let vals: Vec<f64> = raw.iter().map(|v| v - want_mm).collect();
     let mut found = Vec::new();
     for i in 0..INVERSE_SCAN {
         let (mut a, mut b, mut fa) = (radii[i], radii[i + 1], vals[i]);
@@ -685,23 +687,30 @@ pub fn inverse(
     if !found.is_empty() {
         return Ok(Inverse::Found(found));
     }
-    let span_mm = vals
+    let span_mm = raw
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-            (a.min(v + want_mm), b.max(v + want_mm))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
         });
-    let best = (0..vals.len())
-        .min_by(|&i, &j| vals[i].abs().total_cmp(&vals[j].abs()))
+    // How far a value is from the wanted one, in an order that holds however far that lies:
+    // over the span the largest value is nearest, under it the smallest.
+    let miss = |v: f64| {
+        if want_mm >= span_mm.1 {
+            -v
+        } else if want_mm <= span_mm.0 {
+            v
+        } else {
+            (v - want_mm).abs()
+        }
+    };
+    let best = (0..raw.len())
+        .min_by(|&i, &j| miss(raw[i]).total_cmp(&miss(raw[j])))
         .expect("scan points");
     let (a, b) = (
         radii[best.saturating_sub(1)],
         radii[(best + 1).min(INVERSE_SCAN)],
     );
-    let r = golden_min(
-        |r| value(r).map_or(f64::INFINITY, |v| (v - want_mm).abs()),
-        a,
-        b,
-    );
+    let r = golden_min(|r| value(r).map_or(f64::INFINITY, miss), a, b);
     Ok(Inverse::Unreachable {
         span_mm,
         nearest: (r, value(r)?),
@@ -1094,5 +1103,27 @@ mod tests {
             "{span_mm:?} {nearest:?}"
         );
         assert!(nearest.0 >= range.0 && nearest.0 <= range.1);
+    }
+
+    #[test]
+    fn the_inverse_of_a_value_far_out_of_reach_names_the_span_and_its_nearest_end() {
+        let g = FourBarGeometry::DEFAULT;
+        let range = reachable();
+        let span = |want: f64| match inverse(g, L, range, Property::Height, want).unwrap() {
+            Inverse::Unreachable { span_mm, nearest } => (span_mm, nearest),
+            Inverse::Found(s) => panic!("{want}: {s:?}"),
+        };
+        let (near, _) = span(1e3);
+        for want in [1e20, -1e20, f64::MAX] {
+            let (span_mm, nearest) = span(want);
+            // The span is the property's, whatever was wanted.
+            assert!((span_mm.0 - near.0).abs() < 1e-9 && (span_mm.1 - near.1).abs() < 1e-9);
+            assert!(span_mm.1 > span_mm.0, "{span_mm:?}");
+            let end = if want > 0.0 { span_mm.1 } else { span_mm.0 };
+            assert!(
+                (nearest.1 - end).abs() < 1e-6,
+                "{want}: {nearest:?} {span_mm:?}"
+            );
+        }
     }
 }
