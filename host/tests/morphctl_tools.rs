@@ -1002,3 +1002,18 @@ fn a_gait_logs_a_row_per_link_under_its_budget_and_plots_it() {
         "{err}"
     );
 }
+
+#[test]
+fn a_simulator_that_exits_at_once_is_reported_with_what_it_said() {
+    let program = format!("'{MORPH_SIM}' --no-such-option");
+    let out = morphctl(&["--sim", "--sim-program", &program, "status"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(
+            "morph-sim closed the link; it said: error: unexpected argument '--no-such-option'"
+        ),
+        "{err}"
+    );
+    assert!(!err.contains("is this a morphlink board"), "{err}");
+}

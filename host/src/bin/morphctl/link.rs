@@ -32,6 +32,12 @@ pub const MAX_REPLY_LINE: usize = morphlink::protocol::OUT_LINE_BYTES;
 const LINE_QUEUE: usize = 256;
 /// Longest a wait for a line goes without looking at the signal flag, ms.
 const SIGNAL_POLL_MS: u64 = 50;
+/// The simulator's last stderr lines kept, to say why it closed the link (its own error, such
+/// as an option it refused): its stderr is not shown as it runs, since it would tear the
+/// live view.
+const STDERR_TAIL_LINES: usize = 8;
+/// How long a closed link waits for the simulator's stderr to end before it reports, ms.
+const STDERR_WAIT_MS: u64 = 500;
 
 /// Why a link operation failed.
 #[derive(Clone, Debug, PartialEq)]
@@ -155,6 +161,49 @@ pub struct Link {
     /// How many links the device drives, as far as morphctl knows (1 until a gait asks
     /// `LINKS`): stopping the heaters then checks every link's STATUS.
     pub links: usize,
+    /// The simulator's stderr: its last lines, and the thread that reads them.
+    stderr: Option<StderrTail>,
+}
+
+/// The last [`STDERR_TAIL_LINES`] lines of a child's stderr, read on a thread.
+struct StderrTail {
+    lines: Arc<std::sync::Mutex<std::collections::VecDeque<String>>>,
+    reader: std::thread::JoinHandle<()>,
+}
+
+impl StderrTail {
+    fn spawn(source: impl Read + Send + 'static) -> StderrTail {
+        let lines = Arc::new(std::sync::Mutex::new(std::collections::VecDeque::new()));
+        let kept = Arc::clone(&lines);
+        let reader = std::thread::spawn(move || {
+            use std::io::BufRead;
+            for l in std::io::BufReader::new(source)
+                .split(b'\n')
+                .map_while(Result::ok)
+            {
+                let mut q = kept.lock().unwrap_or_else(|e| e.into_inner());
+                if q.len() == STDERR_TAIL_LINES {
+                    q.pop_front();
+                }
+                let l: String = String::from_utf8_lossy(&l)
+                    .chars()
+                    .take(MAX_REPLY_LINE)
+                    .collect();
+                q.push_back(l);
+            }
+        });
+        StderrTail { lines, reader }
+    }
+
+    /// Its lines so far, once the stream has ended or [`STDERR_WAIT_MS`] have passed.
+    fn said(&self) -> Vec<String> {
+        let until = Instant::now() + Duration::from_millis(STDERR_WAIT_MS);
+        while !self.reader.is_finished() && Instant::now() < until {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let q = self.lines.lock().unwrap_or_else(|e| e.into_inner());
+        q.iter().filter(|l| !l.trim().is_empty()).cloned().collect()
+    }
 }
 
 /// Error text for a serial port that could not be opened.
@@ -275,6 +324,21 @@ impl Link {
             name,
             plant: None,
             links: 1,
+            stderr: None,
+        }
+    }
+
+    /// Why the link closed: `why`, and what the simulator said on its stderr, if anything.
+    fn closed(&self, why: String) -> LinkError {
+        let said = self
+            .stderr
+            .as_ref()
+            .map(StderrTail::said)
+            .unwrap_or_default();
+        if said.is_empty() {
+            LinkError::Closed(why)
+        } else {
+            LinkError::Closed(format!("{why}; it said: {}", said.join(" / ")))
         }
     }
 
@@ -356,7 +420,7 @@ impl Link {
                     .arg(format!("{speed}"))
                     .stdin(Stdio::piped())
                     .stdout(Stdio::piped())
-                    .stderr(Stdio::null())
+                    .stderr(Stdio::piped())
                     // Its own process group: a terminal's Ctrl-C reaches morphctl only, which
                     // then still has a simulator to send ABORT to.
                     .process_group(0)
@@ -369,6 +433,7 @@ impl Link {
                     })?;
                 let stdin = child.stdin.take().expect("piped stdin");
                 let stdout = child.stdout.take().expect("piped stdout");
+                let stderr = StderrTail::spawn(child.stderr.take().expect("piped stderr"));
                 let mut link = Link::new(
                     Box::new(stdin),
                     spawn_reader(stdout, "morph-sim".into()),
@@ -377,6 +442,7 @@ impl Link {
                     "morph-sim".into(),
                 );
                 link.plant = Some(sim_plant(args, plant.as_deref()));
+                link.stderr = Some(stderr);
                 Ok(link)
             }
         }
@@ -384,10 +450,11 @@ impl Link {
 
     /// Sends one line.
     pub fn send(&mut self, line: &str) -> Result<(), LinkError> {
-        self.writer
+        let sent = self
+            .writer
             .write_all(format!("{line}\n").as_bytes())
-            .and_then(|_| self.writer.flush())
-            .map_err(|e| LinkError::Closed(format!("cannot write to {}: {e}", self.name)))
+            .and_then(|_| self.writer.flush());
+        sent.map_err(|e| self.closed(format!("cannot write to {}: {e}", self.name)))
     }
 
     /// Next received line within `timeout`; `Ok(None)` if none arrived. Over-long lines are
@@ -411,11 +478,11 @@ impl Link {
                         self.name
                     );
                 }
-                Ok(Incoming::Closed(why)) => return Err(LinkError::Closed(why)),
+                Ok(Incoming::Closed(why)) => return Err(self.closed(why)),
                 Err(RecvTimeoutError::Timeout) if left.is_zero() => return Ok(None),
                 Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => {
-                    return Err(LinkError::Closed(format!("{} closed the link", self.name)))
+                    return Err(self.closed(format!("{} closed the link", self.name)))
                 }
             }
         }
@@ -496,6 +563,8 @@ impl Link {
         let (_, reply) = self
             .command("VERSION", HANDSHAKE_TIMEOUT_S, &mut |_| {})
             .map_err(|e| match e {
+                // A simulator that exited has said why (its stderr, in the error).
+                LinkError::Closed(_) if self.stderr.is_some() => e.to_string(),
                 LinkError::Interrupted(_) => e.to_string(),
                 _ => format!("{e}; is this a morphlink board? (it must answer VERSION with `ok version=.. protocol={PROTOCOL}`)")
             })?;
