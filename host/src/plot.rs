@@ -101,14 +101,27 @@ pub trait Figure {
 
 /// Writes `figure` into `path` (`.svg` or `.png`, by extension) at `size` pixels.
 pub fn write(path: &Path, size: (u32, u32), figure: &impl Figure) -> PlotResult {
-    match Format::of(path)? {
+    let done = match Format::of(path)? {
         Format::Svg => page(SVGBackend::new(path, size).into_drawing_area(), |root| {
             figure.draw(root, Format::Svg)
         }),
         Format::Png => page(BitMapBackend::new(path, size).into_drawing_area(), |root| {
             figure.draw(root, Format::Png)
         }),
-    }
+    };
+    naming(path, done)
+}
+
+/// `done`, its error naming the file and saying what went wrong without plotters' layers of
+/// "backend error" (`cannot write d/x.svg: No such file or directory (os error 2)`).
+fn naming(path: &Path, done: PlotResult) -> PlotResult {
+    done.map_err(|e| {
+        let mut why = e.0.as_str();
+        for layer in ["backend error: ", "Drawing backend error: "] {
+            why = why.strip_prefix(layer).unwrap_or(why);
+        }
+        PlotError(format!("cannot write {}: {why}", path.display()))
+    })
 }
 
 /// Writes an SVG chart into `path` at `size` pixels, drawn by `draw` (whatever `path` ends in).
@@ -117,7 +130,10 @@ pub fn write_svg(
     size: (u32, u32),
     draw: impl FnOnce(&DrawingArea<SVGBackend<'_>, Shift>) -> PlotResult,
 ) -> PlotResult {
-    page(SVGBackend::new(path, size).into_drawing_area(), draw)
+    naming(
+        path,
+        page(SVGBackend::new(path, size).into_drawing_area(), draw),
+    )
 }
 
 /// White page, the drawing, then the file.

@@ -395,7 +395,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                     match telemetry::plot(&samples, &title, &path) {
                         Ok(()) => println!("plot: {}", path.display()),
                         Err(e) => {
-                            eprintln!("morphctl: plot {}: {e}", path.display());
+                            eprintln!("morphctl: plot: {e}");
                             code = ExitCode::FAILURE;
                         }
                     }
@@ -454,7 +454,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 if samples.is_empty() {
                     println!("plot: skipped, no samples were logged");
                 } else if let Err(e) = gait::plot(&samples, &title, &path) {
-                    eprintln!("morphctl: plot {}: {e}", path.display());
+                    eprintln!("morphctl: plot: {e}");
                     code = ExitCode::FAILURE;
                 } else {
                     println!("plot: {}", path.display());
