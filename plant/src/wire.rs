@@ -357,7 +357,8 @@ pub fn answer<P: Plant + ?Sized>(plant: &mut P, line: &str, w: &mut impl Write) 
 
 /// Answers `plant` over the protocol: one reply line to each request line of `input`, until
 /// the end of `input` (then returns `Ok`). A line that is not a request gets `error: ...` and
-/// the loop goes on; the rig decides what an error means.
+/// the loop goes on; the rig decides what an error means. A `step` or `set` before a `hello`
+/// of this protocol is refused: the plant does not yet know the rig speaks its protocol.
 #[cfg(any(test, feature = "std"))]
 pub fn serve<P: Plant + ?Sized>(
     plant: &mut P,
@@ -365,9 +366,24 @@ pub fn serve<P: Plant + ?Sized>(
     mut output: impl std::io::Write,
 ) -> std::io::Result<()> {
     let mut reply = std::string::String::new();
+    let mut greeted = false;
     for line in input.lines() {
         let line = line?;
         reply.clear();
+        match parse_request(&line) {
+            Ok(Request::Hello { protocol, .. }) => greeted |= protocol == PROTOCOL,
+            Ok(_) if !greeted => {
+                let _ = write_error(
+                    &mut reply,
+                    format_args!("hello first: `hello protocol={PROTOCOL} tick_s=<s>`"),
+                );
+                reply.push('\n');
+                output.write_all(reply.as_bytes())?;
+                output.flush()?;
+                continue;
+            }
+            _ => {}
+        }
         let _ = answer(plant, &line, &mut reply);
         reply.push('\n');
         output.write_all(reply.as_bytes())?;
@@ -655,5 +671,25 @@ mod tests {
         assert_eq!(parse_reply(lines[0]), Ok(Reply::Ok(SAMPLE)));
         assert_eq!(parse_reply(lines[1]), Ok(Reply::Ok(SAMPLE)));
         assert_eq!(lines[2], "error: unknown verb: `nonsense`");
+    }
+
+    #[test]
+    fn serve_refuses_a_step_or_set_before_a_hello_of_its_protocol() {
+        let input = b"step dt_s=0.1 pla_duty=0 tca_duty=0\nset supply_v=5\n\
+            hello protocol=2 tick_s=0.1\nstep dt_s=0.1 pla_duty=0 tca_duty=0\n\
+            hello protocol=1 tick_s=0.1\nstep dt_s=0.1 pla_duty=0 tca_duty=0\n";
+        let mut out = std::vec::Vec::new();
+        serve(&mut Fixed, &input[..], &mut out).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        let lines: std::vec::Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 6, "{text}");
+        let first = "error: hello first: `hello protocol=1 tick_s=<s>`";
+        assert_eq!([lines[0], lines[1], lines[3]], [first; 3], "{text}");
+        assert!(
+            lines[2].starts_with("error: unsupported protocol=2"),
+            "{text}"
+        );
+        assert_eq!(parse_reply(lines[4]), Ok(Reply::Ok(SAMPLE)));
+        assert_eq!(parse_reply(lines[5]), Ok(Reply::Ok(SAMPLE)));
     }
 }
