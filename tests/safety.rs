@@ -1466,3 +1466,27 @@ fn healthy_morphs_raise_no_false_alarm_on_either_link() {
         }
     }
 }
+
+#[test]
+fn reset_refused_while_a_bead_still_reads_high_names_the_fault_as_its_alarm_did() {
+    // Where current is sensed, a bead reading high with no current is its own fault; on the
+    // paper's wiring it is a heater that nothing commands. The refusal says the same.
+    for sensed in [true, false] {
+        let mut b = Bench::new();
+        if !sensed {
+            b = b.thermistors_only();
+        }
+        b.run_for(20.0);
+        assert!(b.send("SIM FAULT thermistor-drift pla 0.3")[0].starts_with("ok"));
+        let a = expect_alarm_of(&mut b, &["sensor-implausible", "heating-while-off"], 30.0);
+        let code = code_of(&a).to_string();
+        assert_eq!(code == "sensor-implausible", sensed, "{a}");
+        b.run_for(20.0);
+        let r = b.send("RESET");
+        assert!(
+            r[0].starts_with(&format!("error: fault-active {code} pla")),
+            "{sensed}: {a} / {r:?}"
+        );
+        assert!(r[0].contains("MOSFET") != sensed, "{r:?}");
+    }
+}

@@ -355,13 +355,11 @@ impl Supervisor {
             let i = heater.index();
             let c = &self.change[i];
             if self.envelope[i].above_now || c.sum_k(Side::Above) > 0.5 * CHANGE_LIMIT_K {
-                // How far above the hull it reads, or how far it rose beyond every member.
+                // How far above the hull it reads, or how far it rose beyond every member,
+                // named as the alarm names it (where current is sensed, the bead's own fault).
                 let y_k = self.last_c[heater.sensor().index()] - self.last_c[Sensor::Amb.index()];
-                return Err(Fault {
-                    code: FaultCode::HeatingWhileOff,
-                    subject: Subject::Heater(heater),
-                    value: (y_k - self.expect.bounds_k(i).1).max(c.sum_k(Side::Above)),
-                });
+                let off_k = (y_k - self.expect.bounds_k(i).1).max(c.sum_k(Side::Above));
+                return Err(self.name(i, Side::Above, off_k));
             }
         }
         if let Some(rate_k_per_s) = self.ramp.ramping_k_per_s {
