@@ -40,8 +40,10 @@ fn links(a: &Args) -> Result<Vec<Link>, String> {
     Ok(v)
 }
 
-/// Morphs `rig` to `r_mm` in auto; `None` unless it ends `done` with no alarm.
-fn morph(rig: &mut Rig<Box<dyn Plant>>, r_mm: f32) -> Option<()> {
+/// Morphs `rig` to `r_mm` in auto: seconds from `MORPH` to its end (a rest included);
+/// `None` unless it ends `done` with no alarm.
+fn morph(rig: &mut Rig<Box<dyn Plant>>, r_mm: f32) -> Option<f64> {
+    let t0 = rig.now_ms();
     let mut reply = String::new();
     rig.handle_line(&format!("MORPH {r_mm}"), &mut |l| reply = l.to_string());
     if reply != "ok" {
@@ -59,12 +61,13 @@ fn morph(rig: &mut Rig<Box<dyn Plant>>, r_mm: f32) -> Option<()> {
             break;
         }
     }
-    (ok && !rig.ctrl.busy()).then_some(())
+    (ok && !rig.ctrl.busy()).then_some((rig.now_ms() - t0) as f64 / 1000.0)
 }
 
-/// The final radius error of a morph to `to_mm` (after [`SETTLE_S`]), %: from rest, or right
-/// after a morph to `from_mm`. `None` if a morph did not end `done`.
-fn error_pct(link: &Link, from_mm: Option<f32>, to_mm: f32) -> Option<f64> {
+/// The final radius error of a morph to `to_mm` (after [`SETTLE_S`]), %, and its time (from
+/// `MORPH` to its end, a rest included), s: from rest, or right after a morph to `from_mm`.
+/// `None` if a morph did not end `done`.
+fn error_pct(link: &Link, from_mm: Option<f32>, to_mm: f32) -> Option<(f64, f64)> {
     let mut rig = link.rig();
     for _ in 0..2 * TICKS_PER_S {
         rig.tick();
@@ -73,12 +76,15 @@ fn error_pct(link: &Link, from_mm: Option<f32>, to_mm: f32) -> Option<f64> {
     if let Some(f) = from_mm {
         morph(&mut rig, f)?;
     }
-    morph(&mut rig, to_mm)?;
+    let time_s = morph(&mut rig, to_mm)?;
     for _ in 0..SETTLE_S * TICKS_PER_S {
         rig.tick();
         rig.drain_events(&mut |_| {});
     }
-    Some((rig.radius_mm() - to_mm as f64) / to_mm as f64 * 100.0)
+    Some((
+        (rig.radius_mm() - to_mm as f64) / to_mm as f64 * 100.0,
+        time_s,
+    ))
 }
 
 /// Runs the task.
@@ -108,11 +114,12 @@ pub fn run(args: &Args) -> Result<(), String> {
             .find(|(j, _)| j.0 == l && j.1.is_none() && j.2 == b)
             .and_then(|(_, e)| *e)
     };
-    println!("| plant | pairs | failed | worse than from rest, p50 | p95 | worst | over {WARM_AIM_PP} pp |");
-    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    println!("| plant | pairs | failed | worse than from rest, p50 | p95 | worst | over {WARM_AIM_PP} pp | time warm, p50 / p95 | from rest |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     let mut over = Vec::new();
     for hifi in [true, false] {
         let mut worse: Vec<(f64, String)> = Vec::new();
+        let (mut warm_s, mut rest_s) = (Vec::new(), Vec::new());
         let mut failed = 0;
         for (j, e) in jobs.iter().zip(&results) {
             let (l, Some(a), b) = *j else { continue };
@@ -120,7 +127,9 @@ pub fn run(args: &Args) -> Result<(), String> {
                 continue;
             }
             match (e, rest(l, b)) {
-                (Some(w), Some(r)) => {
+                (Some((w, ws)), Some((r, rs))) => {
+                    warm_s.push(*ws);
+                    rest_s.push(rs);
                     let pp = w.abs() - r.abs();
                     let what = format!(
                         "{} {a:.2} -> {b:.2} mm: {w:+.2} % warm, {r:+.2} % from rest",
@@ -149,14 +158,24 @@ pub fn run(args: &Args) -> Result<(), String> {
                 .map_or(f64::NAN, |w| w.0)
         };
         let n_over = worse.iter().filter(|w| w.0 > WARM_AIM_PP).count();
+        let pct = |v: &mut Vec<f64>, p: f64| {
+            v.sort_by(f64::total_cmp);
+            v.get(((v.len() as f64 - 1.0) * p).round() as usize)
+                .copied()
+                .unwrap_or(f64::NAN)
+        };
         println!(
-            "| {} | {} | {failed} | {:+.2} pp | {:+.2} pp | {:+.2} pp ({}) | {n_over} |",
+            "| {} | {} | {failed} | {:+.2} pp | {:+.2} pp | {:+.2} pp ({}) | {n_over} | {:.0} / {:.0} s | {:.0} / {:.0} s |",
             if hifi { "hifi" } else { "lumped" },
             worse.len(),
             q(0.5),
             q(0.95),
             q(1.0),
             worse.last().map_or("", |w| w.1.as_str()),
+            pct(&mut warm_s, 0.5),
+            pct(&mut warm_s, 0.95),
+            pct(&mut rest_s, 0.5),
+            pct(&mut rest_s, 0.95),
         );
     }
     if over.is_empty() {
