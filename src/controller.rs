@@ -678,9 +678,6 @@ impl Controller {
         let tca_driven = !(matches!(doing, Doing::Idle | Doing::Morph(Phase::Rest))
             || self.tune_step() == Some(crate::tune::TuneStep::Settle));
         self.note_rest(tca_driven, &m);
-        // The B-L475E-IOT01A's hardware image has no room for the rest-shape reading under the
-        // hardware budget (docs/firmware.md, "Size budget"); its emulated image has it.
-        #[cfg(not(feature = "board-b-l475e-iot01a"))]
         self.note_shape(tca_driven, &m);
         // Every tick, so a MORPH between ticks starts from this one's.
         self.seq.set_tca_self(
@@ -727,7 +724,6 @@ impl Controller {
     /// Feeds the rest-shape sensor ([`crate::shape`]) a tick at rest after a morph's `done`
     /// (or as built), queues what a finished rest gave, and, where the reading agrees with the
     /// estimate, folds it into the calibration as a MEASURED would, weighted by its sigma.
-    #[cfg_attr(feature = "board-b-l475e-iot01a", allow(dead_code))]
     fn note_shape(&mut self, tca_driven: bool, m: &Measurements) {
         let Some(k) = self.shape_per_m else {
             return;

@@ -5,6 +5,9 @@
 //! fixed number of decimals, which integer arithmetic on the float's bits does exactly.
 
 use core::fmt;
+use core::num::{NonZeroU16, NonZeroU32};
+
+const TEN: NonZeroU16 = NonZeroU16::new(10).unwrap();
 
 /// Most decimals [`Fixed`] prints; more are clamped. An `f32` carries about 7 significant
 /// digits, so a 10th decimal would only ever show binary noise, and 9 keeps the scaled value
@@ -63,7 +66,7 @@ impl fmt::Display for Fixed {
         let mut buf = [0u8; 24];
         let len = write_digits(&mut buf, scaled, decimals, negative && scaled != 0);
         // Only ASCII digits, '-' and '.' were written.
-        f.write_str(core::str::from_utf8(&buf[..len]).map_err(|_| fmt::Error)?)
+        f.write_str(crate::protocol::ascii_str(&buf[..len]).ok_or(fmt::Error)?)
     }
 }
 
@@ -100,6 +103,24 @@ fn scaled_rounded(magnitude: f32, decimals: u8) -> u64 {
     }
 }
 
+/// `v / d` and `v % d` for a divisor under 2^16, by long division in 16-bit digits with the
+/// Cortex-M4's 32-bit divide: a `u64` division is a software routine of about 1 KiB of flash
+/// there, which nothing else in the firmware then needs.
+pub fn div_rem_small(v: u64, d: NonZeroU16) -> (u64, u32) {
+    let d = NonZeroU32::from(d);
+    let hi = (v >> 32) as u32;
+    let (q_hi, r) = (hi / d, hi % d);
+    // Each partial dividend is under d · 2^16 < 2^32, and each partial quotient under 2^16.
+    let mid = (r << 16) | ((v as u32) >> 16);
+    let (q_mid, r) = (mid / d, mid % d);
+    let low = (r << 16) | (v as u32 & 0xffff);
+    let (q_low, r) = (low / d, low % d);
+    (
+        (u64::from(q_hi) << 32) | u64::from((q_mid << 16) | q_low),
+        r,
+    )
+}
+
 /// Writes `[-]int.frac` of `scaled / 10^decimals` into `buf`, returns the length.
 fn write_digits(buf: &mut [u8; 24], scaled: u64, decimals: u8, negative: bool) -> usize {
     // Digits least significant first into a scratch buffer, then reverse into `buf`.
@@ -108,8 +129,9 @@ fn write_digits(buf: &mut [u8; 24], scaled: u64, decimals: u8, negative: bool) -
     let mut v = scaled;
     let min_digits = decimals as usize + 1; // at least "0" before the point
     while v > 0 || n < min_digits {
-        rev[n] = b'0' + (v % 10) as u8;
-        v /= 10;
+        let (q, r) = div_rem_small(v, TEN);
+        rev[n] = b'0' + r as u8;
+        v = q;
         n += 1;
     }
     let mut len = 0;
@@ -273,6 +295,12 @@ mod tests {
     }
 
     proptest! {
+        #[test]
+        fn small_divisions_match_the_u64_ones(v in any::<u64>(), d in 1u16..) {
+            let n = NonZeroU16::new(d).unwrap();
+            prop_assert_eq!(div_rem_small(v, n), (v / u64::from(d), (v % u64::from(d)) as u32));
+        }
+
         #[test]
         fn format_parse_round_trip(v in -1e6f32..1e6, d in 0u8..=4) {
             let text = show(v, d);

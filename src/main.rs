@@ -330,6 +330,23 @@ mod firmware {
         heaters.apply_link(k, o.pla_duty, o.tca_duty, o.supply_on);
     }
 
+    /// Milliseconds since boot. Not embassy's `Instant::as_millis`: its `u64` division is a
+    /// software routine of about 1 KiB of flash on the Cortex-M4, which this one avoids
+    /// ([`morphlink::fixed::div_rem_small`]).
+    pub fn now_ms() -> u64 {
+        ms_of(Instant::now().as_ticks())
+    }
+
+    /// `ticks` of embassy's time driver in whole milliseconds.
+    fn ms_of(ticks: u64) -> u64 {
+        const PER_MS: core::num::NonZeroU16 =
+            core::num::NonZeroU16::new((embassy_time::TICK_HZ / 1000) as u16).unwrap();
+        const _: () = assert!(
+            embassy_time::TICK_HZ % 1000 == 0 && embassy_time::TICK_HZ / 1000 <= u16::MAX as u64
+        );
+        morphlink::fixed::div_rem_small(ticks, PER_MS).0
+    }
+
     /// When the control loop's last tick started, ms (the low 32 bits of [`Instant`]): the
     /// serial task keeps out of the window before the next one ([`SERIAL_GUARD_MS`]).
     static TICK_STARTED_MS: AtomicU32 = AtomicU32::new(0);
@@ -343,7 +360,7 @@ mod firmware {
     /// The wait out of the window before the next control tick, if now is in it.
     #[inline(never)]
     fn tick_window_wait() -> Option<Timer> {
-        let now = Instant::now().as_millis() as u32;
+        let now = now_ms() as u32;
         let since = now.wrapping_sub(TICK_STARTED_MS.load(Ordering::Relaxed));
         let to_next = (TICK_MS as u32).saturating_sub(since % TICK_MS as u32);
         (to_next <= SERIAL_GUARD_MS).then(|| Timer::after_millis(u64::from(to_next) + 1))
@@ -365,11 +382,11 @@ mod firmware {
                 continue;
             }
             let start = board::cycles();
-            TICK_STARTED_MS.store(Instant::now().as_millis() as u32, Ordering::Relaxed);
+            TICK_STARTED_MS.store(now_ms() as u32, Ordering::Relaxed);
             // The frame is stamped when its ADC burst starts, not when the step runs: a burst
             // that stalls (a hung ADC, a starved task) then arrives old, and the supervisor's
             // stale-sensor check (`STALE_AFTER_MS`) refuses it.
-            let sample_ms = Instant::now().as_millis();
+            let sample_ms = now_ms();
             let sums = read_burst(&mut sensors).await;
             let mut inputs = [Inputs {
                 thermistor_counts: [0; 3],
@@ -394,7 +411,7 @@ mod firmware {
                         });
             }
             let adc_done = board::cycles();
-            let now_ms = Instant::now().as_millis();
+            let now_ms = now_ms();
             let mut outs = [Outputs::default(); LINKS];
             with_core(|c| c.tick(now_ms, &inputs, &mut outs));
             for (k, o) in outs.into_iter().enumerate() {
@@ -427,7 +444,7 @@ mod firmware {
             }
             with_core(|c| session.refill(c));
             if session.has_input() {
-                let now_ms = Instant::now().as_millis();
+                let now_ms = now_ms();
                 let answered = with_core(|c| session.answer_next(c, now_ms, sim_command));
                 if let Some(a) = answered {
                     if a.apply_now {
@@ -448,7 +465,7 @@ mod firmware {
                                     r = Err(e);
                                 }
                             }
-                            defmt::info!("SAVE took {} ms", t0.elapsed().as_millis());
+                            defmt::info!("SAVE took {} ms", ms_of(t0.elapsed().as_ticks()));
                             with_core(|c| session.finish_save(c, r));
                         }
                     }
@@ -482,7 +499,7 @@ mod firmware {
                 }
             };
             if let Some(r) = got {
-                let now_ms = Instant::now().as_millis();
+                let now_ms = now_ms();
                 if with_core(|c| session.received(c, now_ms, r.len, r.lost_after)) {
                     APPLY_NOW.signal(());
                 }
@@ -557,4 +574,4 @@ fn main() {
 // Every defmt log line carries the firmware's uptime from embassy-time, in milliseconds
 // (`probe-rs run` prints it in front of the message).
 #[cfg(target_os = "none")]
-defmt::timestamp!("{=u64:ms}", embassy_time::Instant::now().as_millis());
+defmt::timestamp!("{=u64:ms}", firmware::now_ms());

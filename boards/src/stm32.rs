@@ -39,9 +39,9 @@ use embassy_stm32::adc::{AnyAdcChannel, SampleTime};
 use embassy_stm32::gpio::OutputType;
 use embassy_stm32::peripherals::{ADC1, IWDG, PA6, PA7, TIM3};
 use embassy_stm32::time::Hertz;
-use embassy_stm32::timer::low_level::CountingMode;
-use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
-use embassy_stm32::timer::Channel;
+use embassy_stm32::timer::low_level::{CountingMode, OutputCompareMode, Timer};
+use embassy_stm32::timer::simple_pwm::PwmPin;
+use embassy_stm32::timer::{Ch1, Ch2, Channel};
 use embassy_stm32::usart::{self, BufferedUart, BufferedUartRx, BufferedUartTx};
 use embassy_stm32::{flash, pac, Peri};
 
@@ -240,23 +240,67 @@ pub fn uart_config() -> usart::Config {
     c
 }
 
+/// The heater timer and its two gate pins, set up: what [`Heaters::new`] keeps for the
+/// program's life.
+pub struct HeaterPwm {
+    _timer: Timer<'static, HeaterTimer>,
+    _pins: (
+        PwmPin<'static, HeaterTimer, Ch1>,
+        PwmPin<'static, HeaterTimer, Ch2>,
+    ),
+}
+
 /// The heater timer with the PLA gate (PA6) on channel 1 and the TCA gate (PA7) on channel 2,
-/// push-pull, at [`PWM_FREQUENCY`]; both at 0 % duty.
+/// push-pull, at [`PWM_FREQUENCY`] edge-aligned, PWM mode 1 with preloaded compares; both at
+/// 0 % duty. What embassy's `SimplePwm::new` sets up, but with the period's prescaler and
+/// reload found in 32-bit arithmetic: its `u64` division is a software routine of about 1 KiB
+/// of flash on the Cortex-M4, which nothing else in the image needs.
 pub fn heater_pwm(
     tim: Peri<'static, HeaterTimer>,
     pla: Peri<'static, PA6>,
     tca: Peri<'static, PA7>,
-) -> SimplePwm<'static, HeaterTimer> {
-    SimplePwm::new(
-        tim,
-        Some(PwmPin::new(pla, OutputType::PushPull)),
-        Some(PwmPin::new(tca, OutputType::PushPull)),
-        None,
-        None,
-        PWM_FREQUENCY,
-        CountingMode::EdgeAlignedUp,
-    )
+) -> HeaterPwm {
+    let pins = (
+        PwmPin::new(pla, OutputType::PushPull),
+        PwmPin::new(tca, OutputType::PushPull),
+    );
+    let timer = Timer::new(tim);
+    timer.set_counting_mode(CountingMode::EdgeAlignedUp);
+    let (psc, arr) = prescaler_reload(timer.get_clock_frequency().0, PWM_FREQUENCY.0);
+    let regs = timer.regs_gp16();
+    regs.psc().write_value(psc);
+    regs.arr().write(|w| w.set_arr(arr));
+    timer.enable_outputs();
+    for ch in [PLA_CHANNEL, TCA_CHANNEL] {
+        timer.set_output_compare_mode(ch, OutputCompareMode::PwmMode1);
+        timer.set_output_compare_preload(ch, true);
+    }
+    timer.set_autoreload_preload(true);
+    // The preloaded prescaler and reload reach the counter now, not at the first wrap.
+    timer.generate_update_event();
+    timer.start();
+    HeaterPwm {
+        _timer: timer,
+        _pins: pins,
+    }
 }
+
+/// The prescaler and reload (both as written to the timer: one less than the divisor and the
+/// period) that give `hz` periods a second from a `clock_hz` timer clock, the prescaler as
+/// small as lets the reload fit 16 bits (as embassy's `SimplePwm::set_frequency` finds it) and
+/// the period rounded down, at most one prescaled clock short (embassy rounds it up).
+pub const fn prescaler_reload(clock_hz: u32, hz: u32) -> (u16, u16) {
+    let clocks = clock_hz / hz;
+    let psc = (clocks - 1) >> 16;
+    (psc as u16, (clocks / (psc + 1) - 1) as u16)
+}
+// The boards' timer clocks: 84 MHz (F401), 80 MHz (L475), 170 MHz (G431) at 1 kHz.
+const _: () = {
+    assert!(matches!(prescaler_reload(84_000_000, 1000), (1, 41_999)));
+    assert!(matches!(prescaler_reload(80_000_000, 1000), (1, 39_999)));
+    assert!(matches!(prescaler_reload(170_000_000, 1000), (2, 56_665)));
+    assert!(matches!(prescaler_reload(16_000_000, 1000), (0, 15_999)));
+};
 
 /// Heater `h`'s compare register (0: the PLA's, [`PLA_CHANNEL`]; else the TCA's,
 /// [`TCA_CHANNEL`]).
@@ -289,7 +333,7 @@ impl Heaters {
     /// cut-off driven low, open. The pin's level is set before it leaves its reset state, so
     /// it never drives high on the way.
     pub fn new(
-        pwm: SimplePwm<'static, HeaterTimer>,
+        pwm: HeaterPwm,
         cutoff: RawPin,
         pin: Peri<'static, impl embassy_stm32::gpio::Pin>,
     ) -> Self {
