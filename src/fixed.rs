@@ -66,7 +66,7 @@ impl fmt::Display for Fixed {
         let mut buf = [0u8; 24];
         let len = write_digits(&mut buf, scaled, decimals, negative && scaled != 0);
         // Only ASCII digits, '-' and '.' were written.
-        f.write_str(crate::protocol::ascii_str(&buf[..len]).ok_or(fmt::Error)?)
+        f.write_str(ascii_str(&buf[..len]).ok_or(fmt::Error)?)
     }
 }
 
@@ -101,6 +101,20 @@ fn scaled_rounded(magnitude: f32, decimals: u8) -> u64 {
             q
         }
     }
+}
+
+/// `bytes` as text if every one is printable ASCII or a tab, as the protocol's lines are (a NUL
+/// or another control byte in a line is no command's); else `None`.
+pub fn ascii_str(bytes: &[u8]) -> Option<&str> {
+    if !bytes
+        .iter()
+        .all(|&b| b == b'\t' || (b' '..=b'~').contains(&b))
+    {
+        return None;
+    }
+    // SAFETY: a sequence of ASCII bytes is valid UTF-8. Not `core::str::from_utf8`: its
+    // validator is 368 B of flash, which the hardware budget has no room for.
+    Some(unsafe { core::str::from_utf8_unchecked(bytes) })
 }
 
 /// `v / d` and `v % d` for a divisor under 2^16, by long division in 16-bit digits with the
@@ -295,6 +309,15 @@ mod tests {
     }
 
     proptest! {
+        #[test]
+        fn ascii_str_is_the_text_of_printable_ascii_and_nothing_else(
+            bytes in proptest::collection::vec(any::<u8>(), 0..80)
+        ) {
+            let printable = bytes.iter().all(|&b| b == b'\t' || (0x20..0x7f).contains(&b));
+            let want = printable.then(|| core::str::from_utf8(&bytes).unwrap());
+            prop_assert_eq!(ascii_str(&bytes), want);
+        }
+
         #[test]
         fn small_divisions_match_the_u64_ones(v in any::<u64>(), d in 1u16..) {
             let n = NonZeroU16::new(d).unwrap();

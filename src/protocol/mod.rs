@@ -216,8 +216,8 @@ impl Word {
 
     /// The word's text.
     pub fn as_str(&self) -> &str {
-        // Built from a line's `&str`, which is ASCII ([`ascii_str`]).
-        ascii_str(&self.bytes[..self.len as usize]).unwrap_or("")
+        // Built from a line's `&str`, which is printable ASCII ([`crate::fixed::ascii_str`]).
+        crate::fixed::ascii_str(&self.bytes[..self.len as usize]).unwrap_or("")
     }
 }
 
@@ -439,7 +439,7 @@ impl LineAssembler {
                 if overflow {
                     return Some(Ok(Assembled::TooLong));
                 }
-                Some(Ok(match ascii_str(&self.buf[..len]) {
+                Some(Ok(match crate::fixed::ascii_str(&self.buf[..len]) {
                     Some(line) => Assembled::Line(line),
                     None => Assembled::Invalid,
                 }))
@@ -463,16 +463,6 @@ pub const ERR_LINE_TOO_LONG: ProtoError = ProtoError {
     code: ErrorCode::LineTooLong,
     text: "Lines are limited to 64 characters.",
 };
-
-/// `bytes` as text if every one is ASCII, as the protocol's lines are; else `None`.
-pub fn ascii_str(bytes: &[u8]) -> Option<&str> {
-    if !bytes.is_ascii() {
-        return None;
-    }
-    // SAFETY: a sequence of ASCII bytes is valid UTF-8. Not `core::str::from_utf8`: its
-    // validator is 368 B of flash, which the hardware budget has no room for.
-    Some(unsafe { core::str::from_utf8_unchecked(bytes) })
-}
 
 /// Reply to an [`Assembled::Invalid`] line.
 pub const ERR_INVALID_LINE: ProtoError = ProtoError {
@@ -873,15 +863,19 @@ mod tests {
     }
 
     #[test]
-    fn assembler_refuses_a_line_that_is_not_ascii() {
-        // Not UTF-8, and UTF-8 that is not ASCII: the protocol's lines are ASCII.
-        let got = assemble(b"ST\xffATUS\n\xc3\xbc\nok\n");
+    fn assembler_refuses_a_line_that_is_not_printable_ascii() {
+        // Not UTF-8, UTF-8 that is not ASCII, a NUL, a DEL: the protocol's lines are printable
+        // ASCII (and tabs).
+        let got = assemble(b"ST\xffATUS\n\xc3\xbc\nMORPH 38\x00\nSTA\x7fTUS\nMORPH\t38\n");
+        let invalid = Err(Assembled::Invalid);
         assert_eq!(
             got,
             [
-                Err(Assembled::Invalid),
-                Err(Assembled::Invalid),
-                Ok("ok".into())
+                invalid.clone(),
+                invalid.clone(),
+                invalid.clone(),
+                invalid,
+                Ok("MORPH\t38".into())
             ]
         );
     }
@@ -910,7 +904,10 @@ mod tests {
             .map(|kept| {
                 if kept.len() > MAX_LINE {
                     Err(Assembled::TooLong)
-                } else if kept.is_ascii() {
+                } else if kept
+                    .iter()
+                    .all(|&b| b == b'\t' || (b' '..=b'~').contains(&b))
+                {
                     Ok(String::from_utf8(kept).unwrap())
                 } else {
                     Err(Assembled::Invalid)
@@ -937,13 +934,6 @@ mod tests {
     }
 
     proptest! {
-        #[test]
-        fn ascii_str_is_the_text_of_ascii_bytes_and_nothing_else(
-            bytes in proptest::collection::vec(any::<u8>(), 0..80)
-        ) {
-            let want = bytes.is_ascii().then(|| core::str::from_utf8(&bytes).unwrap());
-            prop_assert_eq!(ascii_str(&bytes), want);
-        }
 
         #[test]
         fn assembler_matches_model_and_parse_answers_once(bytes in stream()) {

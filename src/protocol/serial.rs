@@ -85,7 +85,7 @@ impl AbortScan {
         for (i, &b) in bytes.iter().enumerate() {
             if b == b'\r' || b == b'\n' {
                 let len = usize::from(self.len);
-                if !self.skip && super::ascii_str(&self.line[..len]).is_some_and(is_abort) {
+                if !self.skip && crate::fixed::ascii_str(&self.line[..len]).is_some_and(is_abort) {
                     found = Some(i + 1);
                 }
                 self.len = 0;
