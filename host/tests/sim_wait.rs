@@ -1,4 +1,5 @@
-//! `SIM WAIT` in `morph-sim`: simulated time that passes at once, at any `--speed`.
+//! `SIM WAIT` in `morph-sim`: simulated time that passes at once, at any `--speed`; and the
+//! order of what it answers.
 
 mod common;
 
@@ -106,4 +107,21 @@ fn an_event_never_comes_after_the_reply_to_a_later_command() {
         .expect(&text);
     assert_eq!(lines[soften - 1], "ok", "after MORPH's reply: {text}");
     assert_eq!(lines[soften + 1], "ok", "before ABORT's reply: {text}");
+}
+
+#[test]
+fn a_refused_line_answers_after_the_events_raised_before_it() {
+    // A line not valid text and one too long, each right after a MORPH: the MORPH's first
+    // event goes out before their errors, as it does before any later reply.
+    for bad in [&b"\xff"[..], &[b'a'; 100][..]] {
+        let mut input = b"MORPH 38\n".to_vec();
+        input.extend_from_slice(bad);
+        input.extend_from_slice(b"\nABORT\n");
+        let out = run_with_input(env!("CARGO_BIN_EXE_morph-sim"), ["--speed", "max"], &input);
+        let text = text(&out.stdout);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[0], "ok", "{text}");
+        assert!(lines[1].starts_with("event: phase soften"), "{text}");
+        assert!(lines[2].starts_with("error: "), "{text}");
+    }
 }

@@ -219,12 +219,15 @@ fn feed(
         if rig.failure().is_some() {
             return;
         }
-        match asm.push(b) {
+        let assembled = asm.push(b);
+        if assembled.is_some() {
+            // Events queued by the commands before this line (MORPH's first phase) go out
+            // before its answer, as the board writes them: a line read later, a refused one
+            // too, never answers ahead of an event raised earlier.
+            rig.drain_events(emit);
+        }
+        match assembled {
             Some(Assembled::Line(line)) => {
-                // Events queued by the commands before this one (MORPH's first phase) go out
-                // before this command's reply, as the board writes them: a line read later
-                // never answers ahead of an event raised earlier.
-                rig.drain_events(emit);
                 let saves = rig.saves();
                 let mut replies: Vec<String> = Vec::new();
                 rig.handle_line(line, &mut |l: &str| replies.push(l.to_string()));
