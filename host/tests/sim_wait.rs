@@ -47,7 +47,7 @@ fn sim_wait_skips_time_in_real_time_mode_too() {
 /// code 2 by morph-sim and morphctl alike; before, `--speed 1e-30` panicked in the pacing.
 #[test]
 fn a_speed_outside_its_range_is_refused_not_a_panic() {
-    for speed in ["1e-30", "1e30", "0"] {
+    for speed in ["1e-30", "1e30", "0", "-1"] {
         let out = run_with_input(
             env!("CARGO_BIN_EXE_morph-sim"),
             ["--speed", speed],

@@ -34,7 +34,7 @@ use std::time::{Duration, Instant};
 struct Cli {
     /// Simulation speed: a factor of real time (1 = real time) or `max` (as fast as possible;
     /// simulated time then stands still while the link is idle and waits for input).
-    #[arg(long, default_value = "1", value_parser = parse_speed)]
+    #[arg(long, default_value = "1", value_parser = parse_speed, allow_hyphen_values = true)]
     speed: Speed,
     /// Seed of the simulated sensor noise.
     #[arg(long, default_value_t = LinkSetup::NOMINAL.seed)]

@@ -63,7 +63,8 @@ struct Cli {
     sim: bool,
     /// morph-sim speed, a factor of real time (also `--speed`, before or after the command).
     #[arg(long, global = true, visible_alias = "speed", value_name = "FACTOR",
-          default_value_t = DEFAULT_SIM_SPEED, value_parser = parse_sim_speed)]
+          default_value_t = DEFAULT_SIM_SPEED, value_parser = parse_sim_speed,
+          allow_hyphen_values = true)]
     sim_speed: f64,
     /// The morph-sim program, with arguments if any, split as a shell would
     /// (`--sim-program "morph-sim --seed 3"`; default: beside morphctl, else on the PATH).
