@@ -1023,3 +1023,25 @@ fn a_simulator_that_exits_at_once_is_reported_with_what_it_said() {
     );
     assert!(!err.contains("is this a morphlink board"), "{err}");
 }
+
+#[test]
+fn a_simulator_that_hangs_is_reported_with_what_it_said_and_its_own_options_are_refused() {
+    let dir = scratch("sim-hangs");
+    let hang = script(&dir, "hang.sh", "echo 'stuck: no plant' >&2; exec sleep 60");
+    let out = morphctl(&["--sim", "--sim-program", hang.to_str().unwrap(), "status"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("did not answer `VERSION` within 3 s; it said: stuck: no plant"),
+        "{err}"
+    );
+    // What morphctl passes itself may not be in --sim-program too.
+    let program = format!("'{MORPH_SIM}' --speed 5");
+    let out = morphctl(&["--sim", "--sim-program", &program, "status"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("give --speed as morphctl's --sim-speed"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

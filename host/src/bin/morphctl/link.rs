@@ -112,6 +112,8 @@ pub enum Target {
         flash_file: Option<PathBuf>,
         /// morph-sim's `--links` (`--sim-links`), if given.
         links: Option<u8>,
+        /// Whether `program` came from `--sim-program` (not the default beside morphctl).
+        given: bool,
     },
     /// A serial port served over TCP at `HOST:PORT` (`cargo xtask emulate --port`, ser2net).
     Tcp {
@@ -328,17 +330,23 @@ impl Link {
         }
     }
 
-    /// Why the link closed: `why`, and what the simulator said on its stderr, if anything.
+    /// Why the link closed: `why`, and what the simulator said on its stderr ([`Link::said`]).
     fn closed(&self, why: String) -> LinkError {
+        LinkError::Closed(format!("{why}{}", self.said()))
+    }
+
+    /// `; it said: ...` with the simulator's last stderr lines, or nothing (none, or no
+    /// simulator).
+    fn said(&self) -> String {
         let said = self
             .stderr
             .as_ref()
             .map(StderrTail::said)
             .unwrap_or_default();
         if said.is_empty() {
-            LinkError::Closed(why)
+            String::new()
         } else {
-            LinkError::Closed(format!("{why}; it said: {}", said.join(" / ")))
+            format!("; it said: {}", said.join(" / "))
         }
     }
 
@@ -403,6 +411,7 @@ impl Link {
                 speed,
                 flash_file,
                 links,
+                given,
             } => {
                 let mut command = Command::new(program);
                 command.args(args);
@@ -426,10 +435,12 @@ impl Link {
                     .process_group(0)
                     .spawn()
                     .map_err(|e| {
-                        format!(
-                            "cannot start {}: {e} (build it with `cargo build -p morphlink-host --bin morph-sim`, or pass --sim-program)",
-                            program.display()
-                        )
+                        let hint = if *given {
+                            "check --sim-program"
+                        } else {
+                            "build it with `cargo build -p morphlink-host --bin morph-sim`, or pass --sim-program"
+                        };
+                        format!("cannot start {}: {e} ({hint})", program.display())
                     })?;
                 let stdin = child.stdin.take().expect("piped stdin");
                 let stdout = child.stdout.take().expect("piped stdout");
@@ -527,8 +538,9 @@ impl Link {
             };
             let Some(l) = got else {
                 return Err(LinkError::Timeout(format!(
-                    "{} did not answer `{line}` within {timeout_s} s",
-                    self.name
+                    "{} did not answer `{line}` within {timeout_s} s{}",
+                    self.name,
+                    self.said()
                 )));
             };
             match classify(&l) {
@@ -544,7 +556,10 @@ impl Link {
                 }
                 kind if kind.is_final() => return Ok((data, l)),
                 LineKind::Blank => {}
-                _ => return Err(LinkError::Protocol(not_morphlink(&self.name, &l))),
+                _ => {
+                    let why = not_morphlink(&self.name, &l, self.stderr.is_some());
+                    return Err(LinkError::Protocol(why));
+                }
             }
         }
     }
@@ -564,7 +579,9 @@ impl Link {
             .command("VERSION", HANDSHAKE_TIMEOUT_S, &mut |_| {})
             .map_err(|e| match e {
                 // A simulator that exited has said why (its stderr, in the error).
-                LinkError::Closed(_) if self.stderr.is_some() => e.to_string(),
+                LinkError::Closed(_) | LinkError::Timeout(_) if self.stderr.is_some() => {
+                    e.to_string()
+                }
                 LinkError::Interrupted(_) => e.to_string(),
                 _ => format!("{e}; is this a morphlink board? (it must answer VERSION with `ok version=.. protocol={PROTOCOL}`)")
             })?;
@@ -576,7 +593,7 @@ impl Link {
                 "{} speaks morphlink protocol {p}; this morphctl speaks protocol {PROTOCOL}",
                 self.name
             )),
-            _ => Err(not_morphlink(&self.name, &reply)),
+            _ => Err(not_morphlink(&self.name, &reply, self.stderr.is_some())),
         }
     }
 }
@@ -641,11 +658,14 @@ fn open_tcp(addr: &str) -> Result<Link, String> {
     })
 }
 
-fn not_morphlink(name: &str, line: &str) -> String {
+fn not_morphlink(name: &str, line: &str, simulated: bool) -> String {
     let shown: String = line.chars().take(60).collect();
-    format!(
-        "{name} does not speak the morphlink protocol (it sent `{shown}`); check the port and baud rate"
-    )
+    let check = if simulated {
+        "check --sim-program"
+    } else {
+        "check the port and baud rate"
+    };
+    format!("{name} does not speak the morphlink protocol (it sent `{shown}`); {check}")
 }
 
 impl Drop for Link {

@@ -293,6 +293,29 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 let words = shlex::split(line).filter(|w| !w.is_empty()).ok_or(format!(
                     "--sim-program `{line}`: unbalanced quotes or empty"
                 ))?;
+                // morphctl gives the simulator these itself: twice, morph-sim would refuse.
+                let own = [
+                    ("--speed", "--sim-speed"),
+                    ("--plant", "--sim-plant"),
+                    ("--flash-file", "--sim-flash-file"),
+                    ("--links", "--sim-links"),
+                ];
+                for (flag, ours) in own {
+                    let given = |w: &String| w == flag || w.starts_with(&format!("{flag}="));
+                    let passed = match flag {
+                        "--speed" => true,
+                        "--plant" => cli.sim_plant.is_some(),
+                        "--flash-file" => cli.sim_flash_file.is_some(),
+                        _ => cli.sim_links.is_some(),
+                    };
+                    if passed && words[1..].iter().any(given) {
+                        return Err(format!(
+                            "--sim-program `{line}`: give {flag} as morphctl's {ours}, which \
+                             morphctl passes to the simulator itself"
+                        )
+                        .into());
+                    }
+                }
                 (PathBuf::from(&words[0]), words[1..].to_vec())
             }
             None => (default_sim_program(), Vec::new()),
@@ -304,6 +327,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
             speed: cli.sim_speed,
             flash_file: cli.sim_flash_file.clone(),
             links: cli.sim_links,
+            given: cli.sim_program.is_some(),
         }
     } else if let Some(addr) = &cli.tcp {
         Target::Tcp { addr: addr.clone() }
