@@ -14,7 +14,10 @@ pub fn check_new_file(path: &Path) -> Result<(), String> {
         _ => Path::new("."),
     };
     if !dir.is_dir() {
-        return Err(format!("the directory {} does not exist", dir.display()));
+        return Err(match dir.exists() {
+            true => format!("{} is not a directory", dir.display()),
+            false => format!("the directory {} does not exist", dir.display()),
+        });
     }
     if path.is_dir() || path.as_os_str().to_string_lossy().ends_with('/') {
         return Err("that is a directory".to_string());
@@ -40,6 +43,12 @@ mod tests {
         let e = check_new_file(&tmp.join("no-such-dir-morphlink/x.svg")).unwrap_err();
         assert!(e.contains("does not exist"), "{e}");
         assert_eq!(check_new_file(&tmp).unwrap_err(), "that is a directory");
+        // A file where the directory should be.
+        let file = tmp.join("morphlink-out-path-file");
+        std::fs::write(&file, b"").unwrap();
+        let e = check_new_file(&file.join("x.svg")).unwrap_err();
+        assert_eq!(e, format!("{} is not a directory", file.display()));
+        let _ = std::fs::remove_file(&file);
         let e = check_new_file(Path::new("/proc/x")).unwrap_err();
         assert!(e.starts_with("no file can be made in /proc"), "{e}");
     }

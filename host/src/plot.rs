@@ -101,7 +101,9 @@ pub trait Figure {
 
 /// Writes `figure` into `path` (`.svg` or `.png`, by extension) at `size` pixels.
 pub fn write(path: &Path, size: (u32, u32), figure: &impl Figure) -> PlotResult {
-    let done = match Format::of(path)? {
+    let format = Format::of(path)?;
+    can_write(path)?;
+    let done = match format {
         Format::Svg => page(SVGBackend::new(path, size).into_drawing_area(), |root| {
             figure.draw(root, Format::Svg)
         }),
@@ -110,6 +112,13 @@ pub fn write(path: &Path, size: (u32, u32), figure: &impl Figure) -> PlotResult 
         }),
     };
     naming(path, done)
+}
+
+/// Whether a file can be made at `path`, in plain words ([`crate::out_path::check_new_file`]):
+/// checked first, because the PNG backend reports such a failure in Rust's debug notation.
+fn can_write(path: &Path) -> PlotResult {
+    crate::out_path::check_new_file(path)
+        .map_err(|why| PlotError(format!("cannot write {}: {why}", path.display())))
 }
 
 /// `done`, its error naming the file and saying what went wrong without plotters' layers of
@@ -130,6 +139,7 @@ pub fn write_svg(
     size: (u32, u32),
     draw: impl FnOnce(&DrawingArea<SVGBackend<'_>, Shift>) -> PlotResult,
 ) -> PlotResult {
+    can_write(path)?;
     naming(
         path,
         page(SVGBackend::new(path, size).into_drawing_area(), draw),

@@ -90,8 +90,9 @@ fn a_plot_that_fails_to_write_fails_the_run() {
     assert_eq!(out.status.code(), Some(1), "{err}");
     // The file and the cause, in plain words.
     let want = format!(
-        "morphctl: plot: cannot write {}: No such file or directory",
-        out_dir.join("run.svg").display()
+        "morphctl: plot: cannot write {}: the directory {} does not exist",
+        out_dir.join("run.svg").display(),
+        out_dir.display()
     );
     assert!(err.contains(&want), "{err}");
     assert!(!err.contains("backend error"), "{err}");
