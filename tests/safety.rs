@@ -1490,3 +1490,23 @@ fn reset_refused_while_a_bead_still_reads_high_names_the_fault_as_its_alarm_did(
         assert!(r[0].contains("MOSFET") != sensed, "{r:?}");
     }
 }
+
+#[test]
+fn an_ambient_bead_drifting_at_idle_never_names_an_unpowered_heater() {
+    // Its heaters off, a TCA read colder than the drifting ambient bead says is not a heater
+    // that does not heat: nothing was asked of it.
+    let mut b = Bench::new();
+    b.run_for(20.0);
+    let n = b.lines.len();
+    assert!(b.send("SIM FAULT thermistor-drift amb 0.3")[0].starts_with("ok"));
+    b.run_for(120.0);
+    let alarms = b.alarms_since(n);
+    assert!(
+        alarms[0].starts_with("alarm: sensor-implausible amb"),
+        "{alarms:?}"
+    );
+    assert!(
+        alarms.iter().all(|a| !a.contains("heater-not-heating")),
+        "{alarms:?}"
+    );
+}

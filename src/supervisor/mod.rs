@@ -297,8 +297,8 @@ impl Supervisor {
     /// What a thermistor that left its hull (or outran every member's change) on `side` by
     /// `off_k` (K) means. Where current is
     /// sensed the powers are known, so a thermistor outside is its own fault, unless it is the
-    /// TCA's and the TCA's own temperature (from its resistance) stands below the same floor:
-    /// then the TCA itself is cold (analytical redundancy: a drifting bead is told from a cold
+    /// TCA's, its heat should show, and the TCA's own temperature (from its resistance) stands
+    /// below the same floor: then the TCA itself is cold (analytical redundancy: a drifting bead is told from a cold
     /// TCA, and a drifting PLA bead from a stuck PLA heater, which the electrical checks name).
     /// Without current sense, a bead below while its own heat should show is a heater that
     /// does not heat, and one above a heater on that nothing commands.
@@ -309,7 +309,7 @@ impl Supervisor {
                 < self.expect.bounds_k(ch).0 - RESIDUAL_SLACK_K;
         let heat_shows = self.expect.own_heat_k(heater) > RESIDUAL_SLACK_K;
         let code = match (self.sensed, side) {
-            (true, Side::Below) if own_cold => FaultCode::HeaterNotHeating,
+            (true, Side::Below) if own_cold && heat_shows => FaultCode::HeaterNotHeating,
             (true, _) => FaultCode::SensorImplausible,
             (false, Side::Above) => FaultCode::HeatingWhileOff,
             (false, Side::Below) if heat_shows => FaultCode::HeaterNotHeating,
