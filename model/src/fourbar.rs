@@ -636,8 +636,9 @@ pub enum Inverse {
 pub const INVERSE_SCAN: usize = 64;
 
 /// The radii within `range_mm` at which `geometry`'s foot path has `prop = want_mm`: a scan of
-/// [`INVERSE_SCAN`] radii, bisection of every sign change, and, if there is none, the nearest
-/// radius by golden section around the best scan point.
+/// [`INVERSE_SCAN`] radii, each turn of the property between scan points found by golden
+/// section (a value between the scan's best and the true extremum is reached too), bisection
+/// of every sign change, and, if there is none, the end of the span nearest the wanted value.
 pub fn inverse(
     geometry: FourBarGeometry,
     length_m: f64,
@@ -651,29 +652,42 @@ pub fn inverse(
             .get(prop))
     };
     let (lo, hi) = range_mm;
-    let radii: Vec<f64> = (0..=INVERSE_SCAN)
-        .map(|i| lo + (hi - lo) * i as f64 / INVERSE_SCAN as f64)
-        .collect();
-    let mut raw = Vec::with_capacity(radii.len());
-    for &r in &radii {
-        raw.push(value(r)?);
+    // (radius, value) in ascending radius: the scan, then the turns refined between.
+    let mut pts = Vec::with_capacity(INVERSE_SCAN + 8);
+    for i in 0..=INVERSE_SCAN {
+        let r = lo + (hi - lo) * i as f64 / INVERSE_SCAN as f64;
+        pts.push((r, value(r)?));
     }
+    let mut turns = Vec::new();
+    for w in pts.windows(3) {
+        let (rise_in, rise_out) = (w[1].1 - w[0].1, w[2].1 - w[1].1);
+        if rise_in * rise_out < 0.0 {
+            // A maximum (rising in) or a minimum: the golden section minimises.
+            let sign = if rise_in > 0.0 { -1.0 } else { 1.0 };
+            let f = |r: f64| value(r).map_or(f64::INFINITY, |v| sign * v);
+            let r = golden_min(f, w[0].0, w[2].0);
+            turns.push((r, value(r)?));
+        }
+    }
+    pts.extend(turns);
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
     // Only the signs of the differences are used: they stay right for any finite want.
-    let vals: Vec<f64> = raw.iter().map(|v| v - want_mm).collect();
+    let diff = |v: f64| v - want_mm;
     let mut found = Vec::new();
-    for i in 0..INVERSE_SCAN {
-        let (mut a, mut b, mut fa) = (radii[i], radii[i + 1], vals[i]);
-        let fb = vals[i + 1];
+    for (k, w) in pts.windows(2).enumerate() {
+        let ((mut a, va), (mut b, vb)) = (w[0], w[1]);
+        let (mut fa, fb) = (diff(va), diff(vb));
         if fa == 0.0 {
-            found.push((a, want_mm));
+            found.push((a, va));
             continue;
         }
-        if fa * fb > 0.0 || (fb == 0.0 && i + 1 < INVERSE_SCAN) {
+        let last = k + 2 == pts.len();
+        if fa * fb > 0.0 || (fb == 0.0 && !last) {
             continue; // no crossing, or it is the next interval's left end
         }
         while b - a > 1e-6 {
             let m = 0.5 * (a + b);
-            let fm = value(m)? - want_mm;
+            let fm = diff(value(m)?);
             if (fm < 0.0) == (fa < 0.0) {
                 a = m;
                 fa = fm;
@@ -687,34 +701,22 @@ pub fn inverse(
     if !found.is_empty() {
         return Ok(Inverse::Found(found));
     }
-    let span_mm = raw
+    let span_mm = pts
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &(_, v)| {
             (a.min(v), b.max(v))
         });
-    // How far a value is from the wanted one, in an order that holds however far that lies:
-    // over the span the largest value is nearest, under it the smallest.
-    let miss = |v: f64| {
-        if want_mm >= span_mm.1 {
-            -v
-        } else if want_mm <= span_mm.0 {
-            v
-        } else {
-            (v - want_mm).abs()
-        }
-    };
-    let best = (0..raw.len())
-        .min_by(|&i, &j| miss(raw[i]).total_cmp(&miss(raw[j])))
+    // With no crossing the wanted value lies outside the span: its nearer end is nearest.
+    let above = want_mm > span_mm.1;
+    let nearest = pts
+        .iter()
+        .copied()
+        .min_by(|a, b| match above {
+            true => b.1.total_cmp(&a.1),
+            false => a.1.total_cmp(&b.1),
+        })
         .expect("scan points");
-    let (a, b) = (
-        radii[best.saturating_sub(1)],
-        radii[(best + 1).min(INVERSE_SCAN)],
-    );
-    let r = golden_min(|r| value(r).map_or(f64::INFINITY, miss), a, b);
-    Ok(Inverse::Unreachable {
-        span_mm,
-        nearest: (r, value(r)?),
-    })
+    Ok(Inverse::Unreachable { span_mm, nearest })
 }
 
 #[cfg(test)]
@@ -1103,6 +1105,49 @@ mod tests {
             "{span_mm:?} {nearest:?}"
         );
         assert!(nearest.0 >= range.0 && nearest.0 <= range.1);
+    }
+
+    #[test]
+    fn the_inverse_reaches_a_value_between_the_scans_best_and_the_true_turn() {
+        // A foot whose lowest point turns inside the range: its true maximum lies between two
+        // scan points, above both.
+        let g = FourBarGeometry {
+            foot_at: 0.75,
+            foot_offset_m: -0.03,
+            ..FourBarGeometry::DEFAULT
+        };
+        let range = reachable();
+        let at = |r: f64| {
+            let s = FourBar::new(g, L, Some(r)).unwrap().stats().unwrap();
+            s.get(Property::Lowest)
+        };
+        let dense_max = (0..=4000)
+            .map(|i| at(range.0 + (range.1 - range.0) * i as f64 / 4000.0))
+            .fold(f64::NEG_INFINITY, f64::max);
+        let scan_max = (0..=INVERSE_SCAN)
+            .map(|i| at(range.0 + (range.1 - range.0) * i as f64 / INVERSE_SCAN as f64))
+            .fold(f64::NEG_INFINITY, f64::max);
+        assert!(dense_max > scan_max + 1e-4, "{dense_max} {scan_max}");
+        let want = 0.5 * (dense_max + scan_max);
+        let Inverse::Found(sols) = inverse(g, L, range, Property::Lowest, want).unwrap() else {
+            panic!("{want} is reachable")
+        };
+        assert_eq!(sols.len(), 2, "{sols:?}");
+        for (_, v) in sols {
+            assert!((v - want).abs() < 1e-6, "{v} {want}");
+        }
+        // Just over the true maximum: unreachable, with that maximum as the span's top.
+        let Inverse::Unreachable { span_mm, nearest } =
+            inverse(g, L, range, Property::Lowest, dense_max + 1e-3).unwrap()
+        else {
+            panic!()
+        };
+        // The refined turn is at least the dense scan's best, and near it.
+        assert!(
+            span_mm.1 >= dense_max - 1e-9 && span_mm.1 < dense_max + 1e-3,
+            "{span_mm:?} {dense_max}"
+        );
+        assert_eq!(nearest.1, span_mm.1);
     }
 
     #[test]

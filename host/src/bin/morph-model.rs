@@ -438,6 +438,33 @@ fn fourbar_summary(fb: &FourBar, radius_mm: Option<f64>) -> Result<String, Strin
     ))
 }
 
+/// A wanted value as given, or in exponent notation where it has more digits than a length
+/// of a linkage could (`1e308`, `1e-320`).
+fn number(v: f64) -> String {
+    if v != 0.0 && !(1e-3..1e6).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+/// How far off, mm: to 0.0001 mm with its sign (a value just past an end of the span is off
+/// by less than the span's 0.001 mm), or in exponent notation when far off.
+fn off_text(v: f64) -> String {
+    if v.abs() >= 1e6 {
+        format!("{v:+e}")
+    } else {
+        format!("{v:+.4}")
+    }
+}
+
+/// A property's span rounded inward to the 0.001 mm shown, so that each printed end is
+/// itself reached.
+fn span_text((lo, hi): (f64, f64)) -> String {
+    let (lo, hi) = ((lo * 1e3).ceil() / 1e3, (hi * 1e3).floor() / 1e3);
+    format!("{lo:.3}..{hi:.3}")
+}
+
 /// The `MORPH` line for a radius, rounded to 0.01 mm inside the reachable range.
 fn morph_line(radius_mm: f64, (lo, hi): (f64, f64)) -> String {
     let r = (radius_mm * 100.0)
@@ -474,12 +501,11 @@ fn fourbar_gait(p: &LinkParams, g: &FourBarGeometry, spec: &str) -> Result<Strin
             Inverse::Found(sols) => sols,
             Inverse::Unreachable { span_mm, .. } => {
                 return Err(format!(
-                    "--gait: leg {}: no reachable radius gives {} = {want_mm} mm (it spans \
-                     {:.3}..{:.3} mm)",
+                    "--gait: leg {}: no reachable radius gives {} = {} mm (it spans {} mm)",
                     leg + 1,
                     prop.name(),
-                    span_mm.0,
-                    span_mm.1
+                    number(want_mm),
+                    span_text(span_mm)
                 ))
             }
         };
@@ -551,14 +577,14 @@ fn fourbar_inverse(p: &LinkParams, g: &FourBarGeometry, want: &str) -> Result<St
             Ok(out)
         }
         Inverse::Unreachable { span_mm, nearest } => Err(format!(
-            "no reachable radius gives {} = {want_mm} mm: over {lo:.2}..{hi:.2} mm it spans \
-             {:.3}..{:.3} mm; nearest: radius {:.3} mm gives {:.3} mm ({:+.3} mm off), {}",
+            "no reachable radius gives {} = {} mm: over {lo:.2}..{hi:.2} mm it spans {} mm; \
+             nearest: radius {:.3} mm gives {:.4} mm ({} mm off), {}",
             prop.name(),
-            span_mm.0,
-            span_mm.1,
+            number(want_mm),
+            span_text(span_mm),
             nearest.0,
             nearest.1,
-            nearest.1 - want_mm,
+            off_text(nearest.1 - want_mm),
             morph_line(nearest.0, range)
         )),
     }
