@@ -102,6 +102,10 @@ pub enum ParseError {
     Missing(&'static str),
     /// A key's value is not a number in its range (or not a known word).
     BadValue(&'static str),
+    /// The line starts with a space, not with its verb.
+    LeadingSpace,
+    /// A key is given twice: which value is meant is not said.
+    RepeatedKey,
 }
 
 impl fmt::Display for ParseError {
@@ -112,6 +116,8 @@ impl fmt::Display for ParseError {
             ParseError::NotKeyValue => write!(f, "a token is not key=value"),
             ParseError::Missing(k) => write!(f, "missing {k}="),
             ParseError::BadValue(k) => write!(f, "bad value for {k}="),
+            ParseError::LeadingSpace => write!(f, "the line starts with a space, not its verb"),
+            ParseError::RepeatedKey => write!(f, "a key is given twice"),
         }
     }
 }
@@ -177,12 +183,19 @@ fn split(line: &str) -> Result<(&str, KeyValues<'_>), ParseError> {
     let line = line.trim_end_matches(['\r', '\n']);
     let (verb, rest) = line.split_once(' ').unwrap_or((line, ""));
     if verb.is_empty() {
-        return Err(ParseError::Empty);
+        return Err(match line.is_empty() {
+            true => ParseError::Empty,
+            false => ParseError::LeadingSpace,
+        });
     }
     let kv = KeyValues(rest);
-    for token in kv.tokens() {
-        if !token.contains('=') {
+    for (i, token) in kv.tokens().enumerate() {
+        let Some((key, _)) = token.split_once('=') else {
             return Err(ParseError::NotKeyValue);
+        };
+        let again = |t: &str| t.split_once('=').is_some_and(|(k, _)| k == key);
+        if kv.tokens().skip(i + 1).any(again) {
+            return Err(ParseError::RepeatedKey);
         }
     }
     Ok((verb, kv))
@@ -197,13 +210,12 @@ impl<'a> KeyValues<'a> {
         self.0.split(' ').filter(|t| !t.is_empty())
     }
 
-    /// The value of the last `key=` token.
+    /// The value of the `key=` token (a line gives each key once: [`split`]).
     fn get(self, key: &str) -> Option<&'a str> {
         self.tokens()
             .filter_map(|t| t.split_once('='))
-            .filter(|(k, _)| *k == key)
+            .find(|(k, _)| *k == key)
             .map(|(_, v)| v)
-            .last()
     }
 
     fn number(self, key: &'static str) -> Result<f64, ParseError> {
@@ -561,6 +573,12 @@ mod tests {
             ("set medium=oil", BadValue("medium")),
             ("set", Missing("supply_v, ambient_c or medium")),
             ("OK t_pla_c=1", UnknownVerb),
+            (" hello protocol=1 tick_s=0.1", LeadingSpace),
+            ("hello protocol=2 protocol=1 tick_s=0.1", RepeatedKey),
+            (
+                "step dt_s=0.1 pla_duty=0 tca_duty=0 pla_duty=1",
+                RepeatedKey,
+            ),
         ];
         for (line, e) in requests {
             assert_eq!(parse_request(line), Err(e), "{line:?}");
