@@ -312,8 +312,7 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                         return Err(format!(
                             "--sim-program `{line}`: give {flag} as morphctl's {ours}, which \
                              morphctl passes to the simulator itself"
-                        )
-                        .into());
+                        ));
                     }
                 }
                 (PathBuf::from(&words[0]), words[1..].to_vec())
