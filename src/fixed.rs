@@ -3,6 +3,11 @@
 //! `core::fmt`'s float formatting (Grisu/Dragon) and `str::parse::<f32>` each pull several
 //! kilobytes into the firmware. Protocol values (temperatures, powers, radii) need only a
 //! fixed number of decimals, which integer arithmetic on the float's bits does exactly.
+//!
+//! In the same spirit, two helpers the firmware's text and time share: [`ascii_str`] (the
+//! protocol's printable-ASCII lines as text, without core's UTF-8 validator) and
+//! [`div_rem_small`] (a `u64` divided by a small number with 32-bit divides, without the
+//! software `u64` division).
 
 use core::fmt;
 use core::num::{NonZeroU16, NonZeroU32};

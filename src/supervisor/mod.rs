@@ -295,11 +295,11 @@ impl Supervisor {
     }
 
     /// What a thermistor that left its hull (or outran every member's change) on `side` by
-    /// `off_k` (K) means. Where current is
-    /// sensed the powers are known, so a thermistor outside is its own fault, unless it is the
-    /// TCA's, its heat should show, and the TCA's own temperature (from its resistance) stands
-    /// below the same floor: then the TCA itself is cold (analytical redundancy: a drifting bead is told from a cold
-    /// TCA, and a drifting PLA bead from a stuck PLA heater, which the electrical checks name).
+    /// `off_k` (K) means. Where current is sensed the powers are known, so a thermistor outside
+    /// is its own fault, unless it is the TCA's, its heat should show, and the TCA's own
+    /// temperature (from its resistance) stands below the same floor: then the TCA itself is
+    /// cold (analytical redundancy: a drifting bead is told from a cold TCA, and a drifting PLA
+    /// bead from a stuck PLA heater, which the electrical checks name).
     /// Without current sense, a bead below while its own heat should show is a heater that
     /// does not heat, and one above a heater on that nothing commands.
     fn name(&self, ch: usize, side: Side, off_k: f32) -> Fault {
