@@ -22,13 +22,26 @@ pub fn check_new_file(path: &Path) -> Result<(), String> {
     if path.is_dir() || path.as_os_str().to_string_lossy().ends_with('/') {
         return Err("that is a directory".to_string());
     }
+    // Something already there must be a file to overwrite: a FIFO would block the writer
+    // until a reader came, a device (`/dev/full`) fails in the middle, a link to a place
+    // that is not there fails at the end.
+    if let Ok(there) = std::fs::symlink_metadata(path) {
+        match std::fs::metadata(path) {
+            Ok(m) if m.is_file() => {}
+            Ok(_) => return Err("that is not a regular file".to_string()),
+            Err(_) if there.file_type().is_symlink() => {
+                return Err("that is a link to a place that does not exist".to_string())
+            }
+            Err(e) => return Err(format!("it cannot be read ({e})")),
+        }
+    }
     let probe = dir.join(format!(".morphlink-write-check-{}", std::process::id()));
     match OpenOptions::new().write(true).create_new(true).open(&probe) {
         Ok(_) => {
             let _ = std::fs::remove_file(&probe);
             Ok(())
         }
-        Err(e) => Err(format!("no file can be made in {} ({e})", dir.display())),
+        Err(e) => Err(format!("no file can be made in {}: {e}", dir.display())),
     }
 }
 
@@ -49,7 +62,22 @@ mod tests {
         let e = check_new_file(&file.join("x.svg")).unwrap_err();
         assert_eq!(e, format!("{} is not a directory", file.display()));
         let _ = std::fs::remove_file(&file);
+        // Not a file to overwrite: a device, a FIFO, a dangling link.
+        let e = check_new_file(Path::new("/dev/null")).unwrap_err();
+        assert_eq!(e, "that is not a regular file");
+        #[cfg(unix)]
+        {
+            let link = tmp.join(format!(
+                "morphlink-out-path-dangling-{}",
+                std::process::id()
+            ));
+            let _ = std::fs::remove_file(&link);
+            std::os::unix::fs::symlink("/no-such-dir-morphlink/x.svg", &link).unwrap();
+            let e = check_new_file(&link).unwrap_err();
+            assert_eq!(e, "that is a link to a place that does not exist");
+            let _ = std::fs::remove_file(&link);
+        }
         let e = check_new_file(Path::new("/proc/x")).unwrap_err();
-        assert!(e.starts_with("no file can be made in /proc"), "{e}");
+        assert!(e.starts_with("no file can be made in /proc: "), "{e}");
     }
 }

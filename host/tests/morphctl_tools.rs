@@ -1018,7 +1018,7 @@ fn a_simulator_that_exits_at_once_is_reported_with_what_it_said() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains(
-            "morph-sim closed the link; it said: error: unexpected argument '--no-such-option'"
+            "morph-sim closed the link; it said: `error: unexpected argument '--no-such-option'"
         ),
         "{err}"
     );
@@ -1033,7 +1033,7 @@ fn a_simulator_that_hangs_is_reported_with_what_it_said_and_its_own_options_are_
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(
-        err.contains("did not answer `VERSION` within 3 s; it said: stuck: no plant"),
+        err.contains("did not answer `VERSION` within 3 s; it said: `stuck: no plant`"),
         "{err}"
     );
     // What morphctl passes itself may not be in --sim-program too.
@@ -1044,5 +1044,38 @@ fn a_simulator_that_hangs_is_reported_with_what_it_said_and_its_own_options_are_
         err.contains("give --speed as morphctl's --sim-speed"),
         "{err}"
     );
+    // A flash file morphctl does not know of would leave a TUNE's fit unsaved.
+    let program = format!("'{MORPH_SIM}' --flash-file {}", dir.join("f.bin").display());
+    let out = morphctl(&["--sim", "--sim-program", &program, "status"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("give --flash-file as morphctl's --sim-flash-file"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_plot_to_a_fifo_or_a_device_is_refused_before_the_device_is_started() {
+    let dir = scratch("plot-fifo");
+    let fifo = dir.join("p.svg");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let device = dir.join("full.svg");
+    std::os::unix::fs::symlink("/dev/full", &device).unwrap();
+    for out_path in [fifo.as_path(), device.as_path()] {
+        let out = morphctl(&["--sim", "morph", "38", "--plot", out_path.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains("that is not a regular file"), "{err}");
+        // Refused before the simulator ran: no morph began.
+        assert!(
+            !String::from_utf8_lossy(&out.stdout).contains("phase"),
+            "{err}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -106,6 +106,8 @@ pub enum ParseError {
     LeadingSpace,
     /// A key is given twice: which value is meant is not said.
     RepeatedKey,
+    /// A `set` line names more than one setting: each takes a line of its own.
+    SeveralSettings,
 }
 
 impl fmt::Display for ParseError {
@@ -118,6 +120,7 @@ impl fmt::Display for ParseError {
             ParseError::BadValue(k) => write!(f, "bad value for {k}="),
             ParseError::LeadingSpace => write!(f, "the line starts with a space, not its verb"),
             ParseError::RepeatedKey => write!(f, "a key is given twice"),
+            ParseError::SeveralSettings => write!(f, "a set line takes one setting"),
         }
     }
 }
@@ -272,7 +275,14 @@ pub fn parse_request(line: &str) -> Result<Request, ParseError> {
             Ok(Request::Step { dt_s, duty })
         }
         SET => {
-            // The first known key names the setting; a set line carries one.
+            // The known key names the setting; a set line carries one.
+            let known = |t: &&str| {
+                t.split_once('=')
+                    .is_some_and(|(k, _)| ["supply_v", "ambient_c", "medium"].contains(&k))
+            };
+            if kv.tokens().filter(known).count() > 1 {
+                return Err(ParseError::SeveralSettings);
+            }
             for token in kv.tokens() {
                 let Some((key, _)) = token.split_once('=') else {
                     continue;
@@ -579,6 +589,7 @@ mod tests {
                 "step dt_s=0.1 pla_duty=0 tca_duty=0 pla_duty=1",
                 RepeatedKey,
             ),
+            ("set ambient_c=30 supply_v=5", SeveralSettings),
         ];
         for (line, e) in requests {
             assert_eq!(parse_request(line), Err(e), "{line:?}");

@@ -187,9 +187,12 @@ impl StderrTail {
                 if q.len() == STDERR_TAIL_LINES {
                     q.pop_front();
                 }
+                // Control bytes (a terminal's escapes, a CR) shown, not acted on.
                 let l: String = String::from_utf8_lossy(&l)
+                    .trim_end_matches('\r')
                     .chars()
                     .take(MAX_REPLY_LINE)
+                    .map(|c| if c.is_control() { '?' } else { c })
                     .collect();
                 q.push_back(l);
             }
@@ -346,7 +349,8 @@ impl Link {
         if said.is_empty() {
             String::new()
         } else {
-            format!("; it said: {}", said.join(" / "))
+            let quoted: Vec<String> = said.iter().map(|l| format!("`{l}`")).collect();
+            format!("; it said: {}", quoted.join(" / "))
         }
     }
 
@@ -465,7 +469,13 @@ impl Link {
             .writer
             .write_all(format!("{line}\n").as_bytes())
             .and_then(|_| self.writer.flush());
-        sent.map_err(|e| self.closed(format!("cannot write to {}: {e}", self.name)))
+        sent.map_err(|e| match e.kind() {
+            // A simulator that exited: as when its output ends, with what it said.
+            std::io::ErrorKind::BrokenPipe if self.stderr.is_some() => {
+                self.closed(format!("{} closed the link", self.name))
+            }
+            _ => self.closed(format!("cannot write to {}: {e}", self.name)),
+        })
     }
 
     /// Next received line within `timeout`; `Ok(None)` if none arrived. Over-long lines are

@@ -302,16 +302,17 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                 ];
                 for (flag, ours) in own {
                     let given = |w: &String| w == flag || w.starts_with(&format!("{flag}="));
+                    // The speed paces morphctl's polls and the flash file decides whether
+                    // morphctl saves a fit: morphctl must know both.
                     let passed = match flag {
-                        "--speed" => true,
+                        "--speed" | "--flash-file" => true,
                         "--plant" => cli.sim_plant.is_some(),
-                        "--flash-file" => cli.sim_flash_file.is_some(),
                         _ => cli.sim_links.is_some(),
                     };
                     if passed && words[1..].iter().any(given) {
                         return Err(format!(
-                            "--sim-program `{line}`: give {flag} as morphctl's {ours}, which \
-                             morphctl passes to the simulator itself"
+                            "--sim-program `{line}`: give {flag} as morphctl's {ours}: morphctl \
+                             passes it to the simulator and acts on it"
                         ));
                     }
                 }
