@@ -177,8 +177,9 @@ fn run(cli: Cli) -> Result<(), String> {
                 if let Some(r) = radius {
                     if !(r >= lo && r <= hi) {
                         return Err(format!(
-                            "--radius-mm {r} is outside the reachable range {lo:.2}..{hi:.2} mm \
-                             (--straight gives the unmorphed link)"
+                            "--radius-mm {r} is outside the reachable range {} mm \
+                             (--straight gives the unmorphed link)",
+                            range_text((lo, hi))
                         ));
                     }
                 }
@@ -458,6 +459,13 @@ fn off_text(v: f64) -> String {
     }
 }
 
+/// The reachable radii as `RANGE` prints them: rounded inward to the 0.01 mm shown, so that
+/// each printed end is a radius `MORPH` takes.
+fn range_text((lo, hi): (f64, f64)) -> String {
+    let (lo, hi) = ((lo * 100.0).ceil() / 100.0, (hi * 100.0).floor() / 100.0);
+    format!("{lo:.2}..{hi:.2}")
+}
+
 /// A property's span rounded inward to the 0.001 mm shown, so that each printed end is
 /// itself reached.
 fn span_text((lo, hi): (f64, f64)) -> String {
@@ -556,16 +564,16 @@ fn fourbar_inverse(p: &LinkParams, g: &FourBarGeometry, want: &str) -> Result<St
         .filter(|v: &f64| v.is_finite())
         .ok_or(format!("--want: {value:?} is not a number of mm"))?;
     let range = fourbar::reachable_radii_mm(p);
-    let (lo, hi) = range;
     match fourbar::inverse(*g, p.geometry.length_m, range, prop, want_mm)
         .map_err(|e| e.to_string())?
     {
         Inverse::Found(sols) => {
             let mut out = format!(
-                "{} = {want_mm} mm: {} solution{} within the reachable radii {lo:.2}..{hi:.2} mm\n",
+                "{} = {want_mm} mm: {} solution{} within the reachable radii {} mm\n",
                 prop.name(),
                 sols.len(),
-                if sols.len() == 1 { "" } else { "s" }
+                if sols.len() == 1 { "" } else { "s" },
+                range_text(range)
             );
             for (r, v) in &sols {
                 out += &format!(
@@ -577,10 +585,11 @@ fn fourbar_inverse(p: &LinkParams, g: &FourBarGeometry, want: &str) -> Result<St
             Ok(out)
         }
         Inverse::Unreachable { span_mm, nearest } => Err(format!(
-            "no reachable radius gives {} = {} mm: over {lo:.2}..{hi:.2} mm it spans {} mm; \
+            "no reachable radius gives {} = {} mm: over {} mm it spans {} mm; \
              nearest: radius {:.3} mm gives {:.4} mm ({} mm off), {}",
             prop.name(),
             number(want_mm),
+            range_text(range),
             span_text(span_mm),
             nearest.0,
             nearest.1,
