@@ -29,7 +29,7 @@ use morphlink_sim::Rig;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use crate::ensemble::{parallel, Common, Link, DEFAULT_HIFI_DRAWS};
+use crate::ensemble::{parallel, percentile, Common, Link, DEFAULT_HIFI_DRAWS};
 use crate::strategies::targets;
 
 /// Lumped links drawn by default (each: TUNE, 3 measured morphs, 25 evaluated morphs).
@@ -533,14 +533,6 @@ fn run_link(link: &Link, targets: &[f32], args: &Args) -> LinkResult {
         shapes,
         shapes2,
     }
-}
-
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let rank = ((p / 100.0) * sorted.len() as f64).ceil() as usize;
-    sorted[rank.clamp(1, sorted.len()) - 1]
 }
 
 /// (runs, failed, of which alarms, |error| p50, p95, time p50) over evaluations.

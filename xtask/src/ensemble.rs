@@ -256,6 +256,25 @@ impl Link {
     }
 }
 
+/// Percentile `p` (0–100) of sorted values, nearest rank (NaN of none): the strategy and
+/// calibration tables'.
+pub fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let rank = ((p / 100.0) * sorted.len() as f64).ceil() as usize;
+    sorted[rank.clamp(1, sorted.len()) - 1]
+}
+
+/// Quantile `q` (0–1) of `v`, which it sorts, at the rounded rank `(len − 1) · q` (NaN of
+/// none): the self-sense and warm tables'.
+pub fn quantile(v: &mut [f64], q: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(((v.len() as f64 - 1.0) * q).round() as usize)
+        .copied()
+        .unwrap_or(f64::NAN)
+}
+
 /// Runs `f` on every item of `items` on `threads` workers, with a progress bar named `what`.
 pub fn parallel<T: Sync, R: Send>(
     items: &[T],
@@ -296,6 +315,19 @@ pub fn parallel<T: Sync, R: Send>(
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn percentile_is_nearest_rank_and_quantile_the_rounded_rank() {
+        let v: Vec<f64> = (1..=100).map(f64::from).collect();
+        assert_eq!(percentile(&v, 50.0), 50.0);
+        assert_eq!(percentile(&v, 95.0), 95.0);
+        assert_eq!(percentile(&[3.0], 95.0), 3.0);
+        assert!(percentile(&[], 50.0).is_nan());
+        let mut w: Vec<f64> = (1..=11).rev().map(f64::from).collect();
+        assert_eq!(quantile(&mut w, 0.5), 6.0);
+        assert_eq!(quantile(&mut w, 0.95), 11.0);
+        assert!(quantile(&mut [], 0.5).is_nan());
+    }
+
     use super::*;
 
     #[test]

@@ -182,14 +182,6 @@ fn tune(spec: &HifiSpec, noise: morphlink::bench::Noise) -> Calibration {
     rig.ctrl.calibration()
 }
 
-fn percentile(v: &mut [f64], p: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    v[((v.len() - 1) as f64 * p).round() as usize]
-}
-
 /// One table row: p50, p95 and the largest |error| of the ticks, and p95 at bend's end.
 fn row(name: &str, e: &Errors) -> String {
     let mut abs: Vec<f64> = e.ticks.iter().map(|x| x.abs()).collect();
@@ -199,10 +191,10 @@ fn row(name: &str, e: &Errors) -> String {
         "| {name} | {} | {:+.1} K | {:.1} K | {:.1} K | {:.1} K | {:.1} K |",
         abs.len(),
         bias,
-        percentile(&mut abs, 0.5),
-        percentile(&mut abs, 0.95),
+        crate::ensemble::quantile(&mut abs, 0.5),
+        crate::ensemble::quantile(&mut abs, 0.95),
         abs.last().copied().unwrap_or(f64::NAN),
-        percentile(&mut end, 0.95),
+        crate::ensemble::quantile(&mut end, 0.95),
     )
 }
 
@@ -300,8 +292,8 @@ pub fn run(args: &Args) -> Result<(), String> {
         let _ = writeln!(
             t,
             "| {name} | {:.1} % | {:.1} % | {:.1} % |",
-            percentile(v, 0.5),
-            percentile(v, 0.95),
+            crate::ensemble::quantile(v, 0.5),
+            crate::ensemble::quantile(v, 0.95),
             largest
         );
     }
@@ -320,8 +312,8 @@ pub fn run(args: &Args) -> Result<(), String> {
                 "| {name} | {} | {} | {:.1} K | {:.1} K | {:.1} K | {over} |",
                 phase.as_str(),
                 v.len(),
-                percentile(v, 0.5),
-                percentile(v, 0.95),
+                crate::ensemble::quantile(v, 0.5),
+                crate::ensemble::quantile(v, 0.95),
                 largest,
             );
         }

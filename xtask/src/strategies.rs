@@ -8,7 +8,7 @@
 //! time plot of one nominal morph per strategy on each plant (`docs/strategies_timeline.svg`,
 //! `strategies_timeline_lumped.svg`), and prints the summary tables of `docs/strategies.md`.
 
-use crate::ensemble::{parallel, Body, Common, Link, DEFAULT_HIFI_DRAWS};
+use crate::ensemble::{parallel, percentile, Body, Common, Link, DEFAULT_HIFI_DRAWS};
 use morphlink::protocol::Mode;
 use morphlink::strategy::AUTO_STRATEGY;
 use morphlink::table;
@@ -444,15 +444,6 @@ fn write_oracle_csv(path: &Path, rows: &[OracleRow]) -> Result<(), String> {
         );
     }
     std::fs::write(path, s).map_err(|e| format!("cannot write {}: {e}", path.display()))
-}
-
-/// Percentile `p` (0–100) of sorted values, nearest rank.
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let rank = ((p / 100.0) * sorted.len() as f64).ceil() as usize;
-    sorted[rank.clamp(1, sorted.len()) - 1]
 }
 
 /// Per-strategy statistics over a subset of runs.
@@ -933,15 +924,6 @@ mod tests {
             (5.0, 3.0),
         ]);
         assert_eq!(f, [(5.0, 3.0), (10.0, 1.0), (20.0, 0.5)]);
-    }
-
-    #[test]
-    fn percentile_is_nearest_rank() {
-        let v: Vec<f64> = (1..=100).map(f64::from).collect();
-        assert_eq!(percentile(&v, 50.0), 50.0);
-        assert_eq!(percentile(&v, 95.0), 95.0);
-        assert_eq!(percentile(&[3.0], 95.0), 3.0);
-        assert!(percentile(&[], 50.0).is_nan());
     }
 
     #[test]

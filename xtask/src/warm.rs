@@ -6,7 +6,7 @@
 //! much worse a warm start lands (|error| warm − |error| from rest, percentage points) and fails
 //! if any pair is worse by more than [`WARM_AIM_PP`]. `auto` runs (`closed`).
 
-use crate::ensemble::{parallel, Common, Link};
+use crate::ensemble::{parallel, quantile, Common, Link};
 use morphlink::protocol::{classify, LineKind};
 use morphlink::table;
 use morphlink_plant::Plant;
@@ -158,12 +158,6 @@ pub fn run(args: &Args) -> Result<(), String> {
                 .map_or(f64::NAN, |w| w.0)
         };
         let n_over = worse.iter().filter(|w| w.0 > WARM_AIM_PP).count();
-        let pct = |v: &mut Vec<f64>, p: f64| {
-            v.sort_by(f64::total_cmp);
-            v.get(((v.len() as f64 - 1.0) * p).round() as usize)
-                .copied()
-                .unwrap_or(f64::NAN)
-        };
         println!(
             "| {} | {} | {failed} | {:+.2} pp | {:+.2} pp | {:+.2} pp ({}) | {n_over} | {:.0} / {:.0} s | {:.0} / {:.0} s |",
             if hifi { "hifi" } else { "lumped" },
@@ -172,10 +166,10 @@ pub fn run(args: &Args) -> Result<(), String> {
             q(0.95),
             q(1.0),
             worse.last().map_or("", |w| w.1.as_str()),
-            pct(&mut warm_s, 0.5),
-            pct(&mut warm_s, 0.95),
-            pct(&mut rest_s, 0.5),
-            pct(&mut rest_s, 0.95),
+            quantile(&mut warm_s, 0.5),
+            quantile(&mut warm_s, 0.95),
+            quantile(&mut rest_s, 0.5),
+            quantile(&mut rest_s, 0.95),
         );
     }
     if over.is_empty() {
