@@ -179,7 +179,7 @@ fn run(cli: Cli) -> Result<(), String> {
                         return Err(format!(
                             "--radius-mm {r} is outside the reachable range {} mm \
                              (--straight gives the unmorphed link)",
-                            range_text((lo, hi))
+                            inward((lo, hi), 2)
                         ));
                     }
                 }
@@ -459,18 +459,13 @@ fn off_text(v: f64) -> String {
     }
 }
 
-/// The reachable radii as `RANGE` prints them: rounded inward to the 0.01 mm shown, so that
-/// each printed end is a radius `MORPH` takes.
-fn range_text((lo, hi): (f64, f64)) -> String {
-    let (lo, hi) = ((lo * 100.0).ceil() / 100.0, (hi * 100.0).floor() / 100.0);
-    format!("{lo:.2}..{hi:.2}")
-}
-
-/// A property's span rounded inward to the 0.001 mm shown, so that each printed end is
-/// itself reached.
-fn span_text((lo, hi): (f64, f64)) -> String {
-    let (lo, hi) = ((lo * 1e3).ceil() / 1e3, (hi * 1e3).floor() / 1e3);
-    format!("{lo:.3}..{hi:.3}")
+/// `lo..hi` to `decimals`, rounded inward so that each printed end is itself reached: the
+/// reachable radii to 0.01 mm as `RANGE` prints them (each end a radius `MORPH` takes), a
+/// property's span to 0.001 mm.
+fn inward((lo, hi): (f64, f64), decimals: usize) -> String {
+    let k = 10f64.powi(decimals as i32);
+    let (lo, hi) = ((lo * k).ceil() / k, (hi * k).floor() / k);
+    format!("{lo:.decimals$}..{hi:.decimals$}")
 }
 
 /// The `MORPH` line for a radius, rounded to 0.01 mm inside the reachable range.
@@ -513,7 +508,7 @@ fn fourbar_gait(p: &LinkParams, g: &FourBarGeometry, spec: &str) -> Result<Strin
                     leg + 1,
                     prop.name(),
                     number(want_mm),
-                    span_text(span_mm)
+                    inward(span_mm, 3)
                 ))
             }
         };
@@ -573,7 +568,7 @@ fn fourbar_inverse(p: &LinkParams, g: &FourBarGeometry, want: &str) -> Result<St
                 prop.name(),
                 sols.len(),
                 if sols.len() == 1 { "" } else { "s" },
-                range_text(range)
+                inward(range, 2)
             );
             for (r, v) in &sols {
                 out += &format!(
@@ -589,8 +584,8 @@ fn fourbar_inverse(p: &LinkParams, g: &FourBarGeometry, want: &str) -> Result<St
              nearest: radius {:.3} mm gives {:.4} mm ({} mm off), {}",
             prop.name(),
             number(want_mm),
-            range_text(range),
-            span_text(span_mm),
+            inward(range, 2),
+            inward(span_mm, 3),
             nearest.0,
             nearest.1,
             off_text(nearest.1 - want_mm),
