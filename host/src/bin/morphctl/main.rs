@@ -294,21 +294,17 @@ fn run(cli: Cli) -> Result<ExitCode, String> {
                     "--sim-program `{line}`: unbalanced quotes or empty"
                 ))?;
                 // morphctl gives the simulator these itself: twice, morph-sim would refuse.
+                // (its option, morphctl's, whether morphctl passes it now): the speed paces
+                // morphctl's polls and the flash file decides whether morphctl saves a fit, so
+                // morphctl must know both.
                 let own = [
-                    ("--speed", "--sim-speed"),
-                    ("--plant", "--sim-plant"),
-                    ("--flash-file", "--sim-flash-file"),
-                    ("--links", "--sim-links"),
+                    ("--speed", "--sim-speed", true),
+                    ("--flash-file", "--sim-flash-file", true),
+                    ("--plant", "--sim-plant", cli.sim_plant.is_some()),
+                    ("--links", "--sim-links", cli.sim_links.is_some()),
                 ];
-                for (flag, ours) in own {
+                for (flag, ours, passed) in own {
                     let given = |w: &String| w == flag || w.starts_with(&format!("{flag}="));
-                    // The speed paces morphctl's polls and the flash file decides whether
-                    // morphctl saves a fit: morphctl must know both.
-                    let passed = match flag {
-                        "--speed" | "--flash-file" => true,
-                        "--plant" => cli.sim_plant.is_some(),
-                        _ => cli.sim_links.is_some(),
-                    };
                     if passed && words[1..].iter().any(given) {
                         return Err(format!(
                             "--sim-program `{line}`: give {flag} as morphctl's {ours}: morphctl \
