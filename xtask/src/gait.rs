@@ -147,16 +147,16 @@ pub struct Phases {
     pub bend_s: f64,
     /// From the end of bend to `done` (lock and release), s.
     pub after_s: f64,
-    /// The lowest mean power of both heaters over any [`HOLD_WINDOW_S`] of bend, W (its
+    /// The lowest mean power of both heaters over any [`LEAST_WINDOW_S`] of bend, W (its
     /// whole bend if shorter): the PLA's hold of a soft rod and the TCA's heat.
-    pub hold_w: f64,
+    pub least_w: f64,
     /// Both heaters' powers in bend so far, one per tick, W.
     bend_w: Vec<f64>,
 }
 
 /// The window a bend's power is averaged over, s: long enough to smooth the controllers'
 /// ripple, short enough that the lowest window is what bend never went under.
-pub const HOLD_WINDOW_S: f64 = 5.0;
+pub const LEAST_WINDOW_S: f64 = 5.0;
 
 impl Phases {
     /// Adds one tick of `dt_s` in `phase` with both heaters at `power_w`.
@@ -173,23 +173,23 @@ impl Phases {
         }
     }
 
-    /// Fixes [`Phases::hold_w`] from bend's powers, `dt_s` apart.
+    /// Fixes [`Phases::least_w`] from bend's powers, `dt_s` apart.
     fn finish(&mut self, dt_s: f64) {
         let p = std::mem::take(&mut self.bend_w);
-        let w = ((HOLD_WINDOW_S / dt_s).round() as usize).clamp(1, p.len().max(1));
-        self.hold_w = p
+        let w = ((LEAST_WINDOW_S / dt_s).round() as usize).clamp(1, p.len().max(1));
+        self.least_w = p
             .windows(w)
             .map(|s| s.iter().sum::<f64>() / w as f64)
             .fold(f64::INFINITY, f64::min);
-        if !self.hold_w.is_finite() {
-            self.hold_w = 0.0;
+        if !self.least_w.is_finite() {
+            self.least_w = 0.0;
         }
     }
 }
 
 /// The shortest makespan of the links' own morphs under `budget_w`, s, if each bend runs as
 /// it runs alone: as long, and drawing throughout at least the least it drew alone
-/// ([`Phases::hold_w`]); each soften at least as long as alone before it, each lock and
+/// ([`Phases::least_w`]); each soften at least as long as alone before it, each lock and
 /// release as long as alone after it, and soften and lock taken as drawing nothing. So it
 /// bounds from below any schedule that bends each link as alone; a scheduler that throttles a
 /// bend's TCA trades a longer bend, and more of its PLA's hold, for room beside it, which this
@@ -213,13 +213,13 @@ pub fn bends_as_alone_s(links: &[Phases], budget_w: f64) -> f64 {
     }
     let mut best = f64::INFINITY;
     for order in orders(links.len()) {
-        // (start, end, hold) of the bends placed.
+        // (start, end, power) of the bends placed.
         let mut placed: Vec<(f64, f64, f64)> = Vec::new();
         let mut makespan = 0.0f64;
         for &k in &order {
             let l = &links[k];
             // A link that bent under this budget drew no more than it.
-            let hold = l.hold_w.min(budget_w);
+            let least_w = l.least_w.min(budget_w);
             let fits = |t: f64| {
                 let load_at = |x: f64| {
                     placed
@@ -235,7 +235,7 @@ pub fn bends_as_alone_s(links: &[Phases], budget_w: f64) -> f64 {
                             .map(|p| p.0)
                             .filter(|&s| t < s && s < t + l.bend_s),
                     )
-                    .all(|x| load_at(x) + hold <= budget_w + 1e-9)
+                    .all(|x| load_at(x) + least_w <= budget_w + 1e-9)
             };
             let mut starts: Vec<f64> = std::iter::once(l.soften_s)
                 .chain(placed.iter().map(|p| p.1).filter(|&e| e > l.soften_s))
@@ -245,7 +245,7 @@ pub fn bends_as_alone_s(links: &[Phases], budget_w: f64) -> f64 {
                 .into_iter()
                 .find(|&t| fits(t))
                 .expect("the last end fits");
-            placed.push((t, t + l.bend_s, hold));
+            placed.push((t, t + l.bend_s, least_w));
             makespan = makespan.max(t + l.bend_s + l.after_s);
         }
         best = best.min(makespan);
@@ -552,7 +552,7 @@ pub fn run_task(a: &Args, root: &std::path::Path) -> Result<(), String> {
                 let p = &r.phases[0];
                 format!(
                     "{:.1} / {:.1} / {:.1}, {:.2}",
-                    p.soften_s, p.bend_s, p.after_s, p.hold_w
+                    p.soften_s, p.bend_s, p.after_s, p.least_w
                 )
             })
             .collect::<Vec<_>>()
@@ -766,12 +766,12 @@ fn fmt_list(v: &[f64], decimals: usize) -> String {
 mod tests {
     use super::*;
 
-    fn link(soften_s: f64, bend_s: f64, after_s: f64, hold_w: f64) -> Phases {
+    fn link(soften_s: f64, bend_s: f64, after_s: f64, least_w: f64) -> Phases {
         Phases {
             soften_s,
             bend_s,
             after_s,
-            hold_w,
+            least_w,
             ..Phases::default()
         }
     }
@@ -799,7 +799,7 @@ mod tests {
     }
 
     #[test]
-    fn a_hold_is_the_least_window_of_its_bend() {
+    fn a_bends_least_power_is_its_least_window() {
         let mut p = Phases::default();
         for k in 0..100 {
             let w = if (40..60).contains(&k) { 1.0 } else { 3.0 };
@@ -808,6 +808,6 @@ mod tests {
         p.finish(0.1);
         assert!((p.bend_s - 10.0).abs() < 1e-9);
         // The 5 s windows over the 2 s dip: the lowest has 2 s at 1 W and 3 s at 3 W.
-        assert!((p.hold_w - 2.2).abs() < 1e-9, "{}", p.hold_w);
+        assert!((p.least_w - 2.2).abs() < 1e-9, "{}", p.least_w);
     }
 }
